@@ -1,0 +1,60 @@
+#pragma once
+/// @file
+/// Output types shared by all integrators: the recorded trajectory, switch events and the
+/// progress callback, plus the step grids integrators use between control breakpoints.
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "moreau/core/types.hpp"
+
+namespace moreau {
+
+/// A recorded trajectory: scene states (and, where the integrator has them, algebraic
+/// unknowns such as multipliers and the length of the element or step ending at t).
+struct Trajectory {
+  std::vector<std::string> state_names;      ///< the scene's states
+  std::vector<std::string> algebraic_names;  ///< multipliers etc. (may be empty)
+  std::vector<double> t;
+  std::vector<Vector> x;          ///< scene states at t
+  std::vector<Vector> algebraic;  ///< algebraic values at t (empty vectors if none)
+  std::vector<double> step;       ///< length of the step/element ending at t (0 at t0)
+
+  std::size_t size() const { return t.size(); }
+  void Append(double time, const Vector& state, const Vector& algebraic_values, double length);
+};
+
+/// What happened at an event.
+enum class EventKind {
+  kEnter,        ///< a constraint became active (contact) / a mode became active
+  kLeave,        ///< a constraint or mode became inactive
+  kModeSwitch,   ///< the Filippov mode changed by crossing a switching surface
+  kSlideStart,   ///< a sliding mode started on a switching surface
+  kSlideEnd,     ///< a sliding mode ended
+  kRelaySwitch,  ///< a hysteresis relay switched its memory state
+  kAmbiguous,    ///< non-unique continuation; the documented (slow) solution was taken
+};
+std::string ToString(EventKind kind);
+
+/// A switch event.
+struct Event {
+  double t = 0.0;
+  EventKind kind = EventKind::kEnter;
+  std::string what;    ///< which constraint, mode or relay
+  std::string detail;  ///< free text (e.g. "A -> B", the mode entered)
+};
+
+/// Called by integrators with the current time during long runs (may be empty).
+using ProgressCallback = std::function<void(double t)>;
+
+/// Breakpoints of a fixed-step grid on [t0, tf]: uniform steps of (tf - t0)/N when h divides
+/// the interval up to round-off (|(tf - t0)/h - N| <= 1e-9 N), otherwise steps of h and one
+/// shorter last step. Returns the grid points t0 < t1 < ... < tN = tf.
+std::vector<double> FixedStepGrid(double t0, double tf, double h);
+
+/// Splits [t0, tf] at the given breakpoints (sorted, inside (t0, tf)): returns the segment
+/// end points t0 < b1 < ... < tf.
+std::vector<double> SegmentEnds(double t0, double tf, const std::vector<double>& breakpoints);
+
+}  // namespace moreau

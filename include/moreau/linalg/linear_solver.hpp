@@ -1,0 +1,107 @@
+#pragma once
+/// @file
+/// Linear solvers for the Newton systems of every integrator.
+///
+/// Integrators assemble their (generalized) Jacobians block by block into a
+/// SystemMatrix, which stores them dense or sparse (CSC) depending on the solver chosen by
+/// MakeLinearSolver: a dense LU with partial pivoting (Eigen) for small or dense systems, a
+/// sparse LU (SuiteSparse KLU) for large sparse ones. Both report singular matrices through
+/// their return value (never by exception), so that integrators can turn them into
+/// statuses.
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "moreau/core/types.hpp"
+
+namespace moreau {
+
+/// Which factorization backs a LinearSolver.
+enum class LinearSolverKind {
+  kAutomatic,  ///< dense LU if n <= kDenseSizeLimit or the matrix is dense, else sparse LU
+  kDenseLu,    ///< Eigen PartialPivLU on a dense matrix
+  kSparseLu,   ///< SuiteSparse KLU on a CSC matrix (symbolic analysis reused across calls)
+};
+std::string ToString(LinearSolverKind kind);
+/// Parses "auto", "dense" or "sparse"; throws std::invalid_argument otherwise.
+LinearSolverKind ParseLinearSolverKind(const std::string& name);
+
+/// Systems up to this size always use the dense LU under kAutomatic.
+inline constexpr int kDenseSizeLimit = 256;
+/// Above kDenseSizeLimit, kAutomatic picks the sparse LU if at most this fraction of the
+/// entries is structurally nonzero.
+inline constexpr double kSparseDensityLimit = 0.1;
+
+/// A square matrix assembled from blocks, stored dense or sparse.
+class SystemMatrix {
+ public:
+  /// Starts a new n-by-n matrix of zeros in the given storage (true: sparse).
+  void Reset(int n, bool sparse);
+  int size() const { return n_; }
+  bool sparse() const { return sparse_; }
+  /// A(row0 + i, col0 + j) += scale * block(i, j), for all entries of the block (exact zeros
+  /// included in sparse storage, so that the sparsity pattern does not depend on values).
+  void AddBlock(int row0, int col0, const ConstMatrixRef& block, double scale = 1.0);
+  /// A(row0 + i, col0 + j) += scale * block(i, j) for the stored entries of a sparse block.
+  void AddSparseBlock(int row0, int col0, const SparseMatrix& block, double scale = 1.0);
+  /// A(row0 + i, col0 + i) += value, i = 0..count-1.
+  void AddDiagonal(int row0, int col0, int count, double value);
+  void AddEntry(int row, int col, double value);
+  /// Completes the assembly (sparse: builds the CSC matrix, summing duplicates).
+  void Finalize();
+
+  const Matrix& dense() const { return dense_; }
+  const SparseMatrix& sparse_matrix() const { return sparse_matrix_; }
+  /// y = A x (after Finalize).
+  Vector Multiply(const Vector& x) const;
+
+ private:
+  int n_ = 0;
+  bool sparse_ = false;
+  Matrix dense_;
+  std::vector<Eigen::Triplet<double, int>> triplets_;
+  SparseMatrix sparse_matrix_;
+};
+
+/// Result of a factorization.
+enum class FactorizationStatus {
+  kSuccess,    ///< factors computed and reciprocal condition estimate >= kSingularRcond
+  kSingular,   ///< a zero pivot or reciprocal condition estimate < kSingularRcond
+  kNonFinite,  ///< the matrix contains NaN or infinity
+};
+std::string ToString(FactorizationStatus status);
+
+/// Matrices with a reciprocal condition estimate below this value count as singular:
+/// a solve would lose all digits (1 / eps).
+inline constexpr double kSingularRcond = 1e-15;
+
+/// Factorizes a SystemMatrix and solves with it.
+class LinearSolver {
+ public:
+  virtual ~LinearSolver() = default;
+  virtual LinearSolverKind kind() const = 0;
+  /// True if this solver wants sparse storage in SystemMatrix.
+  bool wants_sparse() const { return kind() == LinearSolverKind::kSparseLu; }
+  /// Factorizes A (whose storage must match wants_sparse()).
+  virtual FactorizationStatus Factorize(const SystemMatrix& a) = 0;
+  /// Overwrites rhs with A^{-1} rhs (after a successful Factorize).
+  virtual void Solve(VectorRef rhs) const = 0;
+  /// Solves for several right-hand sides (columns).
+  virtual void SolveMatrix(MatrixRef rhs) const;
+  /// Overwrites rhs with A^{-T} rhs (after a successful Factorize).
+  virtual void SolveTransposed(VectorRef rhs) const = 0;
+  /// Reciprocal condition number estimate of the last factorization (1-norm).
+  virtual double reciprocal_condition() const = 0;
+  /// Number of factorizations so far.
+  int num_factorizations() const { return num_factorizations_; }
+
+ protected:
+  int num_factorizations_ = 0;
+};
+
+/// Creates a solver for n-by-n systems with about `nonzeros` structural nonzeros
+/// (pass n * n if unknown). kAutomatic resolves as documented in LinearSolverKind.
+std::unique_ptr<LinearSolver> MakeLinearSolver(LinearSolverKind kind, int n, double nonzeros);
+
+}  // namespace moreau

@@ -1,0 +1,175 @@
+#pragma once
+/// @file
+/// Scenes: named, self-describing problems that integrators simulate.
+///
+/// A scene declares its states, initial state, horizon, named parameters, inputs, smooth
+/// dynamics f(x, u, t, p) and a list of **effects**. Each effect is its own type:
+///  - MovingSet:          x' in f - N_{C(t)}(x), C(t) = {x : c(x, t) >= 0} (sweeping process),
+///                        optionally with a projection subspace E (extended PDS);
+///  - SwitchingSurfaces:  Filippov system x' = f + f_mode(x), the mode given by the signs
+///                        of switching functions c(x, t);
+///  - HysteresisRelay:    delayed relay with memory w in {0, 1}: x' = f + f_A (w = 0) or
+///                        f + f_B (w = 1), A -> B when psi reaches its upper threshold,
+///                        B -> A when psi falls to its lower threshold;
+///  - PathConstraints:    differential-algebraic inequalities phi(x, u, t) <= 0 with
+///                        algebraic inputs u and bounds (alpha-method DAI stepper).
+/// Effects compose additively: x' = f(x, u, t, p) + (sum of effect contributions). An effect
+/// reaches an integrator's equations only if the scene declares it: a scene without effects
+/// adds no complementarity unknowns or equations. An integrator handed an effect it does
+/// not support refuses with std::invalid_argument naming the effect.
+///
+/// Every overridable number is named: parameters (the vector p passed to every model
+/// function, so derivatives with respect to them are exact), the initial state entries
+/// ("x0.<state>") and the horizon ("tf"); see SetSceneValue.
+
+#include <limits>
+#include <string>
+#include <variant>
+#include <vector>
+
+#include "moreau/core/smooth_function.hpp"
+#include "moreau/core/types.hpp"
+
+namespace moreau {
+
+/// A named scalar parameter of a scene (an entry of p).
+struct ParameterSpec {
+  std::string name;
+  double value = 0.0;
+  std::string description;
+};
+
+/// A piecewise-constant signal: value[k] on [breakpoints[k-1], breakpoints[k]) with
+/// breakpoints strictly increasing (values.size() == breakpoints.size() + 1). A constant
+/// signal has no breakpoints. Integrators never step across a breakpoint.
+struct PiecewiseConstantSignal {
+  std::vector<double> breakpoints;
+  std::vector<double> values{0.0};
+  double ValueAt(double t) const;
+};
+
+/// An input u_i of the dynamics: either a control signal given as a function of time, or an
+/// algebraic variable determined by a PathConstraints effect (DAI), with bounds.
+struct InputSpec {
+  enum class Kind { kControl, kAlgebraic };
+  std::string name;
+  Kind kind = Kind::kControl;
+  PiecewiseConstantSignal signal;                           ///< used when kind == kControl
+  double lower = -std::numeric_limits<double>::infinity();  ///< bound (algebraic inputs)
+  double upper = std::numeric_limits<double>::infinity();   ///< bound (algebraic inputs)
+  double initial_guess = 0.0;                               ///< algebraic inputs at t0
+  std::string description;
+};
+
+/// Sweeping process / (extended) projected dynamical system with the moving set
+/// C(t) = {x : c(x, t) >= 0}: x' = f + E E^T grad_x c(x, t) lambda, 0 <= lambda ⟂ c >= 0.
+struct MovingSet {
+  std::string name;
+  std::vector<std::string> constraint_names;  ///< one name per component of c
+  SmoothFunction constraints;                 ///< c(x, u, t, p), u is not used
+  /// E: n_x-by-n' with orthonormal columns spanning the directions along which the state
+  /// may be projected. Empty means E = I (ordinary PDS / sweeping process).
+  Matrix projection_basis;
+};
+
+/// Filippov system with n_c switching functions c(x, t). The mode with sign pattern
+/// sigma in {-1, +1}^{n_c} is active where sign(c_j) = sigma_j for all j; modes are indexed
+/// by the bit pattern k = sum_j [sigma_j > 0] 2^j (mode 0: all c_j < 0). Its contribution
+/// f_k(x, u, t, p) is added to the smooth dynamics; on switching surfaces the Filippov
+/// convexification applies.
+struct SwitchingSurfaces {
+  std::string name;
+  std::vector<std::string> surface_names;  ///< one per component of c
+  SmoothFunction surfaces;                 ///< c(x, u, t, p)
+  std::vector<std::string> mode_names;     ///< 2^{n_c} names
+  std::vector<SmoothFunction> modes;       ///< 2^{n_c} vector fields with n_x outputs
+};
+
+/// Delayed relay (hysteresis) with memory w in {0 (mode A), 1 (mode B)}.
+/// psi = (input - lower)/(upper - lower) is the normalized input: the relay switches A -> B
+/// when psi reaches 1 and B -> A when psi falls to 0. Thresholds are scene parameters.
+struct HysteresisRelay {
+  std::string name;
+  SmoothFunction input;      ///< scalar input(x, u, t, p) compared with the thresholds
+  int lower_threshold = -1;  ///< index of the parameter at which B -> A
+  int upper_threshold = -1;  ///< index of the parameter at which A -> B
+  SmoothFunction mode_a;     ///< contribution f_A(x, u, t, p) while w = 0
+  SmoothFunction mode_b;     ///< contribution f_B(x, u, t, p) while w = 1
+  int initial_memory = 0;    ///< w(t0) in {0, 1}
+  /// Gain a > 0 of the auxiliary fields gamma(s) = a s^2 / (1 + s^2) of the time-freezing
+  /// reformulation (how fast w travels while physical time is frozen).
+  double auxiliary_gain = 1.0;
+};
+
+/// Differential-algebraic inequalities: phi(x, u, t, p) <= 0 and state bounds, where the
+/// algebraic inputs (InputSpec::Kind::kAlgebraic) are determined at every time.
+struct PathConstraints {
+  std::string name;
+  std::vector<std::string> constraint_names;  ///< one per component of phi
+  SmoothFunction constraints;                 ///< phi(x, u, t, p) <= 0
+  Vector state_lower;                         ///< empty or n_x entries (-inf allowed)
+  Vector state_upper;                         ///< empty or n_x entries (+inf allowed)
+};
+
+using Effect = std::variant<MovingSet, SwitchingSurfaces, HysteresisRelay, PathConstraints>;
+
+/// The kind of an effect as used in messages ("moving set", "switching surfaces", ...).
+std::string EffectKind(const Effect& effect);
+/// The effect's name.
+const std::string& EffectName(const Effect& effect);
+
+/// A complete problem description (see file comment).
+struct Scene {
+  std::string name;
+  std::string description;
+  std::vector<std::string> state_names;
+  Vector initial_state;
+  double initial_time = 0.0;
+  double final_time = 1.0;
+  std::vector<ParameterSpec> parameters;
+  std::vector<InputSpec> inputs;
+  SmoothFunction dynamics;  ///< f(x, u, t, p) with n_x outputs; empty means f = 0
+  std::vector<Effect> effects;
+
+  int num_states() const { return static_cast<int>(state_names.size()); }
+  int num_inputs() const { return static_cast<int>(inputs.size()); }
+  int num_parameters() const { return static_cast<int>(parameters.size()); }
+  /// Adds a parameter and returns its index in p.
+  int AddParameter(const std::string& name, double value, const std::string& description);
+  /// Index of a parameter by name, or -1.
+  int FindParameter(const std::string& name) const;
+  /// Current parameter values p.
+  Vector ParameterValues() const;
+  /// Input values at time t (controls from their signals; algebraic inputs from the guess).
+  Vector InputValues(double t) const;
+  /// Sorted control breakpoints in (initial_time, final_time): integrators stop there.
+  std::vector<double> ControlBreakpoints() const;
+  /// True if any effect is of the given alternative type.
+  template <class E>
+  bool Has() const {
+    for (const Effect& effect : effects) {
+      if (std::holds_alternative<E>(effect)) return true;
+    }
+    return false;
+  }
+};
+
+/// Tolerance on c(x0, t0) >= 0 for the initial state of a moving set: values down to
+/// -kInitialFeasibilityTolerance * max(1, |x0|_inf) count as feasible (round-off in x0).
+inline constexpr double kInitialFeasibilityTolerance = 1e-12;
+
+/// Throws std::invalid_argument naming the first problem found: empty or duplicate names,
+/// dimension mismatches (initial state, function outputs, projection basis, number of
+/// modes), non-finite values, a non-positive horizon, out-of-range function arguments,
+/// non-finite function values at the initial point, and initial states outside the moving
+/// sets (x0 not in C(t0)).
+void ValidateScene(const Scene& scene);
+
+/// Names accepted by SetSceneValue: "tf", "x0.<state>" and every parameter name.
+std::vector<std::string> OverridableNames(const Scene& scene);
+
+/// Sets a named value ("tf", "x0.<state>" or a parameter). Throws std::invalid_argument for
+/// unknown names (listing the valid ones) and for non-finite values.
+void SetSceneValue(Scene* scene, const std::string& name, double value);
+
+}  // namespace moreau

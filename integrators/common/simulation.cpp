@@ -1,0 +1,65 @@
+#include "moreau/integrators/simulation.hpp"
+
+#include <cmath>
+
+#include "moreau/core/error.hpp"
+
+namespace moreau {
+
+void Trajectory::Append(double time, const Vector& state, const Vector& algebraic_values,
+                        double length) {
+  t.push_back(time);
+  x.push_back(state);
+  algebraic.push_back(algebraic_values);
+  step.push_back(length);
+}
+
+std::string ToString(EventKind kind) {
+  switch (kind) {
+    case EventKind::kEnter:
+      return "enter";
+    case EventKind::kLeave:
+      return "leave";
+    case EventKind::kModeSwitch:
+      return "mode_switch";
+    case EventKind::kSlideStart:
+      return "slide_start";
+    case EventKind::kSlideEnd:
+      return "slide_end";
+    case EventKind::kRelaySwitch:
+      return "relay_switch";
+    case EventKind::kAmbiguous:
+      return "ambiguous";
+  }
+  return "?";
+}
+
+std::vector<double> FixedStepGrid(double t0, double tf, double h) {
+  RequireArgument(std::isfinite(h) && h > 0.0, "step size h must be positive and finite, got ", h);
+  RequireArgument(tf > t0, "grid needs tf > t0, got t0 = ", t0, ", tf = ", tf);
+  const double ratio = (tf - t0) / h;
+  const double rounded = std::max(1.0, std::round(ratio));
+  std::vector<double> grid{t0};
+  if (std::fabs(ratio - rounded) <= 1e-9 * rounded) {
+    const auto n = static_cast<long long>(rounded);
+    for (long long k = 1; k < n; ++k)
+      grid.push_back(t0 + (tf - t0) * static_cast<double>(k) / static_cast<double>(n));
+  } else {
+    const auto n = static_cast<long long>(std::floor(ratio));
+    for (long long k = 1; k <= n; ++k) grid.push_back(t0 + h * static_cast<double>(k));
+    if (grid.back() >= tf) grid.pop_back();
+  }
+  grid.push_back(tf);
+  return grid;
+}
+
+std::vector<double> SegmentEnds(double t0, double tf, const std::vector<double>& breakpoints) {
+  std::vector<double> ends{t0};
+  for (double b : breakpoints) {
+    if (b > ends.back() && b < tf) ends.push_back(b);
+  }
+  ends.push_back(tf);
+  return ends;
+}
+
+}  // namespace moreau

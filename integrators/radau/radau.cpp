@@ -1,0 +1,460 @@
+#include "moreau/integrators/radau.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <sstream>
+
+#include "moreau/core/error.hpp"
+#include "moreau/integrators/radau_tableau.hpp"
+#include "moreau/model/lowered_system.hpp"
+
+namespace moreau {
+
+void RadauOptions::Validate() const {
+  RequireArgument(stages >= 1 && stages <= kMaxRadauStages, "Radau stages must be in [1, ",
+                  kMaxRadauStages, "], got ", stages);
+  RequireArgument(std::isfinite(step_size) && (step_size > 0.0 || (adaptive && step_size == 0.0)),
+                  "step size h must be positive and finite (0 = automatic when adaptive), got ",
+                  step_size);
+  RequireArgument(std::isfinite(relative_tolerance) && relative_tolerance > 0.0,
+                  "relative tolerance must be positive, got ", relative_tolerance);
+  RequireArgument(std::isfinite(absolute_tolerance) && absolute_tolerance > 0.0,
+                  "absolute tolerance must be positive, got ", absolute_tolerance);
+  RequireArgument(min_step_size > 0.0 && max_step_size >= min_step_size,
+                  "step-size bounds need 0 < min_step_size <= max_step_size, got ", min_step_size,
+                  " and ", max_step_size);
+  RequireArgument(std::isfinite(newton_tolerance) && newton_tolerance > 0.0,
+                  "Newton tolerance must be positive, got ", newton_tolerance);
+  RequireArgument(max_newton_iterations >= 1, "max Newton iterations must be >= 1, got ",
+                  max_newton_iterations);
+  RequireArgument(max_steps >= 1, "max steps must be >= 1, got ", max_steps);
+}
+
+std::string ToString(RadauStatus status) {
+  switch (status) {
+    case RadauStatus::kSuccess:
+      return "success";
+    case RadauStatus::kNewtonFailure:
+      return "newton_failure";
+    case RadauStatus::kStepSizeTooSmall:
+      return "step_size_too_small";
+    case RadauStatus::kMaxStepsReached:
+      return "max_steps_reached";
+    case RadauStatus::kNonFinite:
+      return "non_finite";
+  }
+  return "?";
+}
+
+RadauStats& RadauStats::operator+=(const RadauStats& other) {
+  num_steps += other.num_steps;
+  num_rejected_steps += other.num_rejected_steps;
+  num_newton_iterations += other.num_newton_iterations;
+  num_factorizations += other.num_factorizations;
+  num_function_evaluations += other.num_function_evaluations;
+  num_jacobian_evaluations += other.num_jacobian_evaluations;
+  cpu_seconds += other.cpu_seconds;
+  return *this;
+}
+
+std::string RadauStats::Summary() const {
+  std::ostringstream s;
+  s << num_steps << " steps (" << num_rejected_steps << " rejected), " << num_newton_iterations
+    << " Newton iterations, " << num_factorizations << " factorizations, "
+    << num_function_evaluations << " F evaluations, " << cpu_seconds << " s";
+  return s.str();
+}
+
+namespace {
+
+// Why a stage solve failed.
+enum class SolveOutcome { kConverged, kNotConverged, kSingular, kNonFinite };
+
+class RadauRun {
+ public:
+  RadauRun(const Scene& scene, const RadauOptions& options, const ProgressCallback& progress)
+      : options_(options),
+        progress_(progress),
+        system_(scene),
+        tableau_(RadauIIA(options.stages)),
+        n_(system_.num_states()),
+        s_(options.stages) {
+    const double nonzeros = s_ * static_cast<double>(s_) * system_.EstimatedNonzerosFy() + s_ * n_;
+    solver_ = MakeLinearSolver(options.linear_solver, s_ * n_, nonzeros);
+    filter_solver_ = MakeLinearSolver(options.linear_solver, n_, system_.EstimatedNonzerosFy());
+    stage_f_.resize(n_, s_);
+    stage_jacobians_.resize(static_cast<std::size_t>(s_));
+    stage_sparse_.resize(static_cast<std::size_t>(s_));
+  }
+
+  RadauResult Run() {
+    const auto start = std::chrono::steady_clock::now();
+    const Scene& scene = system_.scene();
+    RadauResult result;
+    result.trajectory.state_names = scene.state_names;
+    Vector y = system_.InitialState();
+    const int nx = system_.num_scene_states();
+    result.trajectory.Append(scene.initial_time, y.head(nx), Vector(), 0.0);
+
+    const std::vector<double> ends =
+        SegmentEnds(scene.initial_time, scene.final_time, scene.ControlBreakpoints());
+    double h_next = options_.step_size;
+    for (std::size_t segment = 0; segment + 1 < ends.size(); ++segment) {
+      const double t_begin = ends[segment];
+      const double t_end = ends[segment + 1];
+      system_.SetInputs(scene.InputValues(t_begin));
+      have_previous_ = false;  // no extrapolation across a control breakpoint
+      const bool ok = options_.adaptive ? RunAdaptive(t_begin, t_end, &y, &h_next, &result)
+                                        : RunFixed(t_begin, t_end, &y, &result);
+      if (!ok) break;
+    }
+    result.final_time = y[system_.clock_index()];
+    result.final_state = y.head(nx);
+    if (!options_.record_trajectory && result.trajectory.t.back() != result.final_time) {
+      result.trajectory.Append(result.final_time, result.final_state, Vector(), last_step_);
+    }
+    stats_.num_factorizations =
+        solver_->num_factorizations() + filter_solver_->num_factorizations();
+    stats_.cpu_seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    result.stats = stats_;
+    return result;
+  }
+
+ private:
+  bool RunFixed(double t_begin, double t_end, Vector* y, RadauResult* result) {
+    const std::vector<double> grid = FixedStepGrid(t_begin, t_end, options_.step_size);
+    Matrix z(n_, s_);
+    for (std::size_t k = 0; k + 1 < grid.size(); ++k) {
+      const double h = grid[k + 1] - grid[k];
+      if (stats_.num_steps >= options_.max_steps) {
+        return Fail(result, RadauStatus::kMaxStepsReached, grid[k], "reached max_steps");
+      }
+      InitialGuess(h, &z);
+      int iterations = 0;
+      const SolveOutcome outcome = SolveStages(h, *y, &z, &iterations);
+      if (outcome != SolveOutcome::kConverged) {
+        return Fail(result,
+                    outcome == SolveOutcome::kNonFinite ? RadauStatus::kNonFinite
+                                                        : RadauStatus::kNewtonFailure,
+                    grid[k], Describe(outcome, iterations, h));
+      }
+      Accept(h, z, grid[k + 1], y, result);
+      if (progress_) progress_(grid[k + 1]);
+    }
+    return true;
+  }
+
+  bool RunAdaptive(double t_begin, double t_end, Vector* y, double* h_next, RadauResult* result) {
+    double h = *h_next > 0.0 ? *h_next : StartingStep(*y, t_end - t_begin);
+    h = std::clamp(h, options_.min_step_size, options_.max_step_size);
+    Matrix z(n_, s_);
+    bool last_rejected = false;
+    bool first = true;
+    double t = t_begin;
+    while (t < t_end) {
+      if (stats_.num_steps >= options_.max_steps) {
+        return Fail(result, RadauStatus::kMaxStepsReached, t, "reached max_steps");
+      }
+      bool lands = false;
+      if (t + h >= t_end - 0.01 * h) {  // land exactly on the segment end
+        h = t_end - t;
+        lands = true;
+      }
+      InitialGuess(h, &z);
+      int iterations = 0;
+      const SolveOutcome outcome = SolveStages(h, *y, &z, &iterations);
+      if (outcome != SolveOutcome::kConverged) {
+        ++stats_.num_rejected_steps;
+        if (outcome == SolveOutcome::kNonFinite && h <= options_.min_step_size) {
+          return Fail(result, RadauStatus::kNonFinite, t, Describe(outcome, iterations, h));
+        }
+        h *= 0.5;
+        last_rejected = true;
+        have_previous_ = false;
+        if (h < options_.min_step_size) {
+          return Fail(result, RadauStatus::kStepSizeTooSmall, t,
+                      "step size below min_step_size after " + Describe(outcome, iterations, h));
+        }
+        continue;
+      }
+      const double error = ErrorNorm(h, *y, z, first || last_rejected);
+      if (!std::isfinite(error)) {
+        return Fail(result, RadauStatus::kNonFinite, t, "non-finite error estimate");
+      }
+      const double exponent = 1.0 / (s_ + 1.0);
+      double factor = 0.9 * std::pow(std::max(error, 1e-10), -exponent);
+      if (error <= 1.0) {
+        t = lands ? t_end : t + h;
+        Accept(h, z, t, y, result);
+        if (last_rejected) factor = std::min(factor, 1.0);
+        last_rejected = false;
+        first = false;
+        if (progress_) progress_(t);
+        h = std::clamp(h * std::clamp(factor, 0.2, 5.0), options_.min_step_size,
+                       options_.max_step_size);
+        if (!lands) *h_next = h;
+      } else {
+        ++stats_.num_rejected_steps;
+        last_rejected = true;
+        have_previous_ = false;
+        h *= std::clamp(factor, 0.2, 0.9);
+        if (h < options_.min_step_size) {
+          return Fail(result, RadauStatus::kStepSizeTooSmall, t,
+                      "error test failed with the step size at min_step_size");
+        }
+      }
+    }
+    return true;
+  }
+
+  // Hairer-Wanner I, Sec. II.4: starting step from the first derivatives at y0.
+  double StartingStep(const Vector& y, double span) {
+    const int nx = system_.num_scene_states();
+    Evaluate(y, Derivatives::kNone);
+    const Vector f0 = eval_.F;
+    auto norm = [&](const Vector& v, const Vector& ref) {
+      double sum = 0.0;
+      for (int i = 0; i < nx; ++i) {
+        const double w =
+            options_.absolute_tolerance + options_.relative_tolerance * std::fabs(ref[i]);
+        sum += (v[i] / w) * (v[i] / w);
+      }
+      return std::sqrt(sum / nx);
+    };
+    const double d0 = norm(y, y), d1 = norm(f0, y);
+    double h0 = (d0 < 1e-5 || d1 < 1e-5) ? 1e-6 : 0.01 * d0 / d1;
+    h0 = std::min(h0, span);
+    const Vector y1 = y + h0 * f0;
+    Evaluate(y1, Derivatives::kNone);
+    const double d2 = norm(eval_.F - f0, y) / h0;
+    const double p = 2.0 * s_ - 1.0;
+    const double h1 = std::max(d1, d2) <= 1e-15
+                          ? std::max(1e-6, h0 * 1e-3)
+                          : std::pow(0.01 / std::max(d1, d2), 1.0 / (p + 1.0));
+    return std::min({100.0 * h0, h1, span});
+  }
+
+  void Evaluate(const Vector& y, Derivatives derivatives) {
+    system_.Evaluate(y, Vector(), derivatives, &eval_);
+    ++stats_.num_function_evaluations;
+    if (derivatives != Derivatives::kNone) ++stats_.num_jacobian_evaluations;
+  }
+
+  // Stage increments from the previous step's collocation polynomial (zero if none).
+  void InitialGuess(double h, Matrix* z) {
+    if (!have_previous_) {
+      z->setZero();
+      return;
+    }
+    for (int j = 0; j < s_; ++j) {
+      const double theta = 1.0 + tableau_.c[j] * h / previous_h_;
+      if (theta > 4.0) {  // too far to extrapolate
+        z->setZero();
+        return;
+      }
+      const Vector w = tableau_.InterpolationWeights(theta);
+      z->col(j) = previous_z_ * w - previous_z_.col(s_ - 1);
+    }
+  }
+
+  // Full Newton on Z_i - h sum_j a_ij F(y0 + Z_j) = 0 (Radau IIA collocation).
+  SolveOutcome SolveStages(double h, const Vector& y0, Matrix* z, int* iterations) {
+    double previous_increment = 0.0;
+    for (int k = 1; k <= options_.max_newton_iterations; ++k) {
+      *iterations = k;
+      ++stats_.num_newton_iterations;
+      for (int j = 0; j < s_; ++j) {
+        Evaluate(y0 + z->col(j), Derivatives::kStates);
+        if (!eval_.F.allFinite()) return SolveOutcome::kNonFinite;
+        stage_f_.col(j) = eval_.F;
+        sparse_jacobians_ = eval_.has_sparse_F_y;
+        if (sparse_jacobians_) {
+          stage_sparse_[static_cast<std::size_t>(j)] = eval_.F_y_sparse;
+        } else {
+          stage_jacobians_[static_cast<std::size_t>(j)] = eval_.F_y;
+        }
+      }
+      // Residual of the collocation equations, stacked stage by stage.
+      Vector rhs(s_ * n_);
+      const Matrix hf = h * stage_f_ * tableau_.a.transpose();  // column i: h sum_j a_ij F_j
+      for (int i = 0; i < s_; ++i) rhs.segment(i * n_, n_) = -(z->col(i) - hf.col(i));
+      // Newton matrix: delta_ij I - h a_ij F_y(Y_j).
+      matrix_.Reset(s_ * n_, solver_->wants_sparse());
+      for (int i = 0; i < s_; ++i) {
+        matrix_.AddDiagonal(i * n_, i * n_, n_, 1.0);
+        for (int j = 0; j < s_; ++j) {
+          const auto index = static_cast<std::size_t>(j);
+          if (sparse_jacobians_) {
+            matrix_.AddSparseBlock(i * n_, j * n_, stage_sparse_[index], -h * tableau_.a(i, j));
+          } else {
+            matrix_.AddBlock(i * n_, j * n_, stage_jacobians_[index], -h * tableau_.a(i, j));
+          }
+        }
+      }
+      matrix_.Finalize();
+      const FactorizationStatus status = solver_->Factorize(matrix_);
+      if (status == FactorizationStatus::kNonFinite) return SolveOutcome::kNonFinite;
+      if (status == FactorizationStatus::kSingular) return SolveOutcome::kSingular;
+      solver_->Solve(rhs);
+      if (!rhs.allFinite()) return SolveOutcome::kNonFinite;
+      double increment = 0.0;
+      for (int j = 0; j < s_; ++j) {
+        z->col(j) += rhs.segment(j * n_, n_);
+        increment = std::max(increment, ScaledIncrement(rhs.segment(j * n_, n_), y0));
+      }
+      if (increment <= NewtonTolerance()) return SolveOutcome::kConverged;
+      // Diverging (contraction rate >= 1 after the first correction) or stalled at round-off.
+      if (k >= 3 && increment >= previous_increment) {
+        return increment <= 1e3 * NewtonTolerance() ? SolveOutcome::kConverged
+                                                    : SolveOutcome::kNotConverged;
+      }
+      previous_increment = increment;
+    }
+    return SolveOutcome::kNotConverged;
+  }
+
+  double NewtonTolerance() const { return options_.adaptive ? 1e-2 : options_.newton_tolerance; }
+
+  // Fixed step: max_i |dz_i| / (1 + |y_i|). Adaptive: weighted RMS with atol + rtol |y|.
+  double ScaledIncrement(const Eigen::Ref<const Vector>& dz, const Vector& y0) const {
+    const int nx = system_.num_scene_states();
+    if (!options_.adaptive) {
+      double m = 0.0;
+      for (int i = 0; i < n_; ++i) m = std::max(m, std::fabs(dz[i]) / (1.0 + std::fabs(y0[i])));
+      return m;
+    }
+    double sum = 0.0;
+    for (int i = 0; i < nx; ++i) {
+      const double w = options_.absolute_tolerance + options_.relative_tolerance * std::fabs(y0[i]);
+      sum += (dz[i] / w) * (dz[i] / w);
+    }
+    return std::sqrt(sum / nx);
+  }
+
+  // Embedded estimate (see header), filtered by (I - h gamma0 J(y0))^{-1}.
+  double ErrorNorm(double h, const Vector& y0, const Matrix& z, bool refine) {
+    const int nx = system_.num_scene_states();
+    Evaluate(y0, Derivatives::kStates);
+    const Vector f0 = eval_.F;
+    filter_matrix_.Reset(n_, filter_solver_->wants_sparse());
+    filter_matrix_.AddDiagonal(0, 0, n_, 1.0);
+    if (eval_.has_sparse_F_y) {
+      filter_matrix_.AddSparseBlock(0, 0, eval_.F_y_sparse, -h * tableau_.gamma0);
+    } else {
+      filter_matrix_.AddBlock(0, 0, eval_.F_y, -h * tableau_.gamma0);
+    }
+    filter_matrix_.Finalize();
+    if (filter_solver_->Factorize(filter_matrix_) != FactorizationStatus::kSuccess) {
+      return std::numeric_limits<double>::infinity();
+    }
+    const Vector ez = z * tableau_.error_weights;
+    Vector err = tableau_.gamma0 * h * f0 + ez;
+    filter_solver_->Solve(err);
+    const Vector y1 = y0 + z.col(s_ - 1);
+    auto norm = [&](const Vector& e) {
+      double sum = 0.0;
+      for (int i = 0; i < nx; ++i) {
+        const double w = options_.absolute_tolerance +
+                         options_.relative_tolerance * std::max(std::fabs(y0[i]), std::fabs(y1[i]));
+        sum += (e[i] / w) * (e[i] / w);
+      }
+      return std::sqrt(sum / nx);
+    };
+    double error = norm(err);
+    if (refine && error > 1.0) {
+      // Hairer's refinement on first and rejected steps (avoids needless rejections for
+      // stiff problems): use F(y0 + err) in place of F(y0).
+      Evaluate(y0 + err, Derivatives::kNone);
+      err = tableau_.gamma0 * h * eval_.F + ez;
+      filter_solver_->Solve(err);
+      error = norm(err);
+    }
+    return error;
+  }
+
+  // Advances y by the last stage increment; the clock is set to the exact new time t_new so
+  // that it does not accumulate round-off over many steps.
+  void Accept(double h, const Matrix& z, double t_new, Vector* y, RadauResult* result) {
+    *y += z.col(s_ - 1);
+    (*y)[system_.clock_index()] = t_new;
+    ++stats_.num_steps;
+    previous_z_ = z;
+    previous_h_ = h;
+    have_previous_ = true;
+    last_step_ = h;
+    if (options_.record_trajectory) {
+      result->trajectory.Append((*y)[system_.clock_index()], y->head(system_.num_scene_states()),
+                                Vector(), h);
+    }
+  }
+
+  bool Fail(RadauResult* result, RadauStatus status, double t, const std::string& reason) {
+    result->status = status;
+    std::ostringstream s;
+    s.precision(17);
+    s << ToString(status) << " at t = " << t << ": " << reason;
+    result->message = s.str();
+    return false;
+  }
+
+  std::string Describe(SolveOutcome outcome, int iterations, double h) const {
+    std::ostringstream s;
+    s << "Newton ";
+    switch (outcome) {
+      case SolveOutcome::kNotConverged:
+        s << "did not converge in " << iterations << " iterations";
+        break;
+      case SolveOutcome::kSingular:
+        s << "matrix numerically singular (rcond < " << kSingularRcond << ") at iteration "
+          << iterations;
+        break;
+      case SolveOutcome::kNonFinite:
+        s << "met a non-finite value at iteration " << iterations;
+        break;
+      case SolveOutcome::kConverged:
+        s << "converged";
+        break;
+    }
+    s << " with h = " << h;
+    return s.str();
+  }
+
+  RadauOptions options_;
+  ProgressCallback progress_;
+  LoweredSystem system_;
+  const RadauTableau& tableau_;
+  int n_;
+  int s_;
+  std::unique_ptr<LinearSolver> solver_;
+  std::unique_ptr<LinearSolver> filter_solver_;
+  SystemMatrix matrix_;
+  SystemMatrix filter_matrix_;
+  PointEvaluation eval_;
+  Matrix stage_f_;
+  std::vector<Matrix> stage_jacobians_;
+  std::vector<SparseMatrix> stage_sparse_;
+  bool sparse_jacobians_ = false;
+  Matrix previous_z_;
+  double previous_h_ = 0.0;
+  bool have_previous_ = false;
+  double last_step_ = 0.0;
+  RadauStats stats_;
+};
+
+}  // namespace
+
+RadauResult SimulateRadau(const Scene& scene, const RadauOptions& options,
+                          const ProgressCallback& progress) {
+  options.Validate();
+  for (const Effect& effect : scene.effects) {
+    ThrowInvalidArgument("the smooth Radau IIA integrator does not support the ",
+                         EffectKind(effect), " '", EffectName(effect), "' of scene '", scene.name,
+                         "'; use the timestepping, fesd, ida or alpha integrators");
+  }
+  RadauRun run(scene, options, progress);
+  return run.Run();
+}
+
+}  // namespace moreau

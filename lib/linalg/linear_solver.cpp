@@ -1,0 +1,251 @@
+#include "moreau/linalg/linear_solver.hpp"
+
+#include <klu.h>
+
+#include <Eigen/LU>
+#include <cmath>
+
+#include "moreau/core/error.hpp"
+
+namespace moreau {
+
+std::string ToString(LinearSolverKind kind) {
+  switch (kind) {
+    case LinearSolverKind::kAutomatic:
+      return "auto";
+    case LinearSolverKind::kDenseLu:
+      return "dense";
+    case LinearSolverKind::kSparseLu:
+      return "sparse";
+  }
+  return "?";
+}
+
+LinearSolverKind ParseLinearSolverKind(const std::string& name) {
+  if (name == "auto") return LinearSolverKind::kAutomatic;
+  if (name == "dense") return LinearSolverKind::kDenseLu;
+  if (name == "sparse") return LinearSolverKind::kSparseLu;
+  ThrowInvalidArgument("unknown linear solver '", name, "'; expected auto, dense or sparse");
+}
+
+std::string ToString(FactorizationStatus status) {
+  switch (status) {
+    case FactorizationStatus::kSuccess:
+      return "success";
+    case FactorizationStatus::kSingular:
+      return "singular";
+    case FactorizationStatus::kNonFinite:
+      return "non-finite";
+  }
+  return "?";
+}
+
+// ---- SystemMatrix --------------------------------------------------------------------------
+
+void SystemMatrix::Reset(int n, bool sparse) {
+  n_ = n;
+  sparse_ = sparse;
+  if (sparse_) {
+    triplets_.clear();
+    dense_.resize(0, 0);
+  } else {
+    dense_.setZero(n, n);
+  }
+}
+
+void SystemMatrix::AddBlock(int row0, int col0, const ConstMatrixRef& block, double scale) {
+  MOREAU_ASSERT(row0 >= 0 && col0 >= 0 && row0 + block.rows() <= n_ && col0 + block.cols() <= n_,
+                "block outside the system matrix");
+  if (!sparse_) {
+    dense_.block(row0, col0, block.rows(), block.cols()) += scale * block;
+    return;
+  }
+  for (Eigen::Index j = 0; j < block.cols(); ++j) {
+    for (Eigen::Index i = 0; i < block.rows(); ++i) {
+      triplets_.emplace_back(row0 + static_cast<int>(i), col0 + static_cast<int>(j),
+                             scale * block(i, j));
+    }
+  }
+}
+
+void SystemMatrix::AddSparseBlock(int row0, int col0, const SparseMatrix& block, double scale) {
+  MOREAU_ASSERT(row0 + block.rows() <= n_ && col0 + block.cols() <= n_,
+                "sparse block outside the system matrix");
+  for (int j = 0; j < block.outerSize(); ++j) {
+    for (SparseMatrix::InnerIterator it(block, j); it; ++it) {
+      if (sparse_) {
+        triplets_.emplace_back(row0 + it.row(), col0 + it.col(), scale * it.value());
+      } else {
+        dense_(row0 + it.row(), col0 + it.col()) += scale * it.value();
+      }
+    }
+  }
+}
+
+void SystemMatrix::AddDiagonal(int row0, int col0, int count, double value) {
+  MOREAU_ASSERT(row0 + count <= n_ && col0 + count <= n_, "diagonal outside the system matrix");
+  for (int i = 0; i < count; ++i) AddEntry(row0 + i, col0 + i, value);
+}
+
+void SystemMatrix::AddEntry(int row, int col, double value) {
+  if (sparse_) {
+    triplets_.emplace_back(row, col, value);
+  } else {
+    dense_(row, col) += value;
+  }
+}
+
+void SystemMatrix::Finalize() {
+  if (!sparse_) return;
+  sparse_matrix_.resize(n_, n_);
+  sparse_matrix_.setFromTriplets(triplets_.begin(), triplets_.end());
+  sparse_matrix_.makeCompressed();
+}
+
+Vector SystemMatrix::Multiply(const Vector& x) const {
+  return sparse_ ? Vector(sparse_matrix_ * x) : Vector(dense_ * x);
+}
+
+void LinearSolver::SolveMatrix(MatrixRef rhs) const {
+  for (Eigen::Index j = 0; j < rhs.cols(); ++j) {
+    Vector column = rhs.col(j);
+    Solve(column);
+    rhs.col(j) = column;
+  }
+}
+
+namespace {
+
+// ---- dense LU ------------------------------------------------------------------------------
+class DenseLuSolver final : public LinearSolver {
+ public:
+  LinearSolverKind kind() const override { return LinearSolverKind::kDenseLu; }
+
+  FactorizationStatus Factorize(const SystemMatrix& a) override {
+    MOREAU_ASSERT(!a.sparse(), "dense LU needs dense storage");
+    ++num_factorizations_;
+    if (!a.dense().allFinite()) return FactorizationStatus::kNonFinite;
+    lu_.compute(a.dense());
+    rcond_ = a.size() == 0 ? 1.0 : lu_.rcond();
+    // PartialPivLU does not flag zero pivots; an exactly zero pivot gives rcond = 0 or NaN.
+    if (!(rcond_ >= kSingularRcond)) return FactorizationStatus::kSingular;
+    return FactorizationStatus::kSuccess;
+  }
+  void Solve(VectorRef rhs) const override { rhs = lu_.solve(rhs); }
+  void SolveMatrix(MatrixRef rhs) const override { rhs = lu_.solve(rhs); }
+  void SolveTransposed(VectorRef rhs) const override { rhs = lu_.transpose().solve(rhs); }
+  double reciprocal_condition() const override { return rcond_; }
+
+ private:
+  Eigen::PartialPivLU<Matrix> lu_;
+  double rcond_ = 0.0;
+};
+
+// ---- sparse LU (KLU) -----------------------------------------------------------------------
+class KluSolver final : public LinearSolver {
+ public:
+  KluSolver() { klu_defaults(&common_); }
+  ~KluSolver() override { Release(); }
+  KluSolver(const KluSolver&) = delete;
+  KluSolver& operator=(const KluSolver&) = delete;
+
+  LinearSolverKind kind() const override { return LinearSolverKind::kSparseLu; }
+
+  FactorizationStatus Factorize(const SystemMatrix& a) override {
+    MOREAU_ASSERT(a.sparse(), "KLU needs sparse storage");
+    ++num_factorizations_;
+    matrix_ = a.sparse_matrix();  // KLU keeps pointers into the values it factorizes
+    const int n = static_cast<int>(matrix_.rows());
+    for (int k = 0; k < matrix_.nonZeros(); ++k) {
+      if (!std::isfinite(matrix_.valuePtr()[k])) return FactorizationStatus::kNonFinite;
+    }
+    int* col = matrix_.outerIndexPtr();
+    int* row = matrix_.innerIndexPtr();
+    double* values = matrix_.valuePtr();
+    const bool same_pattern = symbolic_ != nullptr && n == n_ &&
+                              std::equal(col, col + n + 1, col_pattern_.begin()) &&
+                              static_cast<std::size_t>(col[n]) == row_pattern_.size() &&
+                              std::equal(row, row + col[n], row_pattern_.begin());
+    if (!same_pattern) {
+      Release();
+      n_ = n;
+      col_pattern_.assign(col, col + n + 1);
+      row_pattern_.assign(row, row + col[n]);
+      symbolic_ = klu_analyze(n, col, row, &common_);
+      if (symbolic_ == nullptr) return FactorizationStatus::kSingular;
+    }
+    // Numeric factorization (refactor with the previous pivoting when possible).
+    bool ok = false;
+    if (numeric_ != nullptr) {
+      ok = klu_refactor(col, row, values, symbolic_, numeric_, &common_) == 1;
+      if (ok) {
+        // A refactorization keeps the old pivot order, which may be poor for new values.
+        ok = klu_rcond(symbolic_, numeric_, &common_) == 1 && common_.rcond >= kSingularRcond;
+      }
+      if (!ok) {
+        klu_free_numeric(&numeric_, &common_);
+        numeric_ = nullptr;
+      }
+    }
+    if (!ok) {
+      numeric_ = klu_factor(col, row, values, symbolic_, &common_);
+      if (numeric_ == nullptr || common_.status == KLU_SINGULAR) {
+        rcond_ = 0.0;
+        return FactorizationStatus::kSingular;
+      }
+    }
+    klu_rcond(symbolic_, numeric_, &common_);
+    rcond_ = common_.rcond;
+    if (!(rcond_ >= kSingularRcond)) return FactorizationStatus::kSingular;
+    return FactorizationStatus::kSuccess;
+  }
+
+  void Solve(VectorRef rhs) const override {
+    MOREAU_ASSERT(numeric_ != nullptr, "solve before factorization");
+    klu_solve(symbolic_, numeric_, n_, 1, rhs.data(), &common_);
+  }
+  void SolveMatrix(MatrixRef rhs) const override {
+    MOREAU_ASSERT(numeric_ != nullptr, "solve before factorization");
+    if (rhs.outerStride() == rhs.rows()) {
+      klu_solve(symbolic_, numeric_, n_, static_cast<int>(rhs.cols()), rhs.data(), &common_);
+    } else {
+      LinearSolver::SolveMatrix(rhs);
+    }
+  }
+  void SolveTransposed(VectorRef rhs) const override {
+    MOREAU_ASSERT(numeric_ != nullptr, "solve before factorization");
+    klu_tsolve(symbolic_, numeric_, n_, 1, rhs.data(), &common_);
+  }
+  double reciprocal_condition() const override { return rcond_; }
+
+ private:
+  void Release() {
+    if (numeric_ != nullptr) klu_free_numeric(&numeric_, &common_);
+    if (symbolic_ != nullptr) klu_free_symbolic(&symbolic_, &common_);
+    numeric_ = nullptr;
+    symbolic_ = nullptr;
+  }
+
+  mutable klu_common common_;
+  klu_symbolic* symbolic_ = nullptr;
+  klu_numeric* numeric_ = nullptr;
+  SparseMatrix matrix_;
+  std::vector<int> col_pattern_, row_pattern_;
+  int n_ = 0;
+  double rcond_ = 0.0;
+};
+
+}  // namespace
+
+std::unique_ptr<LinearSolver> MakeLinearSolver(LinearSolverKind kind, int n, double nonzeros) {
+  RequireArgument(n >= 0, "linear system size must be non-negative, got ", n);
+  if (kind == LinearSolverKind::kAutomatic) {
+    const double density = n == 0 ? 1.0 : nonzeros / (static_cast<double>(n) * n);
+    kind = (n <= kDenseSizeLimit || density > kSparseDensityLimit) ? LinearSolverKind::kDenseLu
+                                                                   : LinearSolverKind::kSparseLu;
+  }
+  if (kind == LinearSolverKind::kSparseLu) return std::make_unique<KluSolver>();
+  return std::make_unique<DenseLuSolver>();
+}
+
+}  // namespace moreau

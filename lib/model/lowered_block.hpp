@@ -1,0 +1,50 @@
+#pragma once
+// Private interface of one lowered effect inside LoweredSystem (namespace moreau::internal).
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "moreau/model/lowered_system.hpp"
+
+namespace moreau::internal {
+
+// Where a block's unknowns and equations sit in the lowered system.
+struct BlockLayout {
+  int z_offset = 0;     // first algebraic unknown of the block in z
+  int g_offset = 0;     // first algebraic equation in G
+  int pair_offset = 0;  // first complementarity pair
+};
+
+// Everything a block may read while evaluating: the point, inputs, parameters and the
+// Jacobian column layout of the smooth model functions.
+struct BlockContext {
+  int num_scene_states = 0;
+  int clock_index = 0;
+  const Vector* inputs = nullptr;
+  const Vector* parameters = nullptr;
+};
+
+class LoweredBlock {
+ public:
+  virtual ~LoweredBlock() = default;
+  virtual std::unique_ptr<LoweredBlock> Clone() const = 0;
+
+  virtual int num_algebraic() const = 0;
+  virtual int num_equations() const = 0;
+  virtual int num_pairs() const = 0;
+  // Names of the block's algebraic unknowns (size num_algebraic()).
+  virtual std::vector<std::string> AlgebraicNames() const = 0;
+  // Descriptions of the block's pairs (size num_pairs()).
+  virtual std::vector<PairInfo> Pairs() const = 0;
+
+  // Adds the block's contributions to `out` at (y, z). The matrices of `out` are sized for
+  // the whole system and zero-initialized by the caller for the block's rows; F rows are
+  // accumulated (+=) because effects compose additively.
+  virtual void Evaluate(const BlockContext& context, const ConstVectorRef& y,
+                        const ConstVectorRef& z, Derivatives derivatives, PointEvaluation* out) = 0;
+
+  BlockLayout layout;
+};
+
+}  // namespace moreau::internal

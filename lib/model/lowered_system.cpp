@@ -1,0 +1,191 @@
+#include "moreau/model/lowered_system.hpp"
+
+#include "lowered_block.hpp"
+#include "moreau/core/error.hpp"
+
+namespace moreau {
+
+std::string ToString(SwitchingForm form) {
+  return form == SwitchingForm::kStewart ? "stewart" : "heaviside";
+}
+
+SwitchingForm ParseSwitchingForm(const std::string& name) {
+  if (name == "stewart") return SwitchingForm::kStewart;
+  if (name == "heaviside") return SwitchingForm::kHeaviside;
+  ThrowInvalidArgument("unknown switching form '", name, "'; expected stewart or heaviside");
+}
+
+namespace internal {
+// Defined next to each lowering (lib/model/lower_*.cpp); returns nullptr for effects that
+// are not lowered to complementarity form (path constraints are handled by the DAI stepper).
+std::unique_ptr<LoweredBlock> LowerEffect(const Scene& scene, const Effect& effect,
+                                          const LoweringOptions& options);
+}  // namespace internal
+
+LoweredSystem::LoweredSystem(const Scene& scene, const LoweringOptions& options)
+    : scene_(scene), options_(options) {
+  ValidateScene(scene_);
+  Build();
+}
+
+LoweredSystem::~LoweredSystem() = default;
+
+LoweredSystem::LoweredSystem(const LoweredSystem& other)
+    : scene_(other.scene_), options_(other.options_) {
+  Build();
+  inputs_ = other.inputs_;
+  parameters_ = other.parameters_;
+}
+
+LoweredSystem& LoweredSystem::operator=(const LoweredSystem& other) {
+  if (this != &other) {
+    scene_ = other.scene_;
+    options_ = other.options_;
+    Build();
+    inputs_ = other.inputs_;
+    parameters_ = other.parameters_;
+  }
+  return *this;
+}
+
+void LoweredSystem::Build() {
+  blocks_.clear();
+  state_names_ = scene_.state_names;
+  state_names_.push_back("clock");
+  num_states_ = scene_.num_states() + 1;
+  num_algebraic_ = num_equations_ = num_pairs_ = 0;
+  algebraic_names_.clear();
+  pairs_.clear();
+  for (const Effect& effect : scene_.effects) {
+    std::unique_ptr<internal::LoweredBlock> block = internal::LowerEffect(scene_, effect, options_);
+    if (!block) continue;
+    block->layout = {num_algebraic_, num_equations_, num_pairs_};
+    num_algebraic_ += block->num_algebraic();
+    num_equations_ += block->num_equations();
+    num_pairs_ += block->num_pairs();
+    for (const std::string& name : block->AlgebraicNames()) algebraic_names_.push_back(name);
+    for (PairInfo info : block->Pairs()) {
+      info.block = static_cast<int>(blocks_.size());
+      pairs_.push_back(info);
+    }
+    blocks_.push_back(std::move(block));
+  }
+  MOREAU_ASSERT(num_algebraic_ == num_equations_ + num_pairs_,
+                "lowered stage system is not square");
+  inputs_ = scene_.InputValues(scene_.initial_time);
+  parameters_ = scene_.ParameterValues();
+  sparse_dynamics_ = scene_.dynamics.has_sparse_state_jacobian();
+  const double n = num_states_;
+  nonzeros_fy_ = n * n;
+  if (sparse_dynamics_) {
+    RequireArgument(blocks_.empty(), scene_.name,
+                    ": dynamics with a hand-written sparse Jacobian cannot be combined with "
+                    "effects (their lowering needs automatic differentiation)");
+    Vector f;
+    scene_.dynamics.SparseStateJacobian(scene_.initial_state, inputs_, scene_.initial_time,
+                                        parameters_, &f, &sparse_scratch_);
+    nonzeros_fy_ = static_cast<double>(sparse_scratch_.nonZeros());
+  }
+}
+
+Vector LoweredSystem::InitialState() const {
+  Vector y(num_states_);
+  y.head(scene_.num_states()) = scene_.initial_state;
+  y[clock_index()] = scene_.initial_time;
+  return y;
+}
+
+void LoweredSystem::SetInputs(const Vector& u) {
+  RequireArgument(u.size() == scene_.num_inputs(), scene_.name, ": expected ", scene_.num_inputs(),
+                  " input values, got ", u.size());
+  inputs_ = u;
+}
+
+void LoweredSystem::SetParameters(const Vector& p) {
+  RequireArgument(p.size() == scene_.num_parameters(), scene_.name, ": expected ",
+                  scene_.num_parameters(), " parameter values, got ", p.size());
+  parameters_ = p;
+}
+
+double LoweredSystem::EstimatedNonzerosFy() const { return nonzeros_fy_; }
+
+void LoweredSystem::Evaluate(const ConstVectorRef& y, const ConstVectorRef& z,
+                             Derivatives derivatives, PointEvaluation* out) const {
+  MOREAU_ASSERT(y.size() == num_states_ && z.size() == num_algebraic_,
+                "LoweredSystem::Evaluate: wrong point size");
+  const int nx = scene_.num_states();
+  const int ny = num_states_;
+  const int nz = num_algebraic_;
+  const int nu = scene_.num_inputs();
+  const int np = scene_.num_parameters();
+  const int clock = clock_index();
+  const double t = y[clock];
+
+  out->F.setZero(ny);
+  out->G.setZero(num_equations_);
+  out->A.setZero(num_pairs_);
+  out->B.setZero(num_pairs_);
+  out->has_sparse_F_y = false;
+  const bool with_states = derivatives != Derivatives::kNone;
+  const bool with_all = derivatives == Derivatives::kAll;
+  if (with_states) {
+    // Sparse dynamics fill F_y_sparse instead (no dense n_y x n_y allocation).
+    if (sparse_dynamics_) {
+      out->F_y.resize(0, 0);
+    } else {
+      out->F_y.setZero(ny, ny);
+    }
+    out->F_z.setZero(ny, nz);
+    out->G_y.setZero(num_equations_, ny);
+    out->G_z.setZero(num_equations_, nz);
+    out->A_y.setZero(num_pairs_, ny);
+    out->A_z.setZero(num_pairs_, nz);
+    out->B_y.setZero(num_pairs_, ny);
+    out->B_z.setZero(num_pairs_, nz);
+  }
+  if (with_all) {
+    out->F_u.setZero(ny, nu);
+    out->G_u.setZero(num_equations_, nu);
+    out->A_u.setZero(num_pairs_, nu);
+    out->B_u.setZero(num_pairs_, nu);
+    out->F_p.setZero(ny, np);
+    out->G_p.setZero(num_equations_, np);
+    out->A_p.setZero(num_pairs_, np);
+    out->B_p.setZero(num_pairs_, np);
+  }
+
+  // Smooth dynamics: x' = f(x, u, clock, p); clock' = 1.
+  out->F[clock] = 1.0;
+  if (!scene_.dynamics.empty()) {
+    x_scratch_ = y.head(nx);
+    if (sparse_dynamics_ && with_states) {
+      scene_.dynamics.SparseStateJacobian(x_scratch_, inputs_, t, parameters_, &f_scratch_,
+                                          &out->F_y_sparse);
+      out->F.head(nx) = f_scratch_;
+      out->F_y_sparse.conservativeResize(ny, ny);
+      out->has_sparse_F_y = true;
+    } else if (!with_states) {
+      scene_.dynamics.Evaluate(x_scratch_, inputs_, t, parameters_, &f_scratch_);
+      out->F.head(nx) = f_scratch_;
+    } else {
+      const Wrt wrt = with_all ? Wrt::All() : Wrt::XT();
+      scene_.dynamics.Jacobian(x_scratch_, inputs_, t, parameters_, wrt, &f_scratch_,
+                               &jac_scratch_);
+      out->F.head(nx) = f_scratch_;
+      // Columns of jac_scratch_: x, [u], t, [p].
+      out->F_y.topLeftCorner(nx, nx) = jac_scratch_.leftCols(nx);
+      if (with_all) {
+        out->F_u.topRows(nx) = jac_scratch_.middleCols(nx, nu);
+        out->F_y.col(clock).head(nx) = jac_scratch_.col(nx + nu);
+        out->F_p.topRows(nx) = jac_scratch_.rightCols(np);
+      } else {
+        out->F_y.col(clock).head(nx) = jac_scratch_.col(nx);
+      }
+    }
+  }
+
+  internal::BlockContext context{nx, clock, &inputs_, &parameters_};
+  for (const auto& block : blocks_) block->Evaluate(context, y, z, derivatives, out);
+}
+
+}  // namespace moreau

@@ -1,0 +1,305 @@
+#include "moreau/model/scene.hpp"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <set>
+
+#include "moreau/core/error.hpp"
+
+namespace moreau {
+
+double PiecewiseConstantSignal::ValueAt(double t) const {
+  // Interval k = number of breakpoints <= t (right-continuous signal).
+  const auto k = std::upper_bound(breakpoints.begin(), breakpoints.end(), t) - breakpoints.begin();
+  return values[static_cast<std::size_t>(k)];
+}
+
+std::string EffectKind(const Effect& effect) {
+  struct Visitor {
+    std::string operator()(const MovingSet&) const { return "moving set"; }
+    std::string operator()(const SwitchingSurfaces&) const { return "switching surfaces"; }
+    std::string operator()(const HysteresisRelay&) const { return "hysteresis relay"; }
+    std::string operator()(const PathConstraints&) const { return "path constraints"; }
+  };
+  return std::visit(Visitor{}, effect);
+}
+
+const std::string& EffectName(const Effect& effect) {
+  return std::visit([](const auto& e) -> const std::string& { return e.name; }, effect);
+}
+
+int Scene::AddParameter(const std::string& parameter_name, double value,
+                        const std::string& parameter_description) {
+  parameters.push_back({parameter_name, value, parameter_description});
+  return static_cast<int>(parameters.size()) - 1;
+}
+
+int Scene::FindParameter(const std::string& parameter_name) const {
+  for (std::size_t i = 0; i < parameters.size(); ++i) {
+    if (parameters[i].name == parameter_name) return static_cast<int>(i);
+  }
+  return -1;
+}
+
+Vector Scene::ParameterValues() const {
+  Vector p(num_parameters());
+  for (int i = 0; i < num_parameters(); ++i) p[i] = parameters[static_cast<std::size_t>(i)].value;
+  return p;
+}
+
+Vector Scene::InputValues(double t) const {
+  Vector u(num_inputs());
+  for (int i = 0; i < num_inputs(); ++i) {
+    const InputSpec& input = inputs[static_cast<std::size_t>(i)];
+    u[i] = input.kind == InputSpec::Kind::kControl ? input.signal.ValueAt(t) : input.initial_guess;
+  }
+  return u;
+}
+
+std::vector<double> Scene::ControlBreakpoints() const {
+  std::vector<double> points;
+  for (const InputSpec& input : inputs) {
+    if (input.kind != InputSpec::Kind::kControl) continue;
+    for (double b : input.signal.breakpoints) {
+      if (b > initial_time && b < final_time) points.push_back(b);
+    }
+  }
+  std::sort(points.begin(), points.end());
+  points.erase(std::unique(points.begin(), points.end()), points.end());
+  return points;
+}
+
+namespace {
+
+void RequireUniqueNames(const std::vector<std::string>& names, const std::string& what) {
+  std::set<std::string> seen;
+  for (const std::string& name : names) {
+    RequireArgument(!name.empty(), what, ": names must not be empty");
+    RequireArgument(seen.insert(name).second, what, ": duplicate name '", name, "'");
+  }
+}
+
+bool AllFinite(const Vector& v) { return v.allFinite(); }
+
+// Evaluates `f` at the initial point and checks its output size and finiteness; out-of-range
+// argument accesses surface here as std::invalid_argument from the argument views.
+Vector EvaluateAtStart(const Scene& scene, const SmoothFunction& f, const std::string& what,
+                       int expected_outputs) {
+  RequireArgument(!f.empty(), scene.name, ": ", what, " is missing");
+  RequireArgument(f.num_outputs() == expected_outputs, scene.name, ": ", what, " ('", f.name(),
+                  "') must have ", expected_outputs, " outputs, got ", f.num_outputs());
+  Vector out;
+  try {
+    f.Evaluate(scene.initial_state, scene.InputValues(scene.initial_time), scene.initial_time,
+               scene.ParameterValues(), &out);
+  } catch (const std::invalid_argument& error) {
+    ThrowInvalidArgument(scene.name, ": ", what, ": ", error.what());
+  }
+  RequireArgument(AllFinite(out), scene.name, ": ", what, " ('", f.name(),
+                  "') is not finite at the initial state");
+  return out;
+}
+
+void ValidateMovingSet(const Scene& scene, const MovingSet& set) {
+  const std::string what = "moving set '" + set.name + "'";
+  RequireArgument(!set.constraint_names.empty(), scene.name, ": ", what, " has no constraints");
+  RequireUniqueNames(set.constraint_names, scene.name + ": " + what + " constraints");
+  const Vector c = EvaluateAtStart(scene, set.constraints, what + " constraints",
+                                   static_cast<int>(set.constraint_names.size()));
+  const double tolerance =
+      kInitialFeasibilityTolerance * std::max(1.0, scene.initial_state.lpNorm<Eigen::Infinity>());
+  for (Eigen::Index k = 0; k < c.size(); ++k) {
+    RequireArgument(c[k] >= -tolerance, scene.name, ": infeasible initial state: constraint '",
+                    set.constraint_names[static_cast<std::size_t>(k)], "' of ", what,
+                    " is c = ", c[k], " < 0 at t0 = ", scene.initial_time,
+                    " (expected x0 in C(t0), i.e. c(x0, t0) >= 0)");
+  }
+  const Matrix& e = set.projection_basis;
+  if (e.size() != 0) {
+    RequireArgument(e.rows() == scene.num_states(), scene.name, ": ", what,
+                    ": projection basis E must have ", scene.num_states(), " rows, got ", e.rows());
+    RequireArgument(e.cols() >= 1 && e.cols() <= e.rows(), scene.name, ": ", what,
+                    ": projection basis E must have between 1 and ", e.rows(), " columns, got ",
+                    e.cols());
+    RequireArgument(e.allFinite(), scene.name, ": ", what, ": projection basis E is not finite");
+    const double orthonormality =
+        (e.transpose() * e - Matrix::Identity(e.cols(), e.cols())).lpNorm<Eigen::Infinity>();
+    RequireArgument(
+        orthonormality <= 1e-12, scene.name, ": ", what,
+        ": projection basis E must have orthonormal columns (|E^T E - I| = ", orthonormality, ")");
+  }
+}
+
+void ValidateSwitching(const Scene& scene, const SwitchingSurfaces& switching) {
+  const std::string what = "switching surfaces '" + switching.name + "'";
+  const auto nc = switching.surface_names.size();
+  RequireArgument(nc >= 1 && nc <= 8, scene.name, ": ", what,
+                  " needs between 1 and 8 surfaces, got ", nc);
+  RequireUniqueNames(switching.surface_names, scene.name + ": " + what + " surfaces");
+  EvaluateAtStart(scene, switching.surfaces, what + " surfaces", static_cast<int>(nc));
+  const std::size_t num_modes = std::size_t{1} << nc;
+  RequireArgument(switching.modes.size() == num_modes, scene.name, ": ", what, " with ", nc,
+                  " surface", nc == 1 ? "" : "s", " needs ", num_modes,
+                  " modes (one per sign pattern), got ", switching.modes.size());
+  RequireArgument(switching.mode_names.size() == num_modes, scene.name, ": ", what, " needs ",
+                  num_modes, " mode names, got ", switching.mode_names.size());
+  RequireUniqueNames(switching.mode_names, scene.name + ": " + what + " modes");
+  for (std::size_t k = 0; k < num_modes; ++k) {
+    EvaluateAtStart(scene, switching.modes[k], what + " mode '" + switching.mode_names[k] + "'",
+                    scene.num_states());
+  }
+}
+
+void ValidateRelay(const Scene& scene, const HysteresisRelay& relay) {
+  const std::string what = "hysteresis relay '" + relay.name + "'";
+  EvaluateAtStart(scene, relay.input, what + " input", 1);
+  EvaluateAtStart(scene, relay.mode_a, what + " mode A", scene.num_states());
+  EvaluateAtStart(scene, relay.mode_b, what + " mode B", scene.num_states());
+  const int np = scene.num_parameters();
+  RequireArgument(relay.lower_threshold >= 0 && relay.lower_threshold < np, scene.name, ": ", what,
+                  ": lower threshold must be a parameter index in [0, ", np, "), got ",
+                  relay.lower_threshold);
+  RequireArgument(relay.upper_threshold >= 0 && relay.upper_threshold < np, scene.name, ": ", what,
+                  ": upper threshold must be a parameter index in [0, ", np, "), got ",
+                  relay.upper_threshold);
+  const double lower = scene.parameters[static_cast<std::size_t>(relay.lower_threshold)].value;
+  const double upper = scene.parameters[static_cast<std::size_t>(relay.upper_threshold)].value;
+  RequireArgument(upper > lower, scene.name, ": ", what,
+                  ": upper threshold must exceed the lower one, got lower = ", lower,
+                  ", upper = ", upper);
+  RequireArgument(relay.initial_memory == 0 || relay.initial_memory == 1, scene.name, ": ", what,
+                  ": initial memory must be 0 (mode A) or 1 (mode B), got ", relay.initial_memory);
+  RequireArgument(std::isfinite(relay.auxiliary_gain) && relay.auxiliary_gain > 0.0, scene.name,
+                  ": ", what, ": auxiliary gain must be positive and finite, got ",
+                  relay.auxiliary_gain);
+}
+
+void ValidatePathConstraints(const Scene& scene, const PathConstraints& dai) {
+  const std::string what = "path constraints '" + dai.name + "'";
+  RequireUniqueNames(dai.constraint_names, scene.name + ": " + what);
+  if (!dai.constraint_names.empty()) {
+    EvaluateAtStart(scene, dai.constraints, what, static_cast<int>(dai.constraint_names.size()));
+  }
+  for (const Vector* bound : {&dai.state_lower, &dai.state_upper}) {
+    RequireArgument(bound->size() == 0 || bound->size() == scene.num_states(), scene.name, ": ",
+                    what, ": state bounds need 0 or ", scene.num_states(), " entries, got ",
+                    bound->size());
+    for (Eigen::Index i = 0; i < bound->size(); ++i) {
+      RequireArgument(!std::isnan((*bound)[i]), scene.name, ": ", what, ": state bound is NaN");
+    }
+  }
+}
+
+}  // namespace
+
+void ValidateScene(const Scene& scene) {
+  RequireArgument(!scene.name.empty(), "scene name must not be empty");
+  const std::string& s = scene.name;
+  RequireArgument(!scene.state_names.empty(), s, ": a scene needs at least one state");
+  RequireUniqueNames(scene.state_names, s + ": states");
+  RequireArgument(scene.initial_state.size() == scene.num_states(), s, ": initial state has ",
+                  scene.initial_state.size(), " entries, expected ", scene.num_states(),
+                  " (one per state)");
+  for (int i = 0; i < scene.num_states(); ++i) {
+    RequireArgument(std::isfinite(scene.initial_state[i]), s, ": initial state x0.",
+                    scene.state_names[static_cast<std::size_t>(i)], " is not finite (got ",
+                    scene.initial_state[i], ")");
+  }
+  RequireArgument(std::isfinite(scene.initial_time), s, ": initial time is not finite");
+  RequireArgument(std::isfinite(scene.final_time), s, ": final time tf is not finite");
+  RequireArgument(scene.final_time > scene.initial_time, s,
+                  ": horizon must be positive: expected tf > t0 = ", scene.initial_time,
+                  ", got tf = ", scene.final_time);
+
+  std::vector<std::string> names;
+  for (const ParameterSpec& parameter : scene.parameters) {
+    names.push_back(parameter.name);
+    RequireArgument(std::isfinite(parameter.value), s, ": parameter '", parameter.name,
+                    "' is not finite (got ", parameter.value, ")");
+  }
+  RequireUniqueNames(names, s + ": parameters");
+  names.clear();
+  for (const InputSpec& input : scene.inputs) {
+    names.push_back(input.name);
+    if (input.kind == InputSpec::Kind::kControl) {
+      const auto& sig = input.signal;
+      RequireArgument(sig.values.size() == sig.breakpoints.size() + 1, s, ": control '", input.name,
+                      "' needs one value more than breakpoints, got ", sig.values.size(),
+                      " values and ", sig.breakpoints.size(), " breakpoints");
+      for (std::size_t k = 0; k < sig.breakpoints.size(); ++k) {
+        RequireArgument(std::isfinite(sig.breakpoints[k]), s, ": control '", input.name,
+                        "' has a non-finite breakpoint");
+        RequireArgument(k == 0 || sig.breakpoints[k] > sig.breakpoints[k - 1], s, ": control '",
+                        input.name, "' breakpoints must increase strictly");
+      }
+      for (double v : sig.values) {
+        RequireArgument(std::isfinite(v), s, ": control '", input.name,
+                        "' has a non-finite value (got ", v, ")");
+      }
+    } else {
+      RequireArgument(
+          !std::isnan(input.lower) && !std::isnan(input.upper) && input.lower <= input.upper, s,
+          ": algebraic input '", input.name, "' has invalid bounds [", input.lower, ", ",
+          input.upper, "]");
+      RequireArgument(std::isfinite(input.initial_guess), s, ": algebraic input '", input.name,
+                      "' initial guess is not finite");
+    }
+  }
+  RequireUniqueNames(names, s + ": inputs");
+
+  if (!scene.dynamics.empty()) {
+    EvaluateAtStart(scene, scene.dynamics, "dynamics f", scene.num_states());
+  }
+  names.clear();
+  for (const Effect& effect : scene.effects) {
+    names.push_back(EffectName(effect));
+    std::visit(
+        [&](const auto& e) {
+          using E = std::decay_t<decltype(e)>;
+          if constexpr (std::is_same_v<E, MovingSet>) ValidateMovingSet(scene, e);
+          if constexpr (std::is_same_v<E, SwitchingSurfaces>) ValidateSwitching(scene, e);
+          if constexpr (std::is_same_v<E, HysteresisRelay>) ValidateRelay(scene, e);
+          if constexpr (std::is_same_v<E, PathConstraints>) ValidatePathConstraints(scene, e);
+        },
+        effect);
+  }
+  RequireUniqueNames(names, s + ": effects");
+}
+
+std::vector<std::string> OverridableNames(const Scene& scene) {
+  std::vector<std::string> names{"tf"};
+  for (const std::string& state : scene.state_names) names.push_back("x0." + state);
+  for (const ParameterSpec& parameter : scene.parameters) names.push_back(parameter.name);
+  return names;
+}
+
+void SetSceneValue(Scene* scene, const std::string& name, double value) {
+  RequireArgument(std::isfinite(value), "value of '", name, "' must be finite, got ", value);
+  if (name == "tf") {
+    scene->final_time = value;
+    return;
+  }
+  if (name.rfind("x0.", 0) == 0) {
+    const std::string state = name.substr(3);
+    for (std::size_t i = 0; i < scene->state_names.size(); ++i) {
+      if (scene->state_names[i] == state) {
+        scene->initial_state[static_cast<Eigen::Index>(i)] = value;
+        return;
+      }
+    }
+  }
+  const int index = scene->FindParameter(name);
+  if (index >= 0) {
+    scene->parameters[static_cast<std::size_t>(index)].value = value;
+    return;
+  }
+  std::string valid;
+  for (const std::string& candidate : OverridableNames(*scene)) {
+    valid += (valid.empty() ? "" : ", ") + candidate;
+  }
+  ThrowInvalidArgument("scene '", scene->name, "' has no value named '", name,
+                       "'; valid names: ", valid);
+}
+
+}  // namespace moreau

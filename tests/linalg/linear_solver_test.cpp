@@ -1,0 +1,96 @@
+#include "moreau/linalg/linear_solver.hpp"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+namespace moreau {
+namespace {
+
+// A diagonally dominant random sparse matrix (about 5 nonzeros per row), well conditioned.
+SystemMatrix RandomSparse(int n, bool sparse, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> value(-1.0, 1.0);
+  std::uniform_int_distribution<int> column(0, n - 1);
+  SystemMatrix a;
+  a.Reset(n, sparse);
+  for (int i = 0; i < n; ++i) {
+    a.AddEntry(i, i, 6.0);
+    for (int k = 0; k < 4; ++k) a.AddEntry(i, column(rng), value(rng));
+  }
+  a.Finalize();
+  return a;
+}
+
+// Agreement of two backward-stable LU solves of a well-conditioned system (cond ~ 10):
+// a few hundred ulps of O(1) solutions.
+constexpr double kAgreement = 1e-13;
+
+TEST(LinearSolverTest, DenseAndSparseAgreeOnLargeSparseSystem) {
+  constexpr int n = 3000;
+  const SystemMatrix dense = RandomSparse(n, false, 7);
+  const SystemMatrix sparse = RandomSparse(n, true, 7);
+  auto dense_lu = MakeLinearSolver(LinearSolverKind::kDenseLu, n, n * n);
+  auto klu = MakeLinearSolver(LinearSolverKind::kSparseLu, n, 5.0 * n);
+  ASSERT_EQ(dense_lu->Factorize(dense), FactorizationStatus::kSuccess);
+  ASSERT_EQ(klu->Factorize(sparse), FactorizationStatus::kSuccess);
+  Vector b = Vector::LinSpaced(n, -1.0, 2.0);
+  Vector x_dense = b, x_sparse = b;
+  dense_lu->Solve(x_dense);
+  klu->Solve(x_sparse);
+  EXPECT_LE((x_dense - x_sparse).lpNorm<Eigen::Infinity>(), kAgreement);
+  EXPECT_LE((sparse.Multiply(x_sparse) - b).lpNorm<Eigen::Infinity>(), kAgreement);
+  // Transposed solves agree too.
+  Vector t_dense = b, t_sparse = b;
+  dense_lu->SolveTransposed(t_dense);
+  klu->SolveTransposed(t_sparse);
+  EXPECT_LE((t_dense - t_sparse).lpNorm<Eigen::Infinity>(), kAgreement);
+}
+
+TEST(LinearSolverTest, KluRefactorizationWithSamePattern) {
+  constexpr int n = 500;
+  auto klu = MakeLinearSolver(LinearSolverKind::kSparseLu, n, 5.0 * n);
+  for (unsigned seed : {1u, 1u, 2u}) {  // same pattern twice (refactor), then a new pattern
+    const SystemMatrix a = RandomSparse(n, true, seed);
+    ASSERT_EQ(klu->Factorize(a), FactorizationStatus::kSuccess);
+    Vector x = Vector::Ones(n);
+    klu->Solve(x);
+    EXPECT_LE((a.Multiply(x) - Vector::Ones(n)).lpNorm<Eigen::Infinity>(), kAgreement);
+  }
+  EXPECT_EQ(klu->num_factorizations(), 3);
+}
+
+TEST(LinearSolverTest, SingularAndNonFiniteMatricesAreReported) {
+  for (bool sparse : {false, true}) {
+    SystemMatrix a;
+    a.Reset(3, sparse);
+    a.AddEntry(0, 0, 1.0);
+    a.AddEntry(1, 1, 1.0);
+    a.AddEntry(2, 0, 1.0);  // third row equals the first: rank 2
+    a.AddEntry(0, 2, 0.0);
+    a.AddEntry(2, 2, 0.0);
+    a.Finalize();
+    auto solver =
+        MakeLinearSolver(sparse ? LinearSolverKind::kSparseLu : LinearSolverKind::kDenseLu, 3, 9);
+    EXPECT_EQ(solver->Factorize(a), FactorizationStatus::kSingular) << "sparse = " << sparse;
+    SystemMatrix b;
+    b.Reset(2, sparse);
+    b.AddEntry(0, 0, std::numeric_limits<double>::quiet_NaN());
+    b.AddEntry(1, 1, 1.0);
+    b.Finalize();
+    EXPECT_EQ(solver->Factorize(b), FactorizationStatus::kNonFinite);
+  }
+}
+
+TEST(LinearSolverTest, AutomaticChoiceBySizeAndDensity) {
+  EXPECT_EQ(MakeLinearSolver(LinearSolverKind::kAutomatic, 100, 1e4)->kind(),
+            LinearSolverKind::kDenseLu);
+  EXPECT_EQ(MakeLinearSolver(LinearSolverKind::kAutomatic, 5000, 5e4)->kind(),
+            LinearSolverKind::kSparseLu);
+  EXPECT_EQ(MakeLinearSolver(LinearSolverKind::kAutomatic, 5000, 5000.0 * 5000)->kind(),
+            LinearSolverKind::kDenseLu);
+  EXPECT_THROW(ParseLinearSolverKind("cholesky"), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace moreau

@@ -1,0 +1,91 @@
+// Runs the `moreau` executable and checks exit codes, messages and output files.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <string>
+
+namespace {
+
+struct Outcome {
+  int exit_code = -1;
+  std::string output;  // stdout and stderr
+};
+
+Outcome RunCli(const std::string& arguments) {
+  const std::string command = std::string(MOREAU_CLI_PATH) + " " + arguments + " 2>&1";
+  Outcome outcome;
+  FILE* pipe = popen(command.c_str(), "r");
+  if (pipe == nullptr) return outcome;
+  char buffer[512];
+  while (fgets(buffer, sizeof buffer, pipe) != nullptr) outcome.output += buffer;
+  const int status = pclose(pipe);
+  outcome.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return outcome;
+}
+
+void ExpectUsageError(const std::string& arguments, const std::string& fragment) {
+  const Outcome outcome = RunCli(arguments);
+  EXPECT_EQ(outcome.exit_code, 2) << arguments << "\n" << outcome.output;
+  EXPECT_NE(outcome.output.find(fragment), std::string::npos)
+      << arguments << "\nexpected '" << fragment << "' in:\n"
+      << outcome.output;
+}
+
+TEST(CliTest, BadInputGivesClearErrorsAndExitCode2) {
+  ExpectUsageError("run nope", "unknown scene 'nope'; available scenes:");
+  ExpectUsageError("run hopf --bogus", "--bogus");
+  ExpectUsageError("run hopf --set omega=abc", "bad value 'abc' for --set omega");
+  ExpectUsageError("run hopf --set nope=1", "has no value named 'nope'");
+  ExpectUsageError("run hopf --set omega", "expected name=value");
+  ExpectUsageError("run hopf --tf -1", "horizon must be positive");
+  ExpectUsageError("run hopf --set x0.x=nan", "must be finite");
+  ExpectUsageError("run hopf --integrator nope", "unknown integrator 'nope'");
+  ExpectUsageError("run hopf --rtol 1e-3", "option --rtol does not apply to integrator 'radau'");
+  ExpectUsageError("run hopf --h 0", "step size h must be positive");
+  ExpectUsageError("run hopf --stages 0", "stages must be in [1, 7]");
+  ExpectUsageError("run hopf --linear-solver qr", "unknown linear solver 'qr'");
+  ExpectUsageError("show nope", "unknown scene 'nope'");
+}
+
+TEST(CliTest, RunWritesTrajectorySummaryAndPlot) {
+  const std::filesystem::path directory =
+      std::filesystem::temp_directory_path() / "moreau_cli_test_run";
+  std::filesystem::remove_all(directory);
+  const Outcome outcome =
+      RunCli("run hopf --stages 2 --h 0.01 --set mu=2 --quiet --out " + directory.string());
+  ASSERT_EQ(outcome.exit_code, 0) << outcome.output;
+  EXPECT_NE(outcome.output.find("status      success"), std::string::npos) << outcome.output;
+  std::ifstream csv(directory / "trajectory.csv");
+  std::string header;
+  std::getline(csv, header);
+  EXPECT_EQ(header, "t,x,y,h");
+  std::ifstream json_file(directory / "summary.json");
+  const nlohmann::json summary = nlohmann::json::parse(json_file);
+  for (const char* key :
+       {"scene", "integrator", "options", "status", "t_final", "x_final", "events", "stats"}) {
+    EXPECT_TRUE(summary.contains(key)) << key;
+  }
+  EXPECT_EQ(summary["scene"], "hopf");
+  EXPECT_EQ(summary["status"], "success");
+  EXPECT_DOUBLE_EQ(summary["t_final"].get<double>(), 2.0);
+  EXPECT_TRUE(summary["x_final"].contains("x"));
+  EXPECT_EQ(summary["stats"]["num_steps"], 200);
+  EXPECT_TRUE(std::filesystem::exists(directory / "trajectory.png"));
+}
+
+TEST(CliTest, ListAndShowDescribeScenes) {
+  const Outcome list = RunCli("list");
+  EXPECT_EQ(list.exit_code, 0);
+  EXPECT_NE(list.output.find("hopf"), std::string::npos);
+  EXPECT_NE(list.output.find("radau"), std::string::npos);
+  const Outcome show = RunCli("show hopf");
+  EXPECT_EQ(show.exit_code, 0);
+  EXPECT_NE(show.output.find("omega"), std::string::npos) << show.output;
+  EXPECT_NE(show.output.find("x0 = 0.5"), std::string::npos) << show.output;
+}
+
+}  // namespace

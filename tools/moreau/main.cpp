@@ -1,0 +1,273 @@
+// moreau: command-line tool.
+//   moreau list
+//   moreau show <scene>
+//   moreau run [<scene>] [--integrator NAME] [--stages S] [--h H] [--tf T]
+//              [--set name=value ...] [--out DIR] ...
+// Exit codes: 0 success; 1 the simulation ended with a non-success status; 2 bad usage or
+// input (unknown scene, option or parameter, bad value).
+
+#include <unistd.h>
+
+#include <CLI/CLI.hpp>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <sstream>
+
+#include "moreau/core/error.hpp"
+#include "moreau/scenes/catalog.hpp"
+#include "output.hpp"
+#include "run_report.hpp"
+
+namespace {
+
+using moreau::Scene;
+namespace tool = moreau::tool;
+
+// Prints the simulation time on stderr during long runs: in place on a terminal (every
+// 0.2 s), one line every 5 s otherwise; nothing during the first second.
+class ProgressPrinter {
+ public:
+  ProgressPrinter(double t0, double tf, bool enabled)
+      : t0_(t0),
+        tf_(tf),
+        enabled_(enabled),
+        tty_(isatty(STDERR_FILENO) != 0),
+        start_(Clock::now()),
+        last_(start_) {}
+  void Update(double t) {
+    if (!enabled_) return;
+    const auto now = Clock::now();
+    const double since_start = std::chrono::duration<double>(now - start_).count();
+    const double since_last = std::chrono::duration<double>(now - last_).count();
+    if (since_start < 1.0 || since_last < (tty_ ? 0.2 : 5.0)) return;
+    last_ = now;
+    const double percent = 100.0 * (t - t0_) / (tf_ - t0_);
+    std::fprintf(stderr, "%s[moreau] t = %.6g of %.6g (%5.1f%%), %.1f s%s", tty_ ? "\r" : "", t,
+                 tf_, percent, since_start, tty_ ? "   " : "\n");
+    printed_ = true;
+  }
+  void Finish() {
+    if (printed_ && tty_) std::fprintf(stderr, "\n");
+  }
+
+ private:
+  using Clock = std::chrono::steady_clock;
+  double t0_, tf_;
+  bool enabled_, tty_, printed_ = false;
+  Clock::time_point start_, last_;
+};
+
+double ParseNumber(const std::string& text, const std::string& what) {
+  std::size_t used = 0;
+  double value = 0.0;
+  try {
+    value = std::stod(text, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  moreau::RequireArgument(used == text.size() && !text.empty(), "bad value '", text, "' for ", what,
+                          ": expected a number");
+  return value;
+}
+
+void ApplySettings(Scene* scene, const std::vector<std::string>& assignments, double tf,
+                   bool tf_given) {
+  for (const std::string& assignment : assignments) {
+    const auto equals = assignment.find('=');
+    moreau::RequireArgument(equals != std::string::npos && equals > 0, "bad --set '", assignment,
+                            "': expected name=value");
+    const std::string name = assignment.substr(0, equals);
+    moreau::SetSceneValue(scene, name, ParseNumber(assignment.substr(equals + 1), "--set " + name));
+  }
+  if (tf_given) moreau::SetSceneValue(scene, "tf", tf);
+  moreau::ValidateScene(*scene);
+}
+
+std::string Join(const std::vector<std::string>& items, std::size_t limit) {
+  std::string text;
+  for (std::size_t i = 0; i < items.size() && i < limit; ++i) text += (i ? ", " : "") + items[i];
+  if (items.size() > limit) text += ", ... (" + std::to_string(items.size()) + " in all)";
+  return text;
+}
+
+void List() {
+  for (const moreau::SceneDefinition& definition : moreau::SceneCatalog()) {
+    std::printf("  %-12s %s\n", definition.name.c_str(), definition.summary.c_str());
+  }
+  std::printf("\nintegrators (moreau run --integrator NAME):\n");
+  for (const auto& [name, description] : tool::IntegratorNames()) {
+    std::printf("  %-12s %s\n", name.c_str(), description.c_str());
+  }
+}
+
+void Show(const std::string& name) {
+  const Scene scene = moreau::MakeScene(name);
+  constexpr std::size_t kLimit = 12;
+  std::printf("%s: %s\n\n", scene.name.c_str(), scene.description.c_str());
+  std::printf("states (%d), initial value (override with --set x0.<state>=v):\n",
+              scene.num_states());
+  for (int i = 0; i < scene.num_states() && static_cast<std::size_t>(i) < kLimit; ++i) {
+    std::printf("  %-10s x0 = %.17g\n", scene.state_names[static_cast<std::size_t>(i)].c_str(),
+                scene.initial_state[i]);
+  }
+  if (static_cast<std::size_t>(scene.num_states()) > kLimit) {
+    std::printf("  ... (%d states in all)\n", scene.num_states());
+  }
+  std::printf("\nhorizon: t0 = %.17g, tf = %.17g (override with --tf or --set tf=v)\n",
+              scene.initial_time, scene.final_time);
+  std::printf("\nparameters (override with --set name=v):\n");
+  if (scene.parameters.empty()) std::printf("  none\n");
+  for (const moreau::ParameterSpec& p : scene.parameters) {
+    std::printf("  %-12s = %-12.10g %s\n", p.name.c_str(), p.value, p.description.c_str());
+  }
+  std::printf("\ninputs:\n");
+  if (scene.inputs.empty()) std::printf("  none\n");
+  for (const moreau::InputSpec& input : scene.inputs) {
+    std::printf("  %-12s %s %s\n", input.name.c_str(),
+                input.kind == moreau::InputSpec::Kind::kControl ? "control" : "algebraic",
+                input.description.c_str());
+  }
+  std::printf("\neffects:\n");
+  if (scene.effects.empty()) std::printf("  none (smooth dynamics only)\n");
+  for (const moreau::Effect& effect : scene.effects) {
+    std::printf("  %s '%s'", moreau::EffectKind(effect).c_str(),
+                moreau::EffectName(effect).c_str());
+    if (const auto* set = std::get_if<moreau::MovingSet>(&effect)) {
+      std::printf(": constraints %s >= 0%s", Join(set->constraint_names, kLimit).c_str(),
+                  set->projection_basis.size() ? ", projection subspace E given" : "");
+    } else if (const auto* sw = std::get_if<moreau::SwitchingSurfaces>(&effect)) {
+      std::printf(": surfaces %s; modes %s", Join(sw->surface_names, kLimit).c_str(),
+                  Join(sw->mode_names, kLimit).c_str());
+    } else if (const auto* relay = std::get_if<moreau::HysteresisRelay>(&effect)) {
+      std::printf(": A -> B at %s, B -> A at %s, initial memory w0 = %d",
+                  scene.parameters[static_cast<std::size_t>(relay->upper_threshold)].name.c_str(),
+                  scene.parameters[static_cast<std::size_t>(relay->lower_threshold)].name.c_str(),
+                  relay->initial_memory);
+    } else if (const auto* dai = std::get_if<moreau::PathConstraints>(&effect)) {
+      std::printf(": %s <= 0", Join(dai->constraint_names, kLimit).c_str());
+    }
+    std::printf("\n");
+  }
+}
+
+int Run(Scene scene, const tool::RunSettings& settings, const std::string& out_directory, bool plot,
+        bool quiet) {
+  ProgressPrinter progress(scene.initial_time, scene.final_time, !quiet);
+  const tool::RunReport report =
+      tool::RunScene(scene, settings, [&progress](double t) { progress.Update(t); });
+  progress.Finish();
+
+  std::filesystem::create_directories(out_directory);
+  tool::WriteTrajectoryCsv(report, out_directory + "/trajectory.csv");
+  tool::WriteSummaryJson(report, out_directory + "/summary.json");
+  const std::string image = plot ? tool::WritePlot(report, out_directory) : "";
+
+  const auto& names = report.trajectory.state_names;
+  std::ostringstream state;
+  state.precision(12);
+  for (std::size_t i = 0; i < names.size() && i < 8; ++i) {
+    state << (i ? ", " : "") << names[i] << " = " << report.final_state[static_cast<long>(i)];
+  }
+  if (names.size() > 8) state << ", ... (" << names.size() << " states, all in summary.json)";
+  std::printf("scene       %s\n", report.scene.c_str());
+  std::printf("integrator  %s %s\n", report.integrator.c_str(), report.options.dump().c_str());
+  std::printf("status      %s%s%s\n", report.status.c_str(), report.message.empty() ? "" : ": ",
+              report.message.c_str());
+  std::printf("t_final     %.17g\n", report.final_time);
+  std::printf("x_final     %s\n", state.str().c_str());
+  if (report.events.empty()) {
+    std::printf("events      none\n");
+  } else {
+    std::printf("events      %zu\n", report.events.size());
+    for (std::size_t k = 0; k < report.events.size() && k < 10; ++k) {
+      const moreau::Event& e = report.events[k];
+      std::printf("  t = %-22.17g %-12s %s %s\n", e.t, moreau::ToString(e.kind).c_str(),
+                  e.what.c_str(), e.detail.c_str());
+    }
+    if (report.events.size() > 10) std::printf("  ... (all in summary.json)\n");
+  }
+  std::printf("steps       %ld\n", report.num_steps);
+  std::printf("newton      %ld iterations\n", report.num_newton_iterations);
+  std::printf("cpu time    %.3g s\n", report.cpu_seconds);
+  std::printf("stats       %s\n", report.stats_summary.c_str());
+  std::printf("output      %s/trajectory.csv, %s/summary.json%s%s\n", out_directory.c_str(),
+              out_directory.c_str(), image.empty() ? "" : ", ", image.c_str());
+  if (plot && image.empty()) {
+    std::fprintf(stderr, "moreau: warning: no plot written (is gnuplot installed?)\n");
+  }
+  return report.success ? 0 : 1;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"moreau: simulate nonsmooth dynamical systems with measured accuracy"};
+  app.require_subcommand(1);
+  app.set_help_all_flag("--help-all", "help for all subcommands");
+
+  app.add_subcommand("list", "list the scenes and integrators");
+
+  auto* show = app.add_subcommand("show", "show a scene: states, effects, parameters");
+  std::string show_scene;
+  show->add_option("scene", show_scene, "scene name")->required();
+
+  auto* run = app.add_subcommand("run", "simulate a scene");
+  std::string run_scene = moreau::DefaultSceneName();
+  tool::RunSettings settings;
+  std::vector<std::string> assignments;
+  std::string out_directory;
+  double tf = 0.0;
+  bool no_plot = false, quiet = false;
+  run->add_option("scene", run_scene, "scene name (default: " + run_scene + ")");
+  run->add_option("--integrator", settings.integrator, "integrator (see `moreau list`)");
+  auto* stages = run->add_option("--stages", settings.stages, "Radau IIA stages s (order 2s-1)");
+  auto* h = run->add_option("--h", settings.step_size, "step size (initial step if adaptive)");
+  auto* tf_option = run->add_option("--tf", tf, "final time (overrides the scene's horizon)");
+  run->add_option("--set", assignments, "override a scene value: name=value (repeatable)");
+  run->add_option("--out", out_directory, "output directory (default: out/<scene>)");
+  auto* adaptive = run->add_flag("--adaptive", settings.adaptive,
+                                 "step-size control by the embedded error estimate (radau)");
+  auto* rtol = run->add_option("--rtol", settings.relative_tolerance, "relative tolerance");
+  auto* atol = run->add_option("--atol", settings.absolute_tolerance, "absolute tolerance");
+  auto* linear =
+      run->add_option("--linear-solver", settings.linear_solver, "auto, dense or sparse");
+  run->add_flag("--no-plot", no_plot, "do not write trajectory.png");
+  run->add_flag("--quiet", quiet, "no progress output");
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& error) {
+    return app.exit(error) == 0 ? 0 : 2;
+  }
+
+  try {
+    if (app.got_subcommand("list")) {
+      List();
+      return 0;
+    }
+    if (app.got_subcommand("show")) {
+      Show(show_scene);
+      return 0;
+    }
+    const std::vector<std::pair<CLI::Option*, std::string>> tracked = {
+        {stages, "stages"}, {h, "h"},       {adaptive, "adaptive"},
+        {rtol, "rtol"},     {atol, "atol"}, {linear, "linear-solver"}};
+    for (const auto& [option, name] : tracked) {
+      if (option->count() > 0) settings.given.insert(name);
+    }
+    settings.step_size_given = h->count() > 0;
+    Scene scene = moreau::MakeScene(run_scene);
+    ApplySettings(&scene, assignments, tf, tf_option->count() > 0);
+    if (out_directory.empty()) out_directory = "out/" + scene.name;
+    return Run(std::move(scene), settings, out_directory, !no_plot, quiet);
+  } catch (const std::invalid_argument& error) {
+    std::fprintf(stderr, "moreau: error: %s\n", error.what());
+    return 2;
+  } catch (const std::exception& error) {
+    std::fprintf(stderr, "moreau: error: %s\n", error.what());
+    return 2;
+  }
+}

@@ -1,0 +1,25 @@
+#pragma once
+// Files written by `moreau run`: trajectory.csv, summary.json and trajectory.png.
+
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "run_report.hpp"
+
+namespace moreau::tool {
+
+// At most this many states are drawn in the plot (the CSV always has all of them).
+inline constexpr std::size_t kMaxPlottedStates = 8;
+
+// Header "t," then the state names, then algebraic names (multipliers) and "h" (the length
+// of the step or element ending at t) where the integrator has them.
+void WriteTrajectoryCsv(const RunReport& report, const std::string& path);
+// The summary object: scene, integrator, options, status, message, t_final, x_final
+// (state name -> value), events (t, kind, what, detail) and stats.
+nlohmann::json SummaryJson(const RunReport& report);
+void WriteSummaryJson(const RunReport& report, const std::string& path);
+// Draws trajectory.png with gnuplot from DIR/trajectory.csv (events as dashed lines).
+// Returns the image path, or "" if gnuplot is unavailable or failed.
+std::string WritePlot(const RunReport& report, const std::string& directory);
+
+}  // namespace moreau::tool

@@ -1,0 +1,90 @@
+#include "run_report.hpp"
+
+#include "moreau/core/error.hpp"
+#include "moreau/integrators/radau.hpp"
+#include "moreau/linalg/linear_solver.hpp"
+
+namespace moreau::tool {
+
+const std::vector<std::pair<std::string, std::string>>& IntegratorNames() {
+  static const std::vector<std::pair<std::string, std::string>> names = {
+      {"radau", "smooth Radau IIA (fixed step or --adaptive); scenes without effects"},
+  };
+  return names;
+}
+
+namespace {
+
+// Rejects options the user gave explicitly that `integrator` does not use.
+void RequireOnly(const RunSettings& settings, const std::set<std::string>& used) {
+  for (const std::string& option : settings.given) {
+    RequireArgument(used.count(option) > 0, "option --", option, " does not apply to integrator '",
+                    settings.integrator, "'");
+  }
+}
+
+RunReport RunRadau(const Scene& scene, const RunSettings& settings,
+                   const ProgressCallback& progress) {
+  std::set<std::string> used{"stages", "h", "adaptive", "linear-solver"};
+  if (settings.adaptive) used.insert({"rtol", "atol"});
+  RequireOnly(settings, used);
+  RadauOptions options;
+  options.stages = settings.stages;
+  options.adaptive = settings.adaptive;
+  options.step_size = settings.adaptive && !settings.step_size_given ? 0.0 : settings.step_size;
+  options.relative_tolerance = settings.relative_tolerance;
+  options.absolute_tolerance = settings.absolute_tolerance;
+  options.linear_solver = ParseLinearSolverKind(settings.linear_solver);
+  const RadauResult result = SimulateRadau(scene, options, progress);
+
+  RunReport report;
+  report.options = {{"stages", options.stages},
+                    {"order", 2 * options.stages - 1},
+                    {"adaptive", options.adaptive},
+                    {"step_size", options.step_size},
+                    {"linear_solver", settings.linear_solver}};
+  if (options.adaptive) {
+    report.options["rtol"] = options.relative_tolerance;
+    report.options["atol"] = options.absolute_tolerance;
+  }
+  report.status = ToString(result.status);
+  report.success = result.status == RadauStatus::kSuccess;
+  report.message = result.message;
+  report.final_time = result.final_time;
+  report.final_state = result.final_state;
+  report.trajectory = result.trajectory;
+  const RadauStats& s = result.stats;
+  report.stats = {{"num_steps", s.num_steps},
+                  {"num_rejected_steps", s.num_rejected_steps},
+                  {"num_newton_iterations", s.num_newton_iterations},
+                  {"num_factorizations", s.num_factorizations},
+                  {"num_function_evaluations", s.num_function_evaluations},
+                  {"num_jacobian_evaluations", s.num_jacobian_evaluations},
+                  {"cpu_seconds", s.cpu_seconds}};
+  report.stats_summary = s.Summary();
+  report.num_steps = s.num_steps;
+  report.num_newton_iterations = s.num_newton_iterations;
+  report.cpu_seconds = s.cpu_seconds;
+  return report;
+}
+
+}  // namespace
+
+RunReport RunScene(const Scene& scene, const RunSettings& settings,
+                   const ProgressCallback& progress) {
+  RunReport report;
+  if (settings.integrator == "radau") {
+    report = RunRadau(scene, settings, progress);
+  } else {
+    std::string valid;
+    for (const auto& [name, description] : IntegratorNames()) {
+      valid += (valid.empty() ? "" : ", ") + name;
+    }
+    ThrowInvalidArgument("unknown integrator '", settings.integrator, "'; available: ", valid);
+  }
+  report.scene = scene.name;
+  report.integrator = settings.integrator;
+  return report;
+}
+
+}  // namespace moreau::tool

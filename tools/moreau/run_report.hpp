@@ -1,0 +1,58 @@
+#pragma once
+// The command-line tool's integrator-independent view of a run, and the adapters that fill
+// it from each integrator's own Options/Result types.
+
+#include <map>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "moreau/integrators/simulation.hpp"
+#include "moreau/model/scene.hpp"
+
+namespace moreau::tool {
+
+// Command-line settings shared by all integrators; `given` lists the options the user set
+// explicitly, so that an option the chosen integrator does not use is reported as an error.
+struct RunSettings {
+  std::string integrator = "radau";
+  int stages = 3;
+  double step_size = 0.01;
+  bool step_size_given = false;
+  bool adaptive = false;
+  double relative_tolerance = 1e-6;
+  double absolute_tolerance = 1e-8;
+  int finite_elements = 2;
+  std::string switching_form = "stewart";
+  std::string linear_solver = "auto";
+  std::set<std::string> given;
+};
+
+struct RunReport {
+  std::string scene;
+  std::string integrator;
+  nlohmann::json options;
+  std::string status;
+  bool success = false;
+  std::string message;
+  double final_time = 0.0;
+  Vector final_state;
+  std::vector<Event> events;
+  nlohmann::json stats;
+  std::string stats_summary;
+  long num_steps = 0;
+  long num_newton_iterations = 0;
+  double cpu_seconds = 0.0;
+  Trajectory trajectory;
+};
+
+// Names of the integrators `moreau run --integrator` accepts, with one-line descriptions.
+const std::vector<std::pair<std::string, std::string>>& IntegratorNames();
+
+// Runs `scene` with the integrator named in `settings`. Throws std::invalid_argument for an
+// unknown integrator, an option it does not use, or an effect it does not support.
+RunReport RunScene(const Scene& scene, const RunSettings& settings,
+                   const ProgressCallback& progress);
+
+}  // namespace moreau::tool
