@@ -14,6 +14,16 @@ const std::vector<SceneDefinition>& SceneCatalog() {
        scenes::MakeRobertson},
       {"heat", "1-D heat equation with 2000 states and a sparse Jacobian (smooth, large)",
        scenes::MakeHeat},
+      {"S1", "sweeping by a moving wall, contact at t = 1 (time-varying set)", scenes::MakeS1},
+      {"S2", "play operator: interval [sin t - 1/2, sin t + 1/2] sweeps the state", scenes::MakeS2},
+      {"S3", "rotation projected on a floor: contact, sliding, leaving", scenes::MakeS3},
+      {"F1", "oscillator switching at the unit circle (FESD order benchmark)", scenes::MakeF1},
+      {"F2a", "crossing a switching surface", scenes::MakeF2a},
+      {"F2b", "entering a sliding mode", scenes::MakeF2b},
+      {"F2c", "leaving a sliding mode", scenes::MakeF2c},
+      {"F2d", "spontaneous switch (non-unique solution)", scenes::MakeF2d},
+      {"F3", "sliding to the origin, x' in -sign(x)", scenes::MakeF3},
+      {"F4", "Stewart-Anitescu IVP, x' in 2 - sign(x)", scenes::MakeF4},
   };
   return catalog;
 }

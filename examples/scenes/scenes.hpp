@@ -14,4 +14,18 @@ Scene MakeVanDerPol();
 Scene MakeRobertson();
 Scene MakeHeat();
 
+// Sweeping processes (sweeping.cpp).
+Scene MakeS1();
+Scene MakeS2();
+Scene MakeS3();
+
+// Filippov systems (filippov.cpp).
+Scene MakeF1();
+Scene MakeF2a();
+Scene MakeF2b();
+Scene MakeF2c();
+Scene MakeF2d();
+Scene MakeF3();
+Scene MakeF4();
+
 }  // namespace moreau::scenes

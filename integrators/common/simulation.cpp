@@ -14,26 +14,6 @@ void Trajectory::Append(double time, const Vector& state, const Vector& algebrai
   step.push_back(length);
 }
 
-std::string ToString(EventKind kind) {
-  switch (kind) {
-    case EventKind::kEnter:
-      return "enter";
-    case EventKind::kLeave:
-      return "leave";
-    case EventKind::kModeSwitch:
-      return "mode_switch";
-    case EventKind::kSlideStart:
-      return "slide_start";
-    case EventKind::kSlideEnd:
-      return "slide_end";
-    case EventKind::kRelaySwitch:
-      return "relay_switch";
-    case EventKind::kAmbiguous:
-      return "ambiguous";
-  }
-  return "?";
-}
-
 std::vector<double> FixedStepGrid(double t0, double tf, double h) {
   RequireArgument(std::isfinite(h) && h > 0.0, "step size h must be positive and finite, got ", h);
   RequireArgument(tf > t0, "grid needs tf > t0, got t0 = ", t0, ", tf = ", tf);

@@ -106,6 +106,21 @@ Vector SystemMatrix::Multiply(const Vector& x) const {
   return sparse_ ? Vector(sparse_matrix_ * x) : Vector(dense_ * x);
 }
 
+Vector SystemMatrix::MultiplyTransposed(const Vector& x) const {
+  return sparse_ ? Vector(sparse_matrix_.transpose() * x) : Vector(dense_.transpose() * x);
+}
+
+double SystemMatrix::InfinityNorm() const {
+  if (!sparse_) return n_ == 0 ? 0.0 : dense_.cwiseAbs().rowwise().sum().maxCoeff();
+  Vector row_sums = Vector::Zero(n_);
+  for (int j = 0; j < sparse_matrix_.outerSize(); ++j) {
+    for (SparseMatrix::InnerIterator it(sparse_matrix_, j); it; ++it) {
+      row_sums[it.row()] += std::fabs(it.value());
+    }
+  }
+  return n_ == 0 ? 0.0 : row_sums.maxCoeff();
+}
+
 void LinearSolver::SolveMatrix(MatrixRef rhs) const {
   for (Eigen::Index j = 0; j < rhs.cols(); ++j) {
     Vector column = rhs.col(j);

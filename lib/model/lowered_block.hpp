@@ -5,6 +5,7 @@
 #include <string>
 #include <vector>
 
+#include "moreau/model/events.hpp"
 #include "moreau/model/lowered_system.hpp"
 
 namespace moreau::internal {
@@ -44,7 +45,25 @@ class LoweredBlock {
   virtual void Evaluate(const BlockContext& context, const ConstVectorRef& y,
                         const ConstVectorRef& z, Derivatives derivatives, PointEvaluation* out) = 0;
 
+  // Writes a guess of the block's algebraic unknowns at state y into its slice of z,
+  // consistent with the algebraic equations where possible (e.g. Stewart: the mode of the
+  // region containing y). `previous` (may be null) holds earlier values of all algebraic
+  // unknowns; blocks keep their slice of it where y does not decide (multipliers, y on a
+  // switching surface).
+  virtual void InitialGuess(const BlockContext& context, const ConstVectorRef& y,
+                            const Vector* previous, VectorRef z) = 0;
+
+  // Events implied by a change of the block's pair statuses between two times:
+  // a_zero[k] is true when pair k has a_k = 0 (its first side vanishes), false when b_k = 0.
+  virtual std::vector<Event> StatusEvents(double t, const std::vector<bool>& before,
+                                          const std::vector<bool>& after) const = 0;
+
   BlockLayout layout;
 };
+
+// Factories, one per lowering (lower_*.cpp).
+std::unique_ptr<LoweredBlock> LowerMovingSet(const Scene& scene, const MovingSet& set);
+std::unique_ptr<LoweredBlock> LowerStewart(const Scene& scene, const SwitchingSurfaces& effect);
+std::unique_ptr<LoweredBlock> LowerHeaviside(const Scene& scene, const SwitchingSurfaces& effect);
 
 }  // namespace moreau::internal

@@ -95,6 +95,15 @@ Vector LoweredSystem::InitialState() const {
   return y;
 }
 
+Vector LoweredSystem::InitialAlgebraicGuess(const Vector& y, const Vector* previous) const {
+  MOREAU_ASSERT(previous == nullptr || previous->size() == num_algebraic_,
+                "InitialAlgebraicGuess: previous has the wrong size");
+  Vector z = Vector::Zero(num_algebraic_);
+  internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
+  for (const auto& block : blocks_) block->InitialGuess(context, y, previous, z);
+  return z;
+}
+
 void LoweredSystem::SetInputs(const Vector& u) {
   RequireArgument(u.size() == scene_.num_inputs(), scene_.name, ": expected ", scene_.num_inputs(),
                   " input values, got ", u.size());
@@ -108,6 +117,25 @@ void LoweredSystem::SetParameters(const Vector& p) {
 }
 
 double LoweredSystem::EstimatedNonzerosFy() const { return nonzeros_fy_; }
+
+std::vector<Event> LoweredSystem::StatusEvents(double t, const std::vector<bool>& before,
+                                               const std::vector<bool>& after) const {
+  MOREAU_ASSERT(before.size() == pairs_.size() && after.size() == pairs_.size(),
+                "StatusEvents: wrong number of pair statuses");
+  std::vector<Event> events;
+  for (const auto& block : blocks_) {
+    const auto first = before.begin() + block->layout.pair_offset;
+    const auto last = first + block->num_pairs();
+    const std::vector<bool> block_before(first, last);
+    const std::vector<bool> block_after(
+        after.begin() + block->layout.pair_offset,
+        after.begin() + block->layout.pair_offset + block->num_pairs());
+    for (Event& event : block->StatusEvents(t, block_before, block_after)) {
+      events.push_back(std::move(event));
+    }
+  }
+  return events;
+}
 
 void LoweredSystem::Evaluate(const ConstVectorRef& y, const ConstVectorRef& z,
                              Derivatives derivatives, PointEvaluation* out) const {

@@ -234,6 +234,8 @@ int main(int argc, char** argv) {
   auto* atol = run->add_option("--atol", settings.absolute_tolerance, "absolute tolerance");
   auto* linear =
       run->add_option("--linear-solver", settings.linear_solver, "auto, dense or sparse");
+  auto* switching = run->add_option("--switching", settings.switching_form,
+                                    "lowering of switching surfaces: stewart or heaviside");
   run->add_flag("--no-plot", no_plot, "do not write trajectory.png");
   run->add_flag("--quiet", quiet, "no progress output");
 
@@ -253,12 +255,14 @@ int main(int argc, char** argv) {
       return 0;
     }
     const std::vector<std::pair<CLI::Option*, std::string>> tracked = {
-        {stages, "stages"}, {h, "h"},       {adaptive, "adaptive"},
-        {rtol, "rtol"},     {atol, "atol"}, {linear, "linear-solver"}};
+        {stages, "stages"},      {h, "h"},       {adaptive, "adaptive"},
+        {rtol, "rtol"},          {atol, "atol"}, {linear, "linear-solver"},
+        {switching, "switching"}};
     for (const auto& [option, name] : tracked) {
       if (option->count() > 0) settings.given.insert(name);
     }
     settings.step_size_given = h->count() > 0;
+    settings.stages_given = stages->count() > 0;
     Scene scene = moreau::MakeScene(run_scene);
     ApplySettings(&scene, assignments, tf, tf_option->count() > 0);
     if (out_directory.empty()) out_directory = "out/" + scene.name;

@@ -2,6 +2,7 @@
 
 #include "moreau/core/error.hpp"
 #include "moreau/integrators/radau.hpp"
+#include "moreau/integrators/timestepping.hpp"
 #include "moreau/linalg/linear_solver.hpp"
 
 namespace moreau::tool {
@@ -9,6 +10,9 @@ namespace moreau::tool {
 const std::vector<std::pair<std::string, std::string>>& IntegratorNames() {
   static const std::vector<std::pair<std::string, std::string>> names = {
       {"radau", "smooth Radau IIA (fixed step or --adaptive); scenes without effects"},
+      {"timestepping",
+       "fixed-step Radau IIA with stage complementarity (first-order baseline, no switch "
+       "detection); moving sets, switching surfaces"},
   };
   return names;
 }
@@ -68,6 +72,43 @@ RunReport RunRadau(const Scene& scene, const RunSettings& settings,
   return report;
 }
 
+RunReport RunTimeStepping(const Scene& scene, const RunSettings& settings,
+                          const ProgressCallback& progress) {
+  RequireOnly(settings, {"stages", "h", "switching", "linear-solver"});
+  TimeSteppingOptions options;
+  options.stages = settings.stages_given ? settings.stages : 1;
+  options.step_size = settings.step_size;
+  options.switching_form = ParseSwitchingForm(settings.switching_form);
+  options.newton.linear_solver = ParseLinearSolverKind(settings.linear_solver);
+  const TimeSteppingResult result = SimulateTimeStepping(scene, options, progress);
+
+  RunReport report;
+  report.options = {{"stages", options.stages},
+                    {"step_size", options.step_size},
+                    {"switching_form", settings.switching_form},
+                    {"newton_tolerance", options.newton.tolerance}};
+  report.status = ToString(result.status);
+  report.success = result.status == TimeSteppingStatus::kSuccess;
+  report.message = result.message;
+  report.final_time = result.final_time;
+  report.final_state = result.final_state;
+  report.trajectory = result.trajectory;
+  report.events = result.events;
+  const TimeSteppingStats& s = result.stats;
+  report.stats = {{"num_steps", s.num_steps},
+                  {"num_newton_iterations", s.num_newton_iterations},
+                  {"num_factorizations", s.num_factorizations},
+                  {"num_backtracks", s.num_backtracks},
+                  {"max_complementarity_residual", s.max_complementarity_residual},
+                  {"max_newton_residual", s.max_newton_residual},
+                  {"cpu_seconds", s.cpu_seconds}};
+  report.stats_summary = s.Summary();
+  report.num_steps = s.num_steps;
+  report.num_newton_iterations = s.num_newton_iterations;
+  report.cpu_seconds = s.cpu_seconds;
+  return report;
+}
+
 }  // namespace
 
 RunReport RunScene(const Scene& scene, const RunSettings& settings,
@@ -75,6 +116,8 @@ RunReport RunScene(const Scene& scene, const RunSettings& settings,
   RunReport report;
   if (settings.integrator == "radau") {
     report = RunRadau(scene, settings, progress);
+  } else if (settings.integrator == "timestepping") {
+    report = RunTimeStepping(scene, settings, progress);
   } else {
     std::string valid;
     for (const auto& [name, description] : IntegratorNames()) {

@@ -18,6 +18,7 @@ namespace moreau::tool {
 struct RunSettings {
   std::string integrator = "radau";
   int stages = 3;
+  bool stages_given = false;
   double step_size = 0.01;
   bool step_size_given = false;
   bool adaptive = false;

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "moreau/core/types.hpp"
+#include "moreau/model/events.hpp"
 
 namespace moreau {
 
@@ -23,26 +24,6 @@ struct Trajectory {
 
   std::size_t size() const { return t.size(); }
   void Append(double time, const Vector& state, const Vector& algebraic_values, double length);
-};
-
-/// What happened at an event.
-enum class EventKind {
-  kEnter,        ///< a constraint became active (contact) / a mode became active
-  kLeave,        ///< a constraint or mode became inactive
-  kModeSwitch,   ///< the Filippov mode changed by crossing a switching surface
-  kSlideStart,   ///< a sliding mode started on a switching surface
-  kSlideEnd,     ///< a sliding mode ended
-  kRelaySwitch,  ///< a hysteresis relay switched its memory state
-  kAmbiguous,    ///< non-unique continuation; the documented (slow) solution was taken
-};
-std::string ToString(EventKind kind);
-
-/// A switch event.
-struct Event {
-  double t = 0.0;
-  EventKind kind = EventKind::kEnter;
-  std::string what;    ///< which constraint, mode or relay
-  std::string detail;  ///< free text (e.g. "A -> B", the mode entered)
 };
 
 /// Called by integrators with the current time during long runs (may be empty).

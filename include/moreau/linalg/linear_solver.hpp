@@ -55,6 +55,10 @@ class SystemMatrix {
   const SparseMatrix& sparse_matrix() const { return sparse_matrix_; }
   /// y = A x (after Finalize).
   Vector Multiply(const Vector& x) const;
+  /// y = A^T x (after Finalize).
+  Vector MultiplyTransposed(const Vector& x) const;
+  /// max_i sum_j |A_ij| (after Finalize).
+  double InfinityNorm() const;
 
  private:
   int n_ = 0;

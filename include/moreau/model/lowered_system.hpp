@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "moreau/core/types.hpp"
+#include "moreau/model/events.hpp"
 #include "moreau/model/scene.hpp"
 
 namespace moreau {
@@ -69,6 +70,9 @@ struct PairInfo {
   int block = 0;  ///< index of the lowered effect (see block_names())
 };
 
+/// Which side of a pair is zero: a if a <= b (ties, both zero, count as a = 0).
+inline bool PairStatusIsAZero(double a, double b) { return a <= b; }
+
 namespace internal {
 class LoweredBlock;
 }
@@ -97,6 +101,11 @@ class LoweredSystem {
 
   /// y0 = (x0, internal initial states, t0).
   Vector InitialState() const;
+  /// A guess of the algebraic unknowns at state y, for Newton's first iterate: Stewart's
+  /// theta selects the region containing y, Heaviside's alpha follows the signs of c, and
+  /// multipliers come from `previous` (or are 0). Where y does not decide (y on a switching
+  /// surface), the values in `previous` are kept.
+  Vector InitialAlgebraicGuess(const Vector& y, const Vector* previous = nullptr) const;
   /// Sets the input values u used by Evaluate (held constant by integrators within a step).
   void SetInputs(const Vector& u);
   const Vector& inputs() const { return inputs_; }
@@ -110,6 +119,11 @@ class LoweredSystem {
 
   /// Number of structurally nonzero entries of F_y (for choosing dense or sparse LU).
   double EstimatedNonzerosFy() const;
+
+  /// Events implied by a change of pair statuses: a_zero[k] is true when pair k has its
+  /// first side a_k = 0, false when b_k = 0 (see PairStatusIsAZero).
+  std::vector<Event> StatusEvents(double t, const std::vector<bool>& before,
+                                  const std::vector<bool>& after) const;
 
  private:
   void Build();

@@ -1,0 +1,88 @@
+// Sweeping processes and projected dynamical systems (reference problems S1-S3).
+#include <cmath>
+#include <numbers>
+
+#include "scenes.hpp"
+
+namespace moreau::scenes {
+
+Scene MakeS1() {
+  Scene scene;
+  scene.name = "S1";
+  scene.description =
+      "sweeping process x' in -1 - N_C(t)(x), C(t) = {x >= t}, x(0) = 2: x = 2 - t until the "
+      "boundary is met at t = 1, then swept along, x = t (sweeping paper, Example 1)";
+  scene.state_names = {"x"};
+  scene.initial_state = Vector{{2.0}};
+  scene.final_time = 2.0;
+  const int drift = scene.AddParameter("drift", -1.0, "free velocity f");
+  const int speed = scene.AddParameter("speed", 1.0, "velocity of the moving boundary");
+  scene.dynamics = MakeSmoothFunction(
+      "S1.f", 1, [drift](const auto&, const auto&, const auto&, const auto& p, auto& out) {
+        out[0] = p[drift];
+      });
+  MovingSet set;
+  set.name = "wall";
+  set.constraint_names = {"c"};
+  set.constraints = MakeSmoothFunction(
+      "S1.c", 1, [speed](const auto& x, const auto&, const auto& t, const auto& p, auto& out) {
+        out[0] = x[0] - p[speed] * t;
+      });
+  scene.effects.push_back(set);
+  return scene;
+}
+
+Scene MakeS2() {
+  Scene scene;
+  scene.name = "S2";
+  scene.description =
+      "play operator: -x' in N_C(t)(x), C(t) = [sin t - r, sin t + r], r = 1/2, x(0) = 0; "
+      "lower and upper bound alternate in activity (switches at pi/6, pi/2, pi, 3pi/2, then "
+      "2pi-periodic)";
+  scene.state_names = {"x"};
+  scene.initial_state = Vector{{0.0}};
+  scene.final_time = 4.0 * std::numbers::pi;
+  const int r = scene.AddParameter("r", 0.5, "half-width of the moving interval");
+  const int amplitude = scene.AddParameter("amplitude", 1.0, "amplitude of the interval's motion");
+  MovingSet set;
+  set.name = "interval";
+  set.constraint_names = {"lower", "upper"};
+  set.constraints = MakeSmoothFunction(
+      "S2.c", 2,
+      [r, amplitude](const auto& x, const auto&, const auto& t, const auto& p, auto& out) {
+        using std::sin;
+        out[0] = x[0] - p[amplitude] * sin(t) + p[r];
+        out[1] = p[amplitude] * sin(t) + p[r] - x[0];
+      });
+  scene.effects.push_back(set);
+  return scene;
+}
+
+Scene MakeS3() {
+  Scene scene;
+  scene.name = "S3";
+  scene.description =
+      "projected rotation x' in (x2, -x1) - N_C(x), C = {x2 + 1 >= 0}, x(0) = (sqrt2, sqrt2): "
+      "contact at t = 5pi/12 at (sqrt3, -1), slides with x1' = -1, leaves at t = 5pi/12 + sqrt3 "
+      "at (0, -1); x(11pi/12 + sqrt3) = (-1, 0)";
+  scene.state_names = {"x1", "x2"};
+  scene.initial_state = Vector{{std::sqrt(2.0), std::sqrt(2.0)}};
+  scene.final_time = 11.0 * std::numbers::pi / 12.0 + std::sqrt(3.0);
+  const int floor = scene.AddParameter("floor", -1.0, "height of the floor x2 >= floor");
+  scene.dynamics = MakeSmoothFunction(
+      "S3.f", 2, [](const auto& x, const auto&, const auto&, const auto&, auto& out) {
+        out[0] = x[1];
+        out[1] = -x[0];
+      });
+  MovingSet set;
+  set.name = "floor";
+  set.constraint_names = {"c"};
+  set.constraints = MakeSmoothFunction(
+      "S3.c", 1, [floor](const auto& x, const auto&, const auto&, const auto& p, auto& out) {
+        out[0] = x[1] - p[floor];
+      });
+  scene.effects.push_back(set);
+  return scene;
+}
+
+}  // namespace moreau::scenes

@@ -1,0 +1,29 @@
+#pragma once
+/// @file
+/// Switch events: what changed in a scene's nonsmooth state, and when.
+
+#include <string>
+
+namespace moreau {
+
+/// What happened at an event.
+enum class EventKind {
+  kEnter,        ///< a constraint of a moving set became active (contact)
+  kLeave,        ///< a constraint of a moving set became inactive
+  kModeSwitch,   ///< the Filippov mode changed by crossing a switching surface
+  kSlideStart,   ///< a sliding mode started on a switching surface
+  kSlideEnd,     ///< a sliding mode ended
+  kRelaySwitch,  ///< a hysteresis relay switched its memory state
+  kAmbiguous,    ///< non-unique continuation; the documented (slow) solution was taken
+};
+std::string ToString(EventKind kind);
+
+/// A switch event.
+struct Event {
+  double t = 0.0;
+  EventKind kind = EventKind::kEnter;
+  std::string what;    ///< which constraint, mode or relay (e.g. "wall.c1")
+  std::string detail;  ///< free text (e.g. "below -> above")
+};
+
+}  // namespace moreau

@@ -1,0 +1,144 @@
+#pragma once
+/// @file
+/// Semismooth Newton method for mixed complementarity systems
+///
+///   r(w) = 0                      (n_eq smooth equations)
+///   0 <= a_k(w) ⟂ b_k(w) >= 0     (k = 1..n_pairs),        n_eq + n_pairs = dim w,
+///
+/// reformulated as Phi(w) = [r(w); phi(a_k(w), b_k(w))] = 0 with an NCP function phi
+/// (Fischer-Burmeister by default, see ncp_function.hpp).
+///
+/// Iteration: d solves J d = -Phi with J an element of the generalized Jacobian
+/// (rows dr/dw and phi_a da_k/dw + phi_b db_k/dw). Globalization: Armijo backtracking on the
+/// scaled merit theta(w) = 1/2 ||S Phi(w)||^2 (continuously differentiable for
+/// Fischer-Burmeister), with gradient grad theta = J^T S^2 Phi. If J is singular or d is not
+/// a sufficient descent direction (grad theta . d > -rho ||d||^p, De Luca, Facchinei &
+/// Kanzow 1996) the steepest-descent direction -grad theta is used instead. When the
+/// residual contracts only linearly after a full step (ratio > polish_ratio, typical at
+/// degenerate solutions where a = b = 0), a min-map Newton step (a primal-dual active-set
+/// step) is tried and kept if it lowers the residual by polish_ratio: for linear problems it
+/// lands on the solution once the active set is right. Row scales S come from the system (residual
+/// scaling), so that blocks with different units weigh alike in the merit and the stopping test.
+///
+/// Stopping: converged when ||S Phi||_inf <= tolerance. Every other outcome is a status with
+/// its reason (never an exception or abort).
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "moreau/complementarity/ncp_function.hpp"
+#include "moreau/core/types.hpp"
+#include "moreau/linalg/linear_solver.hpp"
+
+namespace moreau {
+
+/// The problem solved by SemismoothNewton (see file comment).
+class MixedComplementaritySystem {
+ public:
+  virtual ~MixedComplementaritySystem() = default;
+  virtual int num_unknowns() const = 0;
+  virtual int num_equations() const = 0;  ///< n_eq
+  virtual int num_pairs() const = 0;      ///< n_pairs = num_unknowns() - n_eq
+  /// Values r, a, b at w. With with_jacobian, also prepares the derivatives that
+  /// AssembleJacobian uses. Returns false if w is outside the system's domain.
+  virtual bool Evaluate(const Vector& w, bool with_jacobian, Vector* r, Vector* a, Vector* b) = 0;
+  /// Adds the generalized Jacobian at the last Evaluate(.., true) point into `jacobian`
+  /// (already Reset to the right size and storage): rows 0..n_eq-1 hold dr/dw, row n_eq + k
+  /// holds da[k] * d a_k/dw + db[k] * d b_k/dw.
+  virtual void AssembleJacobian(const Vector& da, const Vector& db, SystemMatrix* jacobian) = 0;
+  /// Positive scale of every residual row ([r; phi]); the default is 1.
+  virtual void ResidualScale(const Vector& w, Vector* scale);
+  /// Structural nonzeros of the Jacobian (for choosing dense or sparse LU).
+  virtual double EstimatedJacobianNonzeros() const;
+};
+
+struct SemismoothNewtonOptions {
+  /// NCP function for the pairs (Fischer-Burmeister: smooth merit, recommended).
+  NcpFunctionKind ncp_function = NcpFunctionKind::kFischerBurmeister;
+  /// Converged when ||S Phi(w)||_inf <= tolerance, > 0.
+  double tolerance = 1e-12;
+  /// Newton iterations before kMaxIterations, >= 1.
+  int max_iterations = 100;
+  /// Armijo constant sigma in theta(w + t d) <= theta(w) + sigma t grad theta . d, in (0, 1/2).
+  double armijo = 1e-4;
+  /// Backtracking factor for the step length t, in (0, 1).
+  double backtrack = 0.5;
+  /// Smallest step length before kLineSearchFailed, in (0, 1).
+  double min_step = 1e-10;
+  /// Sufficient-descent test grad theta . d <= -descent_rho ||d||^descent_power.
+  double descent_rho = 1e-10;
+  double descent_power = 2.1;
+  /// kStagnated when the merit decreased by less than a relative 1e-3 over this many
+  /// iterations (no progress; slow but steady progress ends at max_iterations instead).
+  int stagnation_window = 12;
+  /// After a full Newton step that contracted ||S Phi|| by less than polish_ratio, try a
+  /// min-map (active-set) step.
+  bool active_set_polish = true;
+  double polish_ratio = 0.2;
+  LinearSolverKind linear_solver = LinearSolverKind::kAutomatic;
+
+  /// Throws std::invalid_argument naming the first out-of-range option.
+  void Validate() const;
+};
+
+/// Outcome of a solve, each documented by its criterion.
+enum class NewtonStatus {
+  kConverged,         ///< ||S Phi(w)||_inf <= tolerance
+  kMaxIterations,     ///< max_iterations iterations without convergence
+  kLineSearchFailed,  ///< no step length >= min_step satisfies the Armijo condition
+  kStagnated,         ///< the merit fell by less than a relative 1e-3 over stagnation_window
+  kStationaryPoint,   ///< grad theta = J^T S^2 Phi vanishes (to round-off) while Phi != 0
+  kNonFinite,         ///< the residual at the initial point is not finite or not defined
+};
+std::string ToString(NewtonStatus status);
+
+struct SemismoothNewtonStats {
+  long iterations = 0;
+  long residual_evaluations = 0;
+  long jacobian_evaluations = 0;
+  long factorizations = 0;
+  long backtracks = 0;          ///< step-length reductions in the line search
+  long gradient_steps = 0;      ///< steepest-descent fallbacks
+  long polish_steps = 0;        ///< accepted min-map (active-set) steps
+  long singular_jacobians = 0;  ///< generalized Jacobians found singular
+
+  SemismoothNewtonStats& operator+=(const SemismoothNewtonStats& other);
+  std::string Summary() const;
+};
+
+struct SemismoothNewtonResult {
+  NewtonStatus status = NewtonStatus::kConverged;
+  std::string message;                    ///< reason when not converged
+  Vector solution;                        ///< last iterate
+  double residual_norm = 0.0;             ///< ||S Phi||_inf at the solution
+  double complementarity_residual = 0.0;  ///< max_k |min(a_k, b_k)| at the solution
+  std::vector<double> residual_history;   ///< ||S Phi||_inf at every iterate
+  SemismoothNewtonStats stats;
+  bool converged() const { return status == NewtonStatus::kConverged; }
+};
+
+/// Reusable solver: keeps its linear solver (and the sparse symbolic analysis) across
+/// solves of systems with the same structure.
+class SemismoothNewton {
+ public:
+  explicit SemismoothNewton(const SemismoothNewtonOptions& options = {});
+  ~SemismoothNewton();
+  SemismoothNewton(const SemismoothNewton&) = delete;
+  SemismoothNewton& operator=(const SemismoothNewton&) = delete;
+
+  const SemismoothNewtonOptions& options() const { return options_; }
+  /// Solves from `initial_guess`. The generalized Jacobian at the solution stays factorized
+  /// (see last_jacobian_solver) for sensitivity computations.
+  SemismoothNewtonResult Solve(MixedComplementaritySystem& system, const Vector& initial_guess);
+  /// The linear solver holding the factorization of the last assembled Jacobian.
+  const LinearSolver* last_jacobian_solver() const { return solver_.get(); }
+
+ private:
+  SemismoothNewtonOptions options_;
+  std::unique_ptr<LinearSolver> solver_;
+  int solver_size_ = -1;
+  SystemMatrix jacobian_;
+};
+
+}  // namespace moreau

@@ -1,0 +1,114 @@
+#include "collocation.hpp"
+
+#include "moreau/core/error.hpp"
+
+namespace moreau::internal {
+
+CollocationStages::CollocationStages(LoweredSystem* system, int stages)
+    : system_(system),
+      tableau_(RadauIIA(stages)),
+      s_(stages),
+      ny_(system->num_states()),
+      nz_(system->num_algebraic()),
+      ng_(system->num_equations()),
+      np_(system->num_pairs()),
+      stages_(static_cast<std::size_t>(stages)) {}
+
+void CollocationStages::Evaluate(const ConstVectorRef& y0, const ConstVectorRef& w,
+                                 Derivatives derivatives) {
+  for (int i = 0; i < s_; ++i) {
+    point_y_ = y0 + w.segment(state_offset(i), ny_);
+    point_z_ = w.segment(algebraic_offset(i), nz_);
+    system_->Evaluate(point_y_, point_z_, derivatives, &stages_[static_cast<std::size_t>(i)]);
+  }
+}
+
+void CollocationStages::Residual(double h, const ConstVectorRef& w, VectorRef equations,
+                                 VectorRef a, VectorRef b) const {
+  const Matrix& coefficients = tableau_.a;
+  for (int i = 0; i < s_; ++i) {
+    const int row = i * (ny_ + ng_);
+    // (Radau IIA collocation) Z_i - h sum_j a_ij F(Y_j, z_j) = 0.
+    auto collocation = equations.segment(row, ny_);
+    collocation = w.segment(state_offset(i), ny_);
+    for (int j = 0; j < s_; ++j) collocation -= h * coefficients(i, j) * stage(j).F;
+    // algebraic equations of the lowered system at stage i: G(Y_i, z_i) = 0.
+    equations.segment(row + ny_, ng_) = stage(i).G;
+    // complementarity pairs of stage i.
+    a.segment(i * np_, np_) = stage(i).A;
+    b.segment(i * np_, np_) = stage(i).B;
+  }
+}
+
+void CollocationStages::AddJacobian(double h, const ConstVectorRef& da, const ConstVectorRef& db,
+                                    int row0, int pair_row0, int col0,
+                                    SystemMatrix* jacobian) const {
+  const Matrix& coefficients = tableau_.a;
+  for (int i = 0; i < s_; ++i) {
+    const int row = row0 + i * (ny_ + ng_);
+    for (int j = 0; j < s_; ++j) {
+      const PointEvaluation& e = stage(j);
+      const double weight = -h * coefficients(i, j);
+      // d collocation_i / d Z_j = delta_ij I - h a_ij F_y(Y_j);  d / d z_j = -h a_ij F_z.
+      if (e.has_sparse_F_y) {
+        jacobian->AddSparseBlock(row, col0 + state_offset(j), e.F_y_sparse, weight);
+      } else {
+        jacobian->AddBlock(row, col0 + state_offset(j), e.F_y, weight);
+      }
+      if (nz_ > 0) jacobian->AddBlock(row, col0 + algebraic_offset(j), e.F_z, weight);
+    }
+    jacobian->AddDiagonal(row, col0 + state_offset(i), ny_, 1.0);
+    const PointEvaluation& e = stage(i);
+    if (ng_ > 0) {
+      jacobian->AddBlock(row + ny_, col0 + state_offset(i), e.G_y);
+      jacobian->AddBlock(row + ny_, col0 + algebraic_offset(i), e.G_z);
+    }
+    if (np_ > 0) {
+      // Pair rows: da dA + db dB.
+      const auto wa = da.segment(i * np_, np_).asDiagonal();
+      const auto wb = db.segment(i * np_, np_).asDiagonal();
+      const Matrix rows_y = wa * e.A_y + wb * e.B_y;
+      const Matrix rows_z = wa * e.A_z + wb * e.B_z;
+      jacobian->AddBlock(pair_row0 + i * np_, col0 + state_offset(i), rows_y);
+      jacobian->AddBlock(pair_row0 + i * np_, col0 + algebraic_offset(i), rows_z);
+    }
+  }
+}
+
+Vector CollocationStages::ResidualDerivativeH() const {
+  Vector d = Vector::Zero(equation_rows());
+  for (int i = 0; i < s_; ++i) {
+    for (int j = 0; j < s_; ++j) {
+      d.segment(i * (ny_ + ng_), ny_) -= tableau_.a(i, j) * stage(j).F;
+    }
+  }
+  return d;
+}
+
+Vector CollocationStages::EndState(const ConstVectorRef& y0, const ConstVectorRef& w) const {
+  return y0 + w.segment(state_offset(s_ - 1), ny_);
+}
+
+Vector CollocationStages::InitialGuess(const ConstVectorRef& y0, double h, const Vector* previous,
+                                       double previous_h, const Vector& z_previous) const {
+  Vector w = Vector::Zero(unknowns());
+  if (previous != nullptr && previous_h > 0.0) {
+    // Collocation polynomial of the previous step: u(theta) = y_prev + sum_j w_j(theta) Z_j.
+    Matrix z_old(ny_, s_);
+    for (int j = 0; j < s_; ++j) z_old.col(j) = previous->segment(state_offset(j), ny_);
+    bool extrapolate = true;
+    for (int i = 0; i < s_; ++i) extrapolate &= 1.0 + tableau_.c[i] * h / previous_h <= 4.0;
+    for (int i = 0; i < s_ && extrapolate; ++i) {
+      const double theta = 1.0 + tableau_.c[i] * h / previous_h;
+      w.segment(state_offset(i), ny_) =
+          z_old * tableau_.InterpolationWeights(theta) - z_old.col(s_ - 1);
+    }
+  }
+  for (int i = 0; i < s_; ++i) {
+    const Vector y = y0 + w.segment(state_offset(i), ny_);
+    w.segment(algebraic_offset(i), nz_) = system_->InitialAlgebraicGuess(y, &z_previous);
+  }
+  return w;
+}
+
+}  // namespace moreau::internal

@@ -1,0 +1,77 @@
+#pragma once
+// Radau IIA collocation of a lowered system over one step or finite element (private to
+// moreau::integrators).
+//
+// Unknowns of one step, stage-interleaved: w = [Z_1; z_1; ...; Z_s; z_s], with stage states
+// Y_i = y0 + Z_i (n_y each) and stage algebraic values z_i (n_z each).
+// Residual rows, stage by stage:
+//   collocation  Z_i - h sum_j a_ij F(Y_j, z_j) = 0      (n_y rows per stage)
+//   algebraic    G(Y_i, z_i) = 0                         (n_G rows per stage)
+//   pairs        (a, b) = (A(Y_i, z_i), B(Y_i, z_i))     (n_pairs per stage)
+// The pair rows of a Jacobian combine da * dA + db * dB: an NCP function's derivatives for
+// stage complementarity, or (1, 0)/(0, 1) for the active-set equations a = 0 / b = 0.
+
+#include <vector>
+
+#include "moreau/integrators/radau_tableau.hpp"
+#include "moreau/linalg/linear_solver.hpp"
+#include "moreau/model/lowered_system.hpp"
+
+namespace moreau::internal {
+
+class CollocationStages {
+ public:
+  CollocationStages(LoweredSystem* system, int stages);
+
+  int stages() const { return s_; }
+  int num_states() const { return ny_; }
+  int num_algebraic() const { return nz_; }
+  int num_equations() const { return ng_; }
+  int num_pairs() const { return np_; }
+  int unknowns() const { return s_ * (ny_ + nz_); }       // size of w
+  int equation_rows() const { return s_ * (ny_ + ng_); }  // collocation + algebraic
+  int pair_rows() const { return s_ * np_; }
+  const RadauTableau& tableau() const { return tableau_; }
+
+  // Offsets inside w of stage i's state increment and algebraic values.
+  int state_offset(int i) const { return i * (ny_ + nz_); }
+  int algebraic_offset(int i) const { return i * (ny_ + nz_) + ny_; }
+
+  // Evaluates all stages at Y_i = y0 + Z_i, z_i taken from w.
+  void Evaluate(const ConstVectorRef& y0, const ConstVectorRef& w, Derivatives derivatives);
+  const PointEvaluation& stage(int i) const { return stages_[static_cast<std::size_t>(i)]; }
+
+  // Residual of the collocation and algebraic rows (equation_rows()) and the pair sides
+  // (pair_rows() each), for element length h, at the last Evaluate.
+  void Residual(double h, const ConstVectorRef& w, VectorRef equations, VectorRef a,
+                VectorRef b) const;
+  // Adds the Jacobian with respect to w: equation rows at row0, pair rows at pair_row0,
+  // columns at col0. da, db weight the pair rows (pair_rows() entries each).
+  void AddJacobian(double h, const ConstVectorRef& da, const ConstVectorRef& db, int row0,
+                   int pair_row0, int col0, SystemMatrix* jacobian) const;
+  // d(equation rows)/dh = [-sum_j a_ij F_j; 0] (pair rows do not depend on h).
+  Vector ResidualDerivativeH() const;
+
+  // State at the end of the step, y0 + Z_s.
+  Vector EndState(const ConstVectorRef& y0, const ConstVectorRef& w) const;
+  // Stage-i algebraic values.
+  Vector Algebraic(const ConstVectorRef& w, int i) const {
+    return w.segment(algebraic_offset(i), nz_);
+  }
+  // Initial guess for w: state increments extrapolated along the previous step's
+  // collocation polynomial (`previous`, its w and length h) or zero; algebraic values at
+  // stage i from LoweredSystem::InitialAlgebraicGuess at the guessed stage state (so that a
+  // stage predicted beyond a switching surface starts in its new mode), keeping z_previous
+  // where the state does not decide.
+  Vector InitialGuess(const ConstVectorRef& y0, double h, const Vector* previous, double previous_h,
+                      const Vector& z_previous) const;
+
+ private:
+  LoweredSystem* system_;
+  const RadauTableau& tableau_;
+  int s_, ny_, nz_, ng_, np_;
+  std::vector<PointEvaluation> stages_;
+  Vector point_y_, point_z_;
+};
+
+}  // namespace moreau::internal

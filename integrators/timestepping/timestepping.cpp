@@ -1,0 +1,221 @@
+#include "moreau/integrators/timestepping.hpp"
+
+#include <chrono>
+#include <cmath>
+#include <sstream>
+
+#include "../common/collocation.hpp"
+#include "moreau/core/error.hpp"
+
+namespace moreau {
+
+SemismoothNewtonOptions TimeSteppingOptions::DefaultNewtonOptions() {
+  SemismoothNewtonOptions newton;
+  newton.tolerance = 1e-12;
+  newton.max_iterations = 50;
+  return newton;
+}
+
+void TimeSteppingOptions::Validate() const {
+  RequireArgument(stages >= 1 && stages <= kMaxRadauStages, "stages must be in [1, ",
+                  kMaxRadauStages, "], got ", stages);
+  RequireArgument(std::isfinite(step_size) && step_size > 0.0,
+                  "step size h must be positive and finite, got ", step_size);
+  newton.Validate();
+}
+
+std::string ToString(TimeSteppingStatus status) {
+  return status == TimeSteppingStatus::kSuccess ? "success" : "newton_failure";
+}
+
+TimeSteppingStats& TimeSteppingStats::operator+=(const TimeSteppingStats& other) {
+  num_steps += other.num_steps;
+  num_newton_iterations += other.num_newton_iterations;
+  num_factorizations += other.num_factorizations;
+  num_backtracks += other.num_backtracks;
+  max_complementarity_residual =
+      std::max(max_complementarity_residual, other.max_complementarity_residual);
+  max_newton_residual = std::max(max_newton_residual, other.max_newton_residual);
+  cpu_seconds += other.cpu_seconds;
+  return *this;
+}
+
+std::string TimeSteppingStats::Summary() const {
+  std::ostringstream s;
+  s << num_steps << " steps, " << num_newton_iterations << " Newton iterations, "
+    << num_factorizations << " factorizations, max complementarity residual "
+    << max_complementarity_residual << ", " << cpu_seconds << " s";
+  return s.str();
+}
+
+namespace {
+
+// One time step as a mixed complementarity system (see the header): collocation and
+// algebraic rows are smooth equations, stage pairs are complementarity pairs.
+class StepSystem final : public MixedComplementaritySystem {
+ public:
+  explicit StepSystem(internal::CollocationStages* stages) : stages_(stages) {}
+  void Prepare(const Vector& y0, double h) {
+    y0_ = y0;
+    h_ = h;
+  }
+  int num_unknowns() const override { return stages_->unknowns(); }
+  int num_equations() const override { return stages_->equation_rows(); }
+  int num_pairs() const override { return stages_->pair_rows(); }
+  bool Evaluate(const Vector& w, bool with_jacobian, Vector* r, Vector* a, Vector* b) override {
+    // Values-only evaluations go to a separate stage set so that the derivatives of the last
+    // with-Jacobian point stay available to AssembleJacobian.
+    internal::CollocationStages& target = with_jacobian ? *stages_ : ValueStages();
+    target.Evaluate(y0_, w, with_jacobian ? Derivatives::kStates : Derivatives::kNone);
+    r->resize(num_equations());
+    a->resize(num_pairs());
+    b->resize(num_pairs());
+    target.Residual(h_, w, *r, *a, *b);
+    return r->allFinite() && a->allFinite() && b->allFinite();
+  }
+  void AssembleJacobian(const Vector& da, const Vector& db, SystemMatrix* jacobian) override {
+    stages_->AddJacobian(h_, da, db, 0, num_equations(), 0, jacobian);
+  }
+  void ResidualScale(const Vector&, Vector* scale) override {
+    scale->setOnes(num_unknowns());
+    const int ny = stages_->num_states(), ng = stages_->num_equations();
+    for (int i = 0; i < stages_->stages(); ++i) {
+      for (int k = 0; k < ny; ++k)
+        scale->coeffRef(i * (ny + ng) + k) = 1.0 / (1.0 + std::fabs(y0_[k]));
+    }
+  }
+
+ private:
+  internal::CollocationStages& ValueStages() {
+    if (!value_stages_) value_stages_ = std::make_unique<internal::CollocationStages>(*stages_);
+    return *value_stages_;
+  }
+  internal::CollocationStages* stages_;
+  std::unique_ptr<internal::CollocationStages> value_stages_;
+  Vector y0_;
+  double h_ = 0.0;
+};
+
+void AddNewtonStats(const SemismoothNewtonResult& solved, TimeSteppingStats* stats) {
+  stats->num_newton_iterations += solved.stats.iterations;
+  stats->num_factorizations += solved.stats.factorizations;
+  stats->num_backtracks += solved.stats.backtracks;
+}
+
+std::vector<bool> PairStatuses(const PointEvaluation& e) {
+  std::vector<bool> status(static_cast<std::size_t>(e.A.size()));
+  for (Eigen::Index k = 0; k < e.A.size(); ++k) {
+    status[static_cast<std::size_t>(k)] = PairStatusIsAZero(e.A[k], e.B[k]);
+  }
+  return status;
+}
+
+}  // namespace
+
+TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOptions& options,
+                                        const ProgressCallback& progress) {
+  options.Validate();
+  for (const Effect& effect : scene.effects) {
+    if (std::holds_alternative<MovingSet>(effect) ||
+        std::holds_alternative<SwitchingSurfaces>(effect)) {
+      continue;
+    }
+    ThrowInvalidArgument("the time-stepping integrator does not support the ", EffectKind(effect),
+                         " '", EffectName(effect), "' of scene '", scene.name, "'");
+  }
+  const auto start = std::chrono::steady_clock::now();
+  LoweringOptions lowering;
+  lowering.switching_form = options.switching_form;
+  LoweredSystem system(scene, lowering);
+  internal::CollocationStages stages(&system, options.stages);
+  StepSystem step_system(&stages);
+  SemismoothNewton newton(options.newton);
+
+  TimeSteppingResult result;
+  TimeSteppingStats& stats = result.stats;
+  const int nx = scene.num_states();
+  const int s = options.stages;
+  Vector y = system.InitialState();
+  Vector z = system.InitialAlgebraicGuess(y);
+  result.trajectory.state_names = scene.state_names;
+  result.trajectory.algebraic_names = system.algebraic_names();
+  result.trajectory.Append(scene.initial_time, y.head(nx), Vector(), 0.0);
+  PointEvaluation initial;
+  system.Evaluate(y, z, Derivatives::kNone, &initial);
+  std::vector<bool> statuses = PairStatuses(initial);
+
+  Vector previous_w;
+  double previous_h = 0.0;
+  const std::vector<double> ends =
+      SegmentEnds(scene.initial_time, scene.final_time, scene.ControlBreakpoints());
+  bool failed = false;
+  for (std::size_t segment = 0; segment + 1 < ends.size() && !failed; ++segment) {
+    system.SetInputs(scene.InputValues(ends[segment]));
+    previous_h = 0.0;  // no extrapolation across a control breakpoint
+    const std::vector<double> grid =
+        FixedStepGrid(ends[segment], ends[segment + 1], options.step_size);
+    for (std::size_t k = 0; k + 1 < grid.size(); ++k) {
+      const double h = grid[k + 1] - grid[k];
+      step_system.Prepare(y, h);
+      // First attempt: state-informed guess (stages predicted across a switching surface
+      // start in their new mode). Second attempt: the previous step's algebraic values at
+      // every stage, if the first did not converge.
+      const Vector guess =
+          stages.InitialGuess(y, h, previous_h > 0.0 ? &previous_w : nullptr, previous_h, z);
+      SemismoothNewtonResult solved = newton.Solve(step_system, guess);
+      AddNewtonStats(solved, &stats);
+      if (!solved.converged()) {
+        Vector retry = guess;
+        for (int i = 0; i < s; ++i) retry.segment(stages.algebraic_offset(i), z.size()) = z;
+        if (retry != guess) {
+          solved = newton.Solve(step_system, retry);
+          AddNewtonStats(solved, &stats);
+        }
+      }
+      if (!solved.converged()) {
+        std::ostringstream message;
+        message.precision(17);
+        message << "newton_failure at t = " << grid[k] << " (step of length " << h
+                << "): " << solved.message;
+        result.status = TimeSteppingStatus::kNewtonFailure;
+        result.message = message.str();
+        failed = true;
+        break;
+      }
+      const Vector& w = solved.solution;
+      y = stages.EndState(y, w);
+      y[system.clock_index()] = grid[k + 1];  // exact grid time
+      z = stages.Algebraic(w, s - 1);
+      previous_w = w;
+      previous_h = h;
+      ++stats.num_steps;
+      stats.max_newton_residual = std::max(stats.max_newton_residual, solved.residual_norm);
+      stats.max_complementarity_residual =
+          std::max(stats.max_complementarity_residual, solved.complementarity_residual);
+      result.step_complementarity_residual.push_back(solved.complementarity_residual);
+      // Events: pair statuses at the last stage against the previous step's.
+      const std::vector<bool> now = PairStatuses(stages.stage(s - 1));
+      for (Event& event : system.StatusEvents(grid[k + 1], statuses, now)) {
+        result.events.push_back(std::move(event));
+      }
+      statuses = now;
+      if (options.record_trajectory) {
+        result.trajectory.Append(grid[k + 1], y.head(nx), z, h);
+      }
+      if (progress) progress(grid[k + 1]);
+    }
+  }
+  result.final_time = y[system.clock_index()];
+  result.final_state = y.head(nx);
+  result.final_algebraic = z;
+  if (!options.record_trajectory || failed) {
+    if (result.trajectory.t.back() != result.final_time) {
+      result.trajectory.Append(result.final_time, result.final_state, z, previous_h);
+    }
+  }
+  stats.cpu_seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return result;
+}
+
+}  // namespace moreau

@@ -1,0 +1,357 @@
+// Switching surfaces lowered to Stewart's form or to the Heaviside step form
+// (docs/lowering.md, sections "Stewart form" and "Heaviside step form").
+
+#include <Eigen/Dense>
+#include <cmath>
+
+#include "lowered_block.hpp"
+#include "moreau/core/error.hpp"
+
+namespace moreau::internal {
+namespace {
+
+// Sign of surface j in mode k (bit j of k set: c_j > 0).
+double Sign(int mode, int surface) { return ((mode >> surface) & 1) ? 1.0 : -1.0; }
+
+// Shared by both forms: the switching functions and the mode vector fields.
+class SwitchingBlockBase : public LoweredBlock {
+ public:
+  SwitchingBlockBase(const Scene& scene, const SwitchingSurfaces& effect)
+      : effect_(effect),
+        num_states_(scene.num_states()),
+        num_surfaces_(static_cast<int>(effect.surface_names.size())),
+        num_modes_(1 << num_surfaces_) {}
+
+ protected:
+  // Evaluates the surfaces c (with derivatives per `derivatives`, columns x, [u], t, [p]).
+  void EvaluateSurfaces(const BlockContext& context, const ConstVectorRef& y,
+                        Derivatives derivatives) {
+    x_ = y.head(num_states_);
+    const double t = y[context.clock_index];
+    if (derivatives == Derivatives::kNone) {
+      effect_.surfaces.Evaluate(x_, *context.inputs, t, *context.parameters, &c_);
+    } else {
+      effect_.surfaces.Jacobian(x_, *context.inputs, t, *context.parameters,
+                                derivatives == Derivatives::kAll ? Wrt::All() : Wrt::XT(), &c_,
+                                &c_jacobian_);
+    }
+  }
+  // Evaluates mode k's vector field into f_[k] (and its Jacobian into f_jacobian_[k]).
+  void EvaluateModes(const BlockContext& context, const ConstVectorRef& y,
+                     Derivatives derivatives) {
+    f_.resize(static_cast<std::size_t>(num_modes_));
+    f_jacobian_.resize(static_cast<std::size_t>(num_modes_));
+    const double t = y[context.clock_index];
+    for (int k = 0; k < num_modes_; ++k) {
+      const auto i = static_cast<std::size_t>(k);
+      if (derivatives == Derivatives::kNone) {
+        effect_.modes[i].Evaluate(x_, *context.inputs, t, *context.parameters, &f_[i]);
+      } else {
+        effect_.modes[i].Jacobian(x_, *context.inputs, t, *context.parameters,
+                                  derivatives == Derivatives::kAll ? Wrt::All() : Wrt::XT(), &f_[i],
+                                  &f_jacobian_[i]);
+      }
+    }
+  }
+  // Adds weight * d(function)/d(y, u, p) from a Jacobian with columns x, [u], t, [p] into
+  // the rows of (dy, du, dp) starting at `row` (x columns and the clock column of dy).
+  void AddJacobian(const BlockContext& context, const Matrix& jacobian, double weight, int row,
+                   Derivatives derivatives, Matrix* dy, Matrix* du, Matrix* dp) const {
+    const int nx = num_states_;
+    const int nu = static_cast<int>(context.inputs->size());
+    const int np = static_cast<int>(context.parameters->size());
+    const int rows = static_cast<int>(jacobian.rows());
+    const bool all = derivatives == Derivatives::kAll;
+    const int t_col = all ? nx + nu : nx;
+    dy->block(row, 0, rows, nx) += weight * jacobian.leftCols(nx);
+    dy->block(row, context.clock_index, rows, 1) += weight * jacobian.col(t_col);
+    if (!all) return;
+    du->middleRows(row, rows) += weight * jacobian.middleCols(nx, nu);
+    dp->middleRows(row, rows) += weight * jacobian.rightCols(np);
+  }
+  // True if some switching function vanishes to round-off at the last evaluated point.
+  bool OnSurface() const {
+    for (Eigen::Index j = 0; j < c_.size(); ++j) {
+      if (std::fabs(c_[j]) <= kOnSurfaceTolerance * (1.0 + x_.lpNorm<Eigen::Infinity>())) {
+        return true;
+      }
+    }
+    return false;
+  }
+  // |c| below this (relative to the state's size) counts as lying on the surface: round-off
+  // of a state that slides along it.
+  static constexpr double kOnSurfaceTolerance = 1e-10;
+
+  std::string ModeName(int k) const { return effect_.mode_names[static_cast<std::size_t>(k)]; }
+
+  SwitchingSurfaces effect_;
+  int num_states_;
+  int num_surfaces_;
+  int num_modes_;
+  Vector x_, c_;
+  Matrix c_jacobian_;
+  std::vector<Vector> f_;
+  std::vector<Matrix> f_jacobian_;
+};
+
+// Stewart: regions R_k = {g_k(x) = min_i g_i(x)} with g = -S c (S_kj = sign of surface j in
+// mode k, so g_k is smallest exactly where the signs of c match mode k).
+//   x' += sum_k theta_k f_k,   0 = g - lambda - mu e,   0 = e^T theta - 1,
+//   0 <= theta_k ⟂ lambda_k >= 0.
+// z = (theta (m), lambda (m), mu); lambda_k = g_k - min g is the continuous side.
+class StewartBlock final : public SwitchingBlockBase {
+ public:
+  using SwitchingBlockBase::SwitchingBlockBase;
+  std::unique_ptr<LoweredBlock> Clone() const override {
+    return std::make_unique<StewartBlock>(*this);
+  }
+  int num_algebraic() const override { return 2 * num_modes_ + 1; }
+  int num_equations() const override { return num_modes_ + 1; }
+  int num_pairs() const override { return num_modes_; }
+  std::vector<std::string> AlgebraicNames() const override {
+    std::vector<std::string> names;
+    for (int k = 0; k < num_modes_; ++k) names.push_back(effect_.name + ".theta_" + ModeName(k));
+    for (int k = 0; k < num_modes_; ++k) names.push_back(effect_.name + ".lambda_" + ModeName(k));
+    names.push_back(effect_.name + ".mu");
+    return names;
+  }
+  std::vector<PairInfo> Pairs() const override {
+    std::vector<PairInfo> pairs;
+    for (int k = 0; k < num_modes_; ++k) {
+      pairs.push_back({effect_.name, effect_.name + "." + ModeName(k), ContinuousSide::kB, 0});
+    }
+    return pairs;
+  }
+
+  void Evaluate(const BlockContext& context, const ConstVectorRef& y, const ConstVectorRef& z,
+                Derivatives derivatives, PointEvaluation* out) override {
+    const int nx = num_states_;
+    const int m = num_modes_;
+    const int z0 = layout.z_offset;  // theta at z0, lambda at z0 + m, mu at z0 + 2m
+    const int g0 = layout.g_offset;
+    const int k0 = layout.pair_offset;
+    EvaluateSurfaces(context, y, derivatives);
+    EvaluateModes(context, y, derivatives);
+    const auto theta = z.segment(z0, m);
+    const auto lambda = z.segment(z0 + m, m);
+    const double mu = z[z0 + 2 * m];
+    for (int k = 0; k < m; ++k) {
+      const auto i = static_cast<std::size_t>(k);
+      // (Stewart) x' += theta_k f_k.
+      out->F.head(nx) += theta[k] * f_[i];
+      // g_k - lambda_k - mu = 0 with g_k = -sum_j S_kj c_j.
+      double g = 0.0;
+      for (int j = 0; j < num_surfaces_; ++j) g -= Sign(k, j) * c_[j];
+      out->G[g0 + k] = g - lambda[k] - mu;
+      // pair k: a = theta_k, b = lambda_k.
+      out->A[k0 + k] = theta[k];
+      out->B[k0 + k] = lambda[k];
+    }
+    out->G[g0 + m] = theta.sum() - 1.0;  // convex combination
+    if (derivatives == Derivatives::kNone) return;
+
+    for (int k = 0; k < m; ++k) {
+      const auto i = static_cast<std::size_t>(k);
+      AddJacobian(context, f_jacobian_[i], theta[k], 0, derivatives, &out->F_y, &out->F_u,
+                  &out->F_p);
+      out->F_z.block(0, z0 + k, nx, 1) += f_[i];
+      for (int j = 0; j < num_surfaces_; ++j) {
+        AddJacobian(context, c_jacobian_.middleRows(j, 1), -Sign(k, j), g0 + k, derivatives,
+                    &out->G_y, &out->G_u, &out->G_p);
+      }
+      out->G_z(g0 + k, z0 + m + k) = -1.0;
+      out->G_z(g0 + k, z0 + 2 * m) = -1.0;
+      out->G_z(g0 + m, z0 + k) = 1.0;
+      out->A_z(k0 + k, z0 + k) = 1.0;
+      out->B_z(k0 + k, z0 + m + k) = 1.0;
+    }
+  }
+
+  // theta = e_k for the region containing y, lambda = g - min g, mu = min g. If y lies on
+  // a switching surface (|c_j| at round-off level) the region does not decide: keep
+  // `previous` (e.g. a sliding mode's theta) when given.
+  void InitialGuess(const BlockContext& context, const ConstVectorRef& y, const Vector* previous,
+                    VectorRef z) override {
+    EvaluateSurfaces(context, y, Derivatives::kNone);
+    const int m = num_modes_;
+    const int z0 = layout.z_offset;
+    if (previous != nullptr && OnSurface()) {
+      z.segment(z0, 2 * m + 1) = previous->segment(z0, 2 * m + 1);
+      return;
+    }
+    Vector g(m);
+    for (int k = 0; k < m; ++k) {
+      g[k] = 0.0;
+      for (int j = 0; j < num_surfaces_; ++j) g[k] -= Sign(k, j) * c_[j];
+    }
+    Eigen::Index best = 0;
+    const double g_min = g.minCoeff(&best);
+    z.segment(z0, m).setZero();
+    z[z0 + best] = 1.0;
+    z.segment(z0 + m, m) = g.array() - g_min;
+    z[z0 + 2 * m] = g_min;
+  }
+
+  // Pair k has b = lambda_k = 0 (a_zero false) exactly when mode k is active.
+  std::vector<Event> StatusEvents(double t, const std::vector<bool>& before,
+                                  const std::vector<bool>& after) const override {
+    std::vector<int> active_before, active_after;
+    for (int k = 0; k < num_modes_; ++k) {
+      if (!before[static_cast<std::size_t>(k)]) active_before.push_back(k);
+      if (!after[static_cast<std::size_t>(k)]) active_after.push_back(k);
+    }
+    if (active_before == active_after) return {};
+    auto names = [this](const std::vector<int>& modes) {
+      std::string s;
+      for (int k : modes) s += (s.empty() ? "" : "+") + ModeName(k);
+      return s.empty() ? std::string("none") : s;
+    };
+    EventKind kind = EventKind::kModeSwitch;
+    if (active_after.size() > active_before.size()) kind = EventKind::kSlideStart;
+    if (active_after.size() < active_before.size()) kind = EventKind::kSlideEnd;
+    return {{t, kind, effect_.name, names(active_before) + " -> " + names(active_after)}};
+  }
+};
+
+// Heaviside step form: one alpha_j in [0, 1] per surface,
+//   x' += sum_k w_k(alpha) f_k,  w_k = prod_j (alpha_j if bit j of k else 1 - alpha_j),
+//   0 = c_j - lambda_p_j + lambda_n_j,
+//   0 <= alpha_j ⟂ lambda_n_j >= 0,   0 <= 1 - alpha_j ⟂ lambda_p_j >= 0.
+// z = (alpha (n_c), lambda_n (n_c), lambda_p (n_c)); lambda_n, lambda_p are continuous.
+class HeavisideBlock final : public SwitchingBlockBase {
+ public:
+  using SwitchingBlockBase::SwitchingBlockBase;
+  std::unique_ptr<LoweredBlock> Clone() const override {
+    return std::make_unique<HeavisideBlock>(*this);
+  }
+  int num_algebraic() const override { return 3 * num_surfaces_; }
+  int num_equations() const override { return num_surfaces_; }
+  int num_pairs() const override { return 2 * num_surfaces_; }
+  std::vector<std::string> AlgebraicNames() const override {
+    std::vector<std::string> names;
+    for (const char* prefix : {".alpha_", ".lambda_n_", ".lambda_p_"}) {
+      for (const std::string& s : effect_.surface_names) names.push_back(effect_.name + prefix + s);
+    }
+    return names;
+  }
+  std::vector<PairInfo> Pairs() const override {
+    std::vector<PairInfo> pairs;
+    for (const std::string& s : effect_.surface_names) {
+      pairs.push_back({effect_.name, effect_.name + "." + s + ".negative", ContinuousSide::kB, 0});
+      pairs.push_back({effect_.name, effect_.name + "." + s + ".positive", ContinuousSide::kB, 0});
+    }
+    return pairs;
+  }
+
+  void Evaluate(const BlockContext& context, const ConstVectorRef& y, const ConstVectorRef& z,
+                Derivatives derivatives, PointEvaluation* out) override {
+    const int nx = num_states_;
+    const int nc = num_surfaces_;
+    const int z0 = layout.z_offset;  // alpha at z0, lambda_n at z0 + nc, lambda_p at z0 + 2nc
+    const int g0 = layout.g_offset;
+    const int k0 = layout.pair_offset;
+    EvaluateSurfaces(context, y, derivatives);
+    EvaluateModes(context, y, derivatives);
+    const auto alpha = z.segment(z0, nc);
+    const auto lambda_n = z.segment(z0 + nc, nc);
+    const auto lambda_p = z.segment(z0 + 2 * nc, nc);
+    for (int k = 0; k < num_modes_; ++k) {
+      // (Heaviside) x' += w_k(alpha) f_k.
+      out->F.head(nx) += Weight(k, alpha, -1) * f_[static_cast<std::size_t>(k)];
+    }
+    for (int j = 0; j < nc; ++j) {
+      out->G[g0 + j] = c_[j] - lambda_p[j] + lambda_n[j];
+      out->A[k0 + 2 * j] = alpha[j];  // alpha_j ⟂ lambda_n_j
+      out->B[k0 + 2 * j] = lambda_n[j];
+      out->A[k0 + 2 * j + 1] = 1.0 - alpha[j];  // 1 - alpha_j ⟂ lambda_p_j
+      out->B[k0 + 2 * j + 1] = lambda_p[j];
+    }
+    if (derivatives == Derivatives::kNone) return;
+
+    for (int k = 0; k < num_modes_; ++k) {
+      const auto i = static_cast<std::size_t>(k);
+      AddJacobian(context, f_jacobian_[i], Weight(k, alpha, -1), 0, derivatives, &out->F_y,
+                  &out->F_u, &out->F_p);
+      for (int j = 0; j < nc; ++j) {
+        // d w_k / d alpha_j = sign * prod_{l != j} (...)
+        out->F_z.block(0, z0 + j, nx, 1) += Sign(k, j) * Weight(k, alpha, j) * f_[i];
+      }
+    }
+    for (int j = 0; j < nc; ++j) {
+      AddJacobian(context, c_jacobian_.middleRows(j, 1), 1.0, g0 + j, derivatives, &out->G_y,
+                  &out->G_u, &out->G_p);
+      out->G_z(g0 + j, z0 + 2 * nc + j) = -1.0;
+      out->G_z(g0 + j, z0 + nc + j) = 1.0;
+      out->A_z(k0 + 2 * j, z0 + j) = 1.0;
+      out->B_z(k0 + 2 * j, z0 + nc + j) = 1.0;
+      out->A_z(k0 + 2 * j + 1, z0 + j) = -1.0;
+      out->B_z(k0 + 2 * j + 1, z0 + 2 * nc + j) = 1.0;
+    }
+  }
+
+  // alpha_j = 1 where c_j > 0, 0 where c_j < 0, 1/2 on the surface; lambda_p/n = c_j^+/-.
+  // On a surface (|c_j| at round-off level) `previous` is kept when given.
+  void InitialGuess(const BlockContext& context, const ConstVectorRef& y, const Vector* previous,
+                    VectorRef z) override {
+    EvaluateSurfaces(context, y, Derivatives::kNone);
+    const int nc = num_surfaces_;
+    const int z0 = layout.z_offset;
+    if (previous != nullptr && OnSurface()) {
+      z.segment(z0, 3 * nc) = previous->segment(z0, 3 * nc);
+      return;
+    }
+    for (int j = 0; j < nc; ++j) {
+      z[z0 + j] = c_[j] > 0.0 ? 1.0 : (c_[j] < 0.0 ? 0.0 : 0.5);
+      z[z0 + nc + j] = std::max(-c_[j], 0.0);
+      z[z0 + 2 * nc + j] = std::max(c_[j], 0.0);
+    }
+  }
+
+  // Surface j: pair 2j has a_zero when alpha_j = 0 (negative side), pair 2j+1 when
+  // alpha_j = 1 (positive side); both b-zero means sliding.
+  std::vector<Event> StatusEvents(double t, const std::vector<bool>& before,
+                                  const std::vector<bool>& after) const override {
+    std::vector<Event> events;
+    auto state = [](const std::vector<bool>& s, int j) {
+      const bool negative = s[static_cast<std::size_t>(2 * j)];
+      const bool positive = s[static_cast<std::size_t>(2 * j + 1)];
+      if (negative && !positive) return std::string("negative");
+      if (positive && !negative) return std::string("positive");
+      return std::string("sliding");
+    };
+    for (int j = 0; j < num_surfaces_; ++j) {
+      const std::string from = state(before, j), to = state(after, j);
+      if (from == to) continue;
+      EventKind kind = EventKind::kModeSwitch;
+      if (to == "sliding") kind = EventKind::kSlideStart;
+      if (from == "sliding") kind = EventKind::kSlideEnd;
+      events.push_back({t, kind,
+                        effect_.name + "." + effect_.surface_names[static_cast<std::size_t>(j)],
+                        from + " -> " + to});
+    }
+    return events;
+  }
+
+ private:
+  // w_k(alpha) with factor `skip` left out (skip = -1: none).
+  double Weight(int mode, const Eigen::Ref<const Vector>& alpha, int skip) const {
+    double w = 1.0;
+    for (int j = 0; j < num_surfaces_; ++j) {
+      if (j == skip) continue;
+      w *= ((mode >> j) & 1) ? alpha[j] : 1.0 - alpha[j];
+    }
+    return w;
+  }
+};
+
+}  // namespace
+
+std::unique_ptr<LoweredBlock> LowerStewart(const Scene& scene, const SwitchingSurfaces& effect) {
+  return std::make_unique<StewartBlock>(scene, effect);
+}
+
+std::unique_ptr<LoweredBlock> LowerHeaviside(const Scene& scene, const SwitchingSurfaces& effect) {
+  return std::make_unique<HeavisideBlock>(scene, effect);
+}
+
+}  // namespace moreau::internal

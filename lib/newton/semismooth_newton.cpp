@@ -1,0 +1,287 @@
+#include "moreau/newton/semismooth_newton.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <sstream>
+#include <vector>
+
+#include "moreau/core/error.hpp"
+
+namespace moreau {
+
+void MixedComplementaritySystem::ResidualScale(const Vector& /*w*/, Vector* scale) {
+  scale->setOnes(num_unknowns());
+}
+
+double MixedComplementaritySystem::EstimatedJacobianNonzeros() const {
+  const double n = num_unknowns();
+  return n * n;
+}
+
+void SemismoothNewtonOptions::Validate() const {
+  RequireArgument(std::isfinite(tolerance) && tolerance > 0.0,
+                  "Newton tolerance must be positive, got ", tolerance);
+  RequireArgument(max_iterations >= 1, "max Newton iterations must be >= 1, got ", max_iterations);
+  RequireArgument(armijo > 0.0 && armijo < 0.5, "Armijo constant must be in (0, 0.5), got ",
+                  armijo);
+  RequireArgument(backtrack > 0.0 && backtrack < 1.0, "backtracking factor must be in (0, 1), got ",
+                  backtrack);
+  RequireArgument(min_step > 0.0 && min_step < 1.0, "min step must be in (0, 1), got ", min_step);
+  RequireArgument(descent_rho > 0.0 && descent_power > 2.0,
+                  "descent test needs rho > 0 and power > 2, got ", descent_rho, " and ",
+                  descent_power);
+  RequireArgument(stagnation_window >= 2, "stagnation window must be >= 2, got ",
+                  stagnation_window);
+  RequireArgument(polish_ratio > 0.0 && polish_ratio < 1.0, "polish ratio must be in (0, 1), got ",
+                  polish_ratio);
+}
+
+std::string ToString(NewtonStatus status) {
+  switch (status) {
+    case NewtonStatus::kConverged:
+      return "converged";
+    case NewtonStatus::kMaxIterations:
+      return "max_iterations";
+    case NewtonStatus::kLineSearchFailed:
+      return "line_search_failed";
+    case NewtonStatus::kStagnated:
+      return "stagnated";
+    case NewtonStatus::kStationaryPoint:
+      return "stationary_point";
+    case NewtonStatus::kNonFinite:
+      return "non_finite";
+  }
+  return "?";
+}
+
+SemismoothNewtonStats& SemismoothNewtonStats::operator+=(const SemismoothNewtonStats& other) {
+  iterations += other.iterations;
+  residual_evaluations += other.residual_evaluations;
+  jacobian_evaluations += other.jacobian_evaluations;
+  factorizations += other.factorizations;
+  backtracks += other.backtracks;
+  gradient_steps += other.gradient_steps;
+  polish_steps += other.polish_steps;
+  singular_jacobians += other.singular_jacobians;
+  return *this;
+}
+
+std::string SemismoothNewtonStats::Summary() const {
+  std::ostringstream s;
+  s << iterations << " iterations, " << factorizations << " factorizations, " << backtracks
+    << " backtracks, " << gradient_steps << " gradient steps, " << polish_steps
+    << " active-set steps, " << singular_jacobians << " singular Jacobians";
+  return s.str();
+}
+
+namespace {
+
+// Relative decrease of the merit below which a window of iterations counts as no progress.
+constexpr double kStagnationDecrease = 1e-3;
+
+// One evaluated point: residual Phi = [r; phi(a, b)], its scaled norms and the NCP derivatives.
+struct Point {
+  Vector w, r, a, b;
+  Vector phi;                                              // full residual [r; phi]
+  Vector da, db;                                           // NCP generalized derivatives
+  Vector scale;                                            // row scales S
+  double merit = std::numeric_limits<double>::infinity();  // 1/2 ||S Phi||^2
+  double norm = std::numeric_limits<double>::infinity();   // ||S Phi||_inf
+  bool valid = false;
+};
+
+}  // namespace
+
+SemismoothNewton::SemismoothNewton(const SemismoothNewtonOptions& options) : options_(options) {
+  options_.Validate();
+}
+
+SemismoothNewton::~SemismoothNewton() = default;
+
+SemismoothNewtonResult SemismoothNewton::Solve(MixedComplementaritySystem& system,
+                                               const Vector& initial_guess) {
+  const int n = system.num_unknowns();
+  const int n_eq = system.num_equations();
+  const int n_pairs = system.num_pairs();
+  MOREAU_ASSERT(n_eq + n_pairs == n, "mixed complementarity system is not square");
+  MOREAU_ASSERT(initial_guess.size() == n, "initial guess has the wrong size");
+  if (solver_ == nullptr || solver_size_ != n) {
+    solver_ = MakeLinearSolver(options_.linear_solver, n, system.EstimatedJacobianNonzeros());
+    solver_size_ = n;
+  }
+  SemismoothNewtonResult result;
+  SemismoothNewtonStats& stats = result.stats;
+
+  // Evaluates the residual with a given NCP function (the line search always measures the
+  // merit with options_.ncp_function).
+  auto evaluate = [&](const Vector& w, bool with_jacobian, NcpFunctionKind kind, Point* p) {
+    p->w = w;
+    ++stats.residual_evaluations;
+    if (with_jacobian) ++stats.jacobian_evaluations;
+    p->valid = system.Evaluate(w, with_jacobian, &p->r, &p->a, &p->b);
+    if (!p->valid) {
+      p->merit = p->norm = std::numeric_limits<double>::infinity();
+      return;
+    }
+    p->phi.resize(n);
+    p->da.resize(n_pairs);
+    p->db.resize(n_pairs);
+    p->phi.head(n_eq) = p->r;
+    for (int k = 0; k < n_pairs; ++k) {
+      const NcpValue v = EvaluateNcp(kind, p->a[k], p->b[k]);
+      p->phi[n_eq + k] = v.value;
+      p->da[k] = v.da;
+      p->db[k] = v.db;
+    }
+    system.ResidualScale(w, &p->scale);
+    const Vector scaled = p->scale.cwiseProduct(p->phi);
+    p->valid = scaled.allFinite();
+    p->merit = p->valid ? 0.5 * scaled.squaredNorm() : std::numeric_limits<double>::infinity();
+    p->norm = p->valid ? scaled.lpNorm<Eigen::Infinity>() : std::numeric_limits<double>::infinity();
+  };
+  std::vector<double> history;
+  auto finish = [&](NewtonStatus status, const Point& p, const std::string& reason) {
+    result.status = status;
+    result.solution = p.w;
+    result.residual_history = history;
+    result.residual_norm = p.norm;
+    result.complementarity_residual = 0.0;
+    if (p.valid) {
+      for (int k = 0; k < n_pairs; ++k) {
+        result.complementarity_residual =
+            std::max(result.complementarity_residual, ComplementarityResidual(p.a[k], p.b[k]));
+      }
+    }
+    if (status != NewtonStatus::kConverged) {
+      std::ostringstream s;
+      s.precision(6);
+      s << ToString(status) << " after " << stats.iterations << " iterations: " << reason
+        << " (||S Phi||_inf = " << p.norm << ")";
+      result.message = s.str();
+    }
+    return result;
+  };
+  // Factorizes the generalized Jacobian for derivatives (da, db) at the last evaluated point.
+  auto factorize = [&](const Vector& da, const Vector& db) {
+    jacobian_.Reset(n, solver_->wants_sparse());
+    system.AssembleJacobian(da, db, &jacobian_);
+    jacobian_.Finalize();
+    ++stats.factorizations;
+    const FactorizationStatus status = solver_->Factorize(jacobian_);
+    if (status != FactorizationStatus::kSuccess) ++stats.singular_jacobians;
+    return status == FactorizationStatus::kSuccess;
+  };
+
+  Point current;
+  evaluate(initial_guess, true, options_.ncp_function, &current);
+  if (!current.valid) {
+    return finish(NewtonStatus::kNonFinite, current,
+                  "the residual at the initial point is not finite or not defined");
+  }
+  history.push_back(current.norm);
+  std::vector<double> merits{current.merit};
+  double previous_norm = std::numeric_limits<double>::infinity();
+  bool last_step_full = false;  // the previous Newton step was taken with length 1
+  Point trial;
+
+  for (int k = 0;; ++k) {
+    if (current.norm <= options_.tolerance) {
+      // Leave the Jacobian at the solution factorized for sensitivity computations.
+      factorize(current.da, current.db);
+      return finish(NewtonStatus::kConverged, current, "");
+    }
+    if (k >= options_.max_iterations) {
+      return finish(NewtonStatus::kMaxIterations, current, "iteration limit reached");
+    }
+    const int window = options_.stagnation_window;
+    // Judged on the merit, which the line search decreases monotonically (the infinity
+    // norm of the residual need not decrease at every step).
+    if (static_cast<int>(merits.size()) > window &&
+        current.merit > (1.0 - kStagnationDecrease) *
+                            merits[merits.size() - 1 - static_cast<std::size_t>(window)]) {
+      return finish(
+          NewtonStatus::kStagnated, current,
+          "merit fell by less than a relative 1e-3 over " + std::to_string(window) + " iterations");
+    }
+    ++stats.iterations;
+
+    // Active-set (min-map) step when FB-Newton contracts only linearly.
+    const bool slow = last_step_full && current.norm > options_.polish_ratio * previous_norm;
+    if (options_.active_set_polish && slow && n_pairs > 0) {
+      Vector da_min(n_pairs), db_min(n_pairs), rhs(n);
+      rhs.head(n_eq) = -current.r;
+      for (int i = 0; i < n_pairs; ++i) {
+        const NcpValue v = MinMap(current.a[i], current.b[i]);
+        da_min[i] = v.da;
+        db_min[i] = v.db;
+        rhs[n_eq + i] = -v.value;
+      }
+      if (factorize(da_min, db_min)) {
+        solver_->Solve(rhs);
+        if (rhs.allFinite()) {
+          // Values only: the system's derivatives must stay those of `current` unless the
+          // step is accepted (AssembleJacobian uses the last point evaluated with them).
+          evaluate(current.w + rhs, false, options_.ncp_function, &trial);
+          if (trial.valid && trial.norm < options_.polish_ratio * current.norm) {
+            evaluate(trial.w, true, options_.ncp_function, &trial);
+            ++stats.polish_steps;
+            previous_norm = current.norm;
+            std::swap(current, trial);
+            history.push_back(current.norm);
+            merits.push_back(current.merit);
+            continue;
+          }
+        }
+      }
+    }
+
+    // Newton direction on the FB (or min) reformulation.
+    const bool nonsingular = factorize(current.da, current.db);
+    const Vector scaled_phi = current.scale.cwiseProduct(current.scale).cwiseProduct(current.phi);
+    const Vector gradient = jacobian_.MultiplyTransposed(scaled_phi);  // grad theta = J^T S^2 Phi
+    Vector direction = -current.phi;
+    bool use_gradient = !nonsingular;
+    if (nonsingular) {
+      solver_->Solve(direction);
+      const double slope = gradient.dot(direction);
+      use_gradient =
+          !direction.allFinite() ||
+          slope > -options_.descent_rho * std::pow(direction.norm(), options_.descent_power);
+    }
+    if (use_gradient) {
+      ++stats.gradient_steps;
+      if (gradient.lpNorm<Eigen::Infinity>() <=
+          1e-14 * std::max(1.0, jacobian_.InfinityNorm()) * current.norm) {
+        return finish(NewtonStatus::kStationaryPoint, current,
+                      "the merit gradient J^T S^2 Phi vanishes while Phi does not");
+      }
+      direction = -gradient;
+    }
+    // Armijo backtracking on theta.
+    const double slope = gradient.dot(direction);
+    double t = 1.0;
+    bool accepted = false;
+    while (t >= options_.min_step) {
+      evaluate(current.w + t * direction, true, options_.ncp_function, &trial);
+      if (trial.valid && trial.merit <= current.merit + options_.armijo * t * slope) {
+        accepted = true;
+        break;
+      }
+      ++stats.backtracks;
+      t *= options_.backtrack;
+    }
+    if (!accepted) {
+      return finish(NewtonStatus::kLineSearchFailed, current,
+                    "no step length >= " + std::to_string(options_.min_step) +
+                        " decreases the merit sufficiently");
+    }
+    previous_norm = current.norm;
+    last_step_full = t == 1.0 && !use_gradient;
+    std::swap(current, trial);
+    history.push_back(current.norm);
+    merits.push_back(current.merit);
+  }
+}
+
+}  // namespace moreau

@@ -1,0 +1,86 @@
+#pragma once
+// Reference problems with known answers (../shared/reference-problems.md), for the scenes of
+// the same name in examples/scenes: exact switch times, exact solution and x(T).
+
+#include <cmath>
+#include <functional>
+#include <numbers>
+#include <string>
+#include <vector>
+
+#include "moreau/core/types.hpp"
+#include "moreau/scenes/catalog.hpp"
+
+namespace moreau::testing {
+
+struct ReferenceProblem {
+  std::string scene;
+  std::vector<double> switch_times;        // every switch in (t0, tf], in order
+  std::function<Vector(double)> solution;  // exact x(t)
+  Scene Make() const { return MakeScene(scene); }
+  Vector FinalState() const { return solution(Make().final_time); }
+};
+
+inline ReferenceProblem S1() {
+  return {"S1", {1.0}, [](double t) { return Vector{{t < 1.0 ? 2.0 - t : t}}; }};
+}
+
+// Play operator: events pi/6, pi/2, pi, 3pi/2, 2pi, 5pi/2, 3pi, 7pi/2, 4pi (the last at tf).
+inline ReferenceProblem S2() {
+  const double pi = std::numbers::pi;
+  return {"S2",
+          {pi / 6, pi / 2, pi, 3 * pi / 2, 2 * pi, 5 * pi / 2, 3 * pi, 7 * pi / 2, 4 * pi},
+          [pi](double t) {
+            if (t <= pi / 6) return Vector{{0.0}};
+            const double tau = t < 3 * pi / 2 ? t : std::fmod(t - 3 * pi / 2, 2 * pi) + 3 * pi / 2;
+            if (tau <= pi / 2) return Vector{{std::sin(tau) - 0.5}};
+            if (tau <= pi) return Vector{{0.5}};
+            if (tau <= 3 * pi / 2) return Vector{{std::sin(tau) + 0.5}};
+            if (tau <= 2 * pi) return Vector{{-0.5}};
+            if (tau <= 5 * pi / 2) return Vector{{std::sin(tau) - 0.5}};
+            return Vector{{0.5}};
+          }};
+}
+
+// Contact at 5pi/12 at (sqrt3, -1), slides with x1' = -1, leaves at 5pi/12 + sqrt3.
+inline ReferenceProblem S3() {
+  const double t1 = 5 * std::numbers::pi / 12, t2 = t1 + std::sqrt(3.0);
+  return {"S3", {t1, t2}, [t1, t2](double t) {
+            if (t <= t1) {
+              const double angle = std::numbers::pi / 4 - t;
+              return Vector{{2 * std::cos(angle), 2 * std::sin(angle)}};
+            }
+            if (t <= t2) return Vector{{std::sqrt(3.0) - (t - t1), -1.0}};
+            return Vector{{-std::sin(t - t2), -std::cos(t - t2)}};
+          }};
+}
+
+inline ReferenceProblem F1() {
+  const double omega = 2 * std::numbers::pi;
+  return {"F1", {1.0}, [omega](double t) {
+            const double r = std::exp(t - 1.0);
+            if (t <= 1.0) return Vector{{r * std::cos(omega * t), r * std::sin(omega * t)}};
+            return Vector{{r * std::cos(omega * (t - 1.0)), -r * std::sin(omega * (t - 1.0))}};
+          }};
+}
+
+inline ReferenceProblem F2a() {
+  return {"F2a", {0.5}, [](double t) { return Vector{{t < 0.5 ? -1 + 2 * t : 0.2 * (t - 0.5)}}; }};
+}
+inline ReferenceProblem F2b() {
+  return {"F2b", {0.5}, [](double t) { return Vector{{t < 0.5 ? -0.5 + t : 0.0}}; }};
+}
+inline ReferenceProblem F2c() {
+  return {"F2c", {1.0}, [](double t) { return Vector{{t < 1.0 ? 0.0 : 0.5 * (t - 1) * (t - 1)}}; }};
+}
+inline ReferenceProblem F3() {
+  const double ts = std::sqrt(2.0);
+  return {"F3", {ts}, [ts](double t) { return Vector{{t < ts ? -ts + t : 0.0}}; }};
+}
+// x0 = -1: switch at t = 1/3, then x' = 1.
+inline ReferenceProblem F4() {
+  return {
+      "F4", {1.0 / 3}, [](double t) { return Vector{{t < 1.0 / 3 ? -1 + 3 * t : t - 1.0 / 3}}; }};
+}
+
+}  // namespace moreau::testing
