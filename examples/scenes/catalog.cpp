@@ -17,6 +17,8 @@ const std::vector<SceneDefinition>& SceneCatalog() {
       {"S1", "sweeping by a moving wall, contact at t = 1 (time-varying set)", scenes::MakeS1},
       {"S2", "play operator: interval [sin t - 1/2, sin t + 1/2] sweeps the state", scenes::MakeS2},
       {"S3", "rotation projected on a floor: contact, sliding, leaving", scenes::MakeS3},
+      {"S4", "wave-rider: a moving boundary pushes an unactuated state (fixed control)",
+       scenes::MakeS4},
       {"F1", "oscillator switching at the unit circle (FESD order benchmark)", scenes::MakeF1},
       {"F2a", "crossing a switching surface", scenes::MakeF2a},
       {"F2b", "entering a sliding mode", scenes::MakeF2b},

@@ -18,6 +18,7 @@ Scene MakeHeat();
 Scene MakeS1();
 Scene MakeS2();
 Scene MakeS3();
+Scene MakeS4();
 
 // Filippov systems (filippov.cpp).
 Scene MakeF1();

@@ -1,5 +1,6 @@
 // Sweeping processes and projected dynamical systems (reference problems S1-S3).
 #include <cmath>
+#include <limits>
 #include <numbers>
 
 #include "scenes.hpp"
@@ -80,6 +81,39 @@ Scene MakeS3() {
   set.constraints = MakeSmoothFunction(
       "S3.c", 1, [floor](const auto& x, const auto&, const auto&, const auto& p, auto& out) {
         out[0] = x[1] - p[floor];
+      });
+  scene.effects.push_back(set);
+  return scene;
+}
+
+Scene MakeS4() {
+  Scene scene;
+  scene.name = "S4";
+  scene.description =
+      "wave-rider: x' in (0, u) - N_C(t)(x), C(t) = {x1 + cos(x2 - t) >= 0}, constant control "
+      "u = 2; the moving boundary pushes the unactuated x1 from 0.5 towards 1. The reference "
+      "x0 = (0, 2) lies outside C(0) (cos 2 < 0), so x0 = (0.5, 2) is used";
+  scene.state_names = {"x1", "x2"};
+  scene.initial_state = Vector{{0.5, 2.0}};
+  scene.final_time = 5.0;
+  InputSpec control;
+  control.name = "u";
+  control.signal.values = {2.0};
+  control.lower = -std::numeric_limits<double>::infinity();
+  control.description = "velocity of x2 (piecewise constant)";
+  scene.inputs.push_back(control);
+  scene.dynamics = MakeSmoothFunction(
+      "S4.f", 2, [](const auto&, const auto& u, const auto&, const auto&, auto& out) {
+        out[0] = 0.0;
+        out[1] = u[0];
+      });
+  MovingSet set;
+  set.name = "wave";
+  set.constraint_names = {"c"};
+  set.constraints = MakeSmoothFunction(
+      "S4.c", 1, [](const auto& x, const auto&, const auto& t, const auto&, auto& out) {
+        using std::cos;
+        out[0] = x[0] + cos(x[1] - t);
       });
   scene.effects.push_back(set);
   return scene;

@@ -85,6 +85,53 @@ Vector CollocationStages::ResidualDerivativeH() const {
   return d;
 }
 
+void CollocationStages::AddStartJacobian(double h, const ConstVectorRef& da,
+                                         const ConstVectorRef& db, int row0, int pair_row0,
+                                         int col0, SystemMatrix* jacobian) const {
+  const Matrix& coefficients = tableau_.a;
+  for (int i = 0; i < s_; ++i) {
+    const int row = row0 + i * (ny_ + ng_);
+    for (int j = 0; j < s_; ++j) {
+      const PointEvaluation& e = stage(j);
+      if (e.has_sparse_F_y) {
+        jacobian->AddSparseBlock(row, col0, e.F_y_sparse, -h * coefficients(i, j));
+      } else {
+        jacobian->AddBlock(row, col0, e.F_y, -h * coefficients(i, j));
+      }
+    }
+    const PointEvaluation& e = stage(i);
+    if (ng_ > 0) jacobian->AddBlock(row + ny_, col0, e.G_y);
+    if (np_ > 0) {
+      const Matrix rows = da.segment(i * np_, np_).asDiagonal() * e.A_y +
+                          db.segment(i * np_, np_).asDiagonal() * e.B_y;
+      jacobian->AddBlock(pair_row0 + i * np_, col0, rows);
+    }
+  }
+}
+
+void CollocationStages::ParameterJacobian(double h, const ConstVectorRef& da,
+                                          const ConstVectorRef& db, Matrix* d_u,
+                                          Matrix* d_p) const {
+  const int nu = static_cast<int>(stage(0).F_u.cols());
+  const int np = static_cast<int>(stage(0).F_p.cols());
+  d_u->setZero(equation_rows() + pair_rows(), nu);
+  d_p->setZero(equation_rows() + pair_rows(), np);
+  for (int i = 0; i < s_; ++i) {
+    const int row = i * (ny_ + ng_);
+    for (int j = 0; j < s_; ++j) {
+      d_u->middleRows(row, ny_) -= h * tableau_.a(i, j) * stage(j).F_u;
+      d_p->middleRows(row, ny_) -= h * tableau_.a(i, j) * stage(j).F_p;
+    }
+    const PointEvaluation& e = stage(i);
+    d_u->middleRows(row + ny_, ng_) = e.G_u;
+    d_p->middleRows(row + ny_, ng_) = e.G_p;
+    const auto wa = da.segment(i * np_, np_).asDiagonal();
+    const auto wb = db.segment(i * np_, np_).asDiagonal();
+    d_u->middleRows(equation_rows() + i * np_, np_) = wa * e.A_u + wb * e.B_u;
+    d_p->middleRows(equation_rows() + i * np_, np_) = wa * e.A_p + wb * e.B_p;
+  }
+}
+
 Vector CollocationStages::EndState(const ConstVectorRef& y0, const ConstVectorRef& w) const {
   return y0 + w.segment(state_offset(s_ - 1), ny_);
 }
@@ -94,19 +141,29 @@ Vector CollocationStages::InitialGuess(const ConstVectorRef& y0, double h, const
   Vector w = Vector::Zero(unknowns());
   if (previous != nullptr && previous_h > 0.0) {
     // Collocation polynomial of the previous step: u(theta) = y_prev + sum_j w_j(theta) Z_j.
-    Matrix z_old(ny_, s_);
-    for (int j = 0; j < s_; ++j) z_old.col(j) = previous->segment(state_offset(j), ny_);
-    bool extrapolate = true;
-    for (int i = 0; i < s_; ++i) extrapolate &= 1.0 + tableau_.c[i] * h / previous_h <= 4.0;
-    for (int i = 0; i < s_ && extrapolate; ++i) {
-      const double theta = 1.0 + tableau_.c[i] * h / previous_h;
-      w.segment(state_offset(i), ny_) =
-          z_old * tableau_.InterpolationWeights(theta) - z_old.col(s_ - 1);
+    // The weights depend on h / previous_h only; they are cached (constant steps).
+    const double ratio = h / previous_h;
+    if (ratio != cached_ratio_) {
+      cached_ratio_ = ratio;
+      extrapolation_.resize(s_, s_);
+      for (int i = 0; i < s_; ++i) {
+        const double theta = 1.0 + tableau_.c[i] * ratio;
+        extrapolation_.col(i) = tableau_.InterpolationWeights(theta);
+        extrapolation_.col(i)[s_ - 1] -= 1.0;  // minus Z_s: increments from the new start
+      }
+    }
+    if (1.0 + ratio <= 4.0) {  // no extrapolation far beyond the previous step
+      for (int i = 0; i < s_; ++i) {
+        auto zi = w.segment(state_offset(i), ny_);
+        for (int j = 0; j < s_; ++j) {
+          zi += extrapolation_(j, i) * previous->segment(state_offset(j), ny_);
+        }
+      }
     }
   }
   for (int i = 0; i < s_; ++i) {
-    const Vector y = y0 + w.segment(state_offset(i), ny_);
-    w.segment(algebraic_offset(i), nz_) = system_->InitialAlgebraicGuess(y, &z_previous);
+    guess_y_ = y0 + w.segment(state_offset(i), ny_);
+    w.segment(algebraic_offset(i), nz_) = system_->InitialAlgebraicGuess(guess_y_, &z_previous);
   }
   return w;
 }

@@ -51,6 +51,14 @@ class CollocationStages {
                    int pair_row0, int col0, SystemMatrix* jacobian) const;
   // d(equation rows)/dh = [-sum_j a_ij F_j; 0] (pair rows do not depend on h).
   Vector ResidualDerivativeH() const;
+  // Adds the derivative of all rows with respect to the start state y0 (n_y columns at
+  // col0): collocation -h sum_j a_ij F_y(Y_j), algebraic G_y(Y_i), pairs da A_y + db B_y.
+  void AddStartJacobian(double h, const ConstVectorRef& da, const ConstVectorRef& db, int row0,
+                        int pair_row0, int col0, SystemMatrix* jacobian) const;
+  // Derivative of all rows (equation rows, then pair rows weighted by da, db) with respect to
+  // the inputs u and parameters p, from an evaluation with Derivatives::kAll.
+  void ParameterJacobian(double h, const ConstVectorRef& da, const ConstVectorRef& db, Matrix* d_u,
+                         Matrix* d_p) const;
 
   // State at the end of the step, y0 + Z_s.
   Vector EndState(const ConstVectorRef& y0, const ConstVectorRef& w) const;
@@ -72,6 +80,10 @@ class CollocationStages {
   int s_, ny_, nz_, ng_, np_;
   std::vector<PointEvaluation> stages_;
   Vector point_y_, point_z_;
+  // Extrapolation weights for the last step-length ratio (column i: stage i of the new step).
+  mutable double cached_ratio_ = -1.0;
+  mutable Matrix extrapolation_;
+  mutable Vector guess_y_;
 };
 
 }  // namespace moreau::internal

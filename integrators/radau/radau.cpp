@@ -5,6 +5,7 @@
 #include <cmath>
 #include <sstream>
 
+#include "../common/smooth_collocation.hpp"
 #include "moreau/core/error.hpp"
 #include "moreau/integrators/radau_tableau.hpp"
 #include "moreau/model/lowered_system.hpp"
@@ -68,8 +69,7 @@ std::string RadauStats::Summary() const {
 
 namespace {
 
-// Why a stage solve failed.
-enum class SolveOutcome { kConverged, kNotConverged, kSingular, kNonFinite };
+using SolveOutcome = internal::SmoothCollocationSolver::Outcome;
 
 class RadauRun {
  public:
@@ -79,13 +79,9 @@ class RadauRun {
         system_(scene),
         tableau_(RadauIIA(options.stages)),
         n_(system_.num_states()),
-        s_(options.stages) {
-    const double nonzeros = s_ * static_cast<double>(s_) * system_.EstimatedNonzerosFy() + s_ * n_;
-    solver_ = MakeLinearSolver(options.linear_solver, s_ * n_, nonzeros);
+        s_(options.stages),
+        stage_solver_(&system_, options.stages, options.linear_solver) {
     filter_solver_ = MakeLinearSolver(options.linear_solver, n_, system_.EstimatedNonzerosFy());
-    stage_f_.resize(n_, s_);
-    stage_jacobians_.resize(static_cast<std::size_t>(s_));
-    stage_sparse_.resize(static_cast<std::size_t>(s_));
   }
 
   RadauResult Run() {
@@ -115,7 +111,10 @@ class RadauRun {
       result.trajectory.Append(result.final_time, result.final_state, Vector(), last_step_);
     }
     stats_.num_factorizations =
-        solver_->num_factorizations() + filter_solver_->num_factorizations();
+        stage_solver_.num_factorizations() + filter_solver_->num_factorizations();
+    stats_.num_newton_iterations = stage_solver_.num_newton_iterations();
+    stats_.num_function_evaluations += stage_solver_.num_function_evaluations();
+    stats_.num_jacobian_evaluations += stage_solver_.num_function_evaluations();
     stats_.cpu_seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     result.stats = stats_;
@@ -259,78 +258,16 @@ class RadauRun {
     }
   }
 
-  // Full Newton on Z_i - h sum_j a_ij F(y0 + Z_j) = 0 (Radau IIA collocation).
+  // Full Newton on the collocation equations (shared kernel, see smooth_collocation.hpp).
   SolveOutcome SolveStages(double h, const Vector& y0, Matrix* z, int* iterations) {
-    double previous_increment = 0.0;
-    for (int k = 1; k <= options_.max_newton_iterations; ++k) {
-      *iterations = k;
-      ++stats_.num_newton_iterations;
-      for (int j = 0; j < s_; ++j) {
-        Evaluate(y0 + z->col(j), Derivatives::kStates);
-        if (!eval_.F.allFinite()) return SolveOutcome::kNonFinite;
-        stage_f_.col(j) = eval_.F;
-        sparse_jacobians_ = eval_.has_sparse_F_y;
-        if (sparse_jacobians_) {
-          stage_sparse_[static_cast<std::size_t>(j)] = eval_.F_y_sparse;
-        } else {
-          stage_jacobians_[static_cast<std::size_t>(j)] = eval_.F_y;
-        }
-      }
-      // Residual of the collocation equations, stacked stage by stage.
-      Vector rhs(s_ * n_);
-      const Matrix hf = h * stage_f_ * tableau_.a.transpose();  // column i: h sum_j a_ij F_j
-      for (int i = 0; i < s_; ++i) rhs.segment(i * n_, n_) = -(z->col(i) - hf.col(i));
-      // Newton matrix: delta_ij I - h a_ij F_y(Y_j).
-      matrix_.Reset(s_ * n_, solver_->wants_sparse());
-      for (int i = 0; i < s_; ++i) {
-        matrix_.AddDiagonal(i * n_, i * n_, n_, 1.0);
-        for (int j = 0; j < s_; ++j) {
-          const auto index = static_cast<std::size_t>(j);
-          if (sparse_jacobians_) {
-            matrix_.AddSparseBlock(i * n_, j * n_, stage_sparse_[index], -h * tableau_.a(i, j));
-          } else {
-            matrix_.AddBlock(i * n_, j * n_, stage_jacobians_[index], -h * tableau_.a(i, j));
-          }
-        }
-      }
-      matrix_.Finalize();
-      const FactorizationStatus status = solver_->Factorize(matrix_);
-      if (status == FactorizationStatus::kNonFinite) return SolveOutcome::kNonFinite;
-      if (status == FactorizationStatus::kSingular) return SolveOutcome::kSingular;
-      solver_->Solve(rhs);
-      if (!rhs.allFinite()) return SolveOutcome::kNonFinite;
-      double increment = 0.0;
-      for (int j = 0; j < s_; ++j) {
-        z->col(j) += rhs.segment(j * n_, n_);
-        increment = std::max(increment, ScaledIncrement(rhs.segment(j * n_, n_), y0));
-      }
-      if (increment <= NewtonTolerance()) return SolveOutcome::kConverged;
-      // Diverging (contraction rate >= 1 after the first correction) or stalled at round-off.
-      if (k >= 3 && increment >= previous_increment) {
-        return increment <= 1e3 * NewtonTolerance() ? SolveOutcome::kConverged
-                                                    : SolveOutcome::kNotConverged;
-      }
-      previous_increment = increment;
-    }
-    return SolveOutcome::kNotConverged;
-  }
-
-  double NewtonTolerance() const { return options_.adaptive ? 1e-2 : options_.newton_tolerance; }
-
-  // Fixed step: max_i |dz_i| / (1 + |y_i|). Adaptive: weighted RMS with atol + rtol |y|.
-  double ScaledIncrement(const Eigen::Ref<const Vector>& dz, const Vector& y0) const {
-    const int nx = system_.num_scene_states();
-    if (!options_.adaptive) {
-      double m = 0.0;
-      for (int i = 0; i < n_; ++i) m = std::max(m, std::fabs(dz[i]) / (1.0 + std::fabs(y0[i])));
-      return m;
-    }
-    double sum = 0.0;
-    for (int i = 0; i < nx; ++i) {
-      const double w = options_.absolute_tolerance + options_.relative_tolerance * std::fabs(y0[i]);
-      sum += (dz[i] / w) * (dz[i] / w);
-    }
-    return std::sqrt(sum / nx);
+    internal::SmoothCollocationSolver::Stopping stopping;
+    stopping.weighted_rms = options_.adaptive;
+    // Adaptive: a small fraction of the error tolerance; fixed step: newton_tolerance.
+    stopping.tolerance = options_.adaptive ? 1e-2 : options_.newton_tolerance;
+    stopping.relative_tolerance = options_.relative_tolerance;
+    stopping.absolute_tolerance = options_.absolute_tolerance;
+    stopping.max_iterations = options_.max_newton_iterations;
+    return stage_solver_.Solve(h, y0, stopping, z, iterations);
   }
 
   // Embedded estimate (see header), filtered by (I - h gamma0 J(y0))^{-1}.
@@ -427,15 +364,10 @@ class RadauRun {
   const RadauTableau& tableau_;
   int n_;
   int s_;
-  std::unique_ptr<LinearSolver> solver_;
+  internal::SmoothCollocationSolver stage_solver_;
   std::unique_ptr<LinearSolver> filter_solver_;
-  SystemMatrix matrix_;
   SystemMatrix filter_matrix_;
   PointEvaluation eval_;
-  Matrix stage_f_;
-  std::vector<Matrix> stage_jacobians_;
-  std::vector<SparseMatrix> stage_sparse_;
-  bool sparse_jacobians_ = false;
   Matrix previous_z_;
   double previous_h_ = 0.0;
   bool have_previous_ = false;

@@ -12,6 +12,7 @@ namespace moreau {
 SemismoothNewtonOptions TimeSteppingOptions::DefaultNewtonOptions() {
   SemismoothNewtonOptions newton;
   newton.tolerance = 1e-12;
+  newton.min_iterations = 1;
   newton.max_iterations = 50;
   return newton;
 }
@@ -102,6 +103,28 @@ void AddNewtonStats(const SemismoothNewtonResult& solved, TimeSteppingStats* sta
   stats->num_backtracks += solved.stats.backtracks;
 }
 
+// Continuation on the smoothed Fischer-Burmeister function: mu = 1e-1, 1e-2, ..., 1e-8, then
+// the exact problem (mu = 0) from the last iterate. Each stage warm-starts the next; a stage
+// that does not converge still passes its iterate on.
+SemismoothNewtonResult SolveBySmoothing(MixedComplementaritySystem* system, const Vector& guess,
+                                        const SemismoothNewtonOptions& base,
+                                        TimeSteppingStats* stats) {
+  Vector w = guess;
+  for (double mu : {1e-1, 1e-2, 1e-3, 1e-4, 1e-6, 1e-8}) {
+    SemismoothNewtonOptions options = base;
+    options.smoothing = mu;
+    options.tolerance = std::max(base.tolerance, 1e-3 * mu);
+    SemismoothNewton newton(options);
+    const SemismoothNewtonResult stage = newton.Solve(*system, w);
+    AddNewtonStats(stage, stats);
+    if (stage.solution.allFinite()) w = stage.solution;
+  }
+  SemismoothNewton newton(base);
+  SemismoothNewtonResult result = newton.Solve(*system, w);
+  AddNewtonStats(result, stats);
+  return result;
+}
+
 std::vector<bool> PairStatuses(const PointEvaluation& e) {
   std::vector<bool> status(static_cast<std::size_t>(e.A.size()));
   for (Eigen::Index k = 0; k < e.A.size(); ++k) {
@@ -171,6 +194,10 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
           solved = newton.Solve(step_system, retry);
           AddNewtonStats(solved, &stats);
         }
+      }
+      // Third attempt: smoothing continuation, a b = mu^2 with mu -> 0, warm-started.
+      if (!solved.converged() && system.num_pairs() > 0) {
+        solved = SolveBySmoothing(&step_system, guess, options.newton, &stats);
       }
       if (!solved.converged()) {
         std::ostringstream message;

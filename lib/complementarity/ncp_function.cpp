@@ -30,6 +30,15 @@ NcpValue FischerBurmeister(double a, double b) {
   return {value, 1.0 - a / r, 1.0 - b / r};
 }
 
+NcpValue SmoothedFischerBurmeister(double a, double b, double mu) {
+  if (mu == 0.0) return FischerBurmeister(a, b);
+  const double r = std::sqrt(a * a + b * b + 2.0 * mu * mu);
+  const double sum = a + b;
+  // (a + b)^2 - r^2 = 2 (ab - mu^2): stable form when a + b > 0.
+  const double value = sum > 0.0 ? 2.0 * (a * b - mu * mu) / (sum + r) : sum - r;
+  return {value, 1.0 - a / r, 1.0 - b / r};
+}
+
 NcpValue MinMap(double a, double b) {
   if (a <= b) return {a, 1.0, 0.0};
   return {b, 0.0, 1.0};

@@ -110,6 +110,14 @@ Vector SystemMatrix::MultiplyTransposed(const Vector& x) const {
   return sparse_ ? Vector(sparse_matrix_.transpose() * x) : Vector(dense_.transpose() * x);
 }
 
+void SystemMatrix::MultiplyTransposed(const Vector& x, Vector* y) const {
+  if (sparse_) {
+    *y = sparse_matrix_.transpose() * x;
+  } else {
+    y->noalias() = dense_.transpose() * x;
+  }
+}
+
 double SystemMatrix::InfinityNorm() const {
   if (!sparse_) return n_ == 0 ? 0.0 : dense_.cwiseAbs().rowwise().sum().maxCoeff();
   Vector row_sums = Vector::Zero(n_);
@@ -141,8 +149,17 @@ class DenseLuSolver final : public LinearSolver {
     ++num_factorizations_;
     if (!a.dense().allFinite()) return FactorizationStatus::kNonFinite;
     lu_.compute(a.dense());
-    rcond_ = a.size() == 0 ? 1.0 : lu_.rcond();
-    // PartialPivLU does not flag zero pivots; an exactly zero pivot gives rcond = 0 or NaN.
+    // Singularity from the pivots of U (O(n)): min |u_ii| / max |u_ii|. This is a lower bound
+    // on nothing in general, but with partial pivoting a tiny ratio is how rank deficiency shows,
+    // and it costs nothing next to the L1 condition estimator (which dominated the cost of the
+    // small factorizations of collocation steps).
+    if (a.size() == 0) {
+      rcond_ = 1.0;
+      return FactorizationStatus::kSuccess;
+    }
+    const auto pivots = lu_.matrixLU().diagonal().cwiseAbs();
+    const double largest = pivots.maxCoeff();
+    rcond_ = largest > 0.0 ? pivots.minCoeff() / largest : 0.0;
     if (!(rcond_ >= kSingularRcond)) return FactorizationStatus::kSingular;
     return FactorizationStatus::kSuccess;
   }

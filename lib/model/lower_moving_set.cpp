@@ -98,6 +98,54 @@ class MovingSetBlock final : public LoweredBlock {
     }
   }
 
+  // lambda is a jump variable (it jumps at contact); there are no equations.
+  std::vector<bool> ContinuousAlgebraic() const override {
+    return std::vector<bool>(static_cast<std::size_t>(num_constraints_), false);
+  }
+  std::vector<bool> DifferentiatedEquations() const override { return {}; }
+
+  // Continuous side c_k(x, clock): rows of d/d(y, u, p) [grad_y c_k . d] = Hess c_k d.
+  void AddCurvature(const BlockContext& context, const ConstVectorRef& y,
+                    const ConstVectorRef& direction, Derivatives derivatives,
+                    CurvatureTerms* out) override {
+    const int k0 = layout.pair_offset;
+    for (int k = 0; k < num_constraints_; ++k) {
+      AddHessianDirection(context, set_.constraints, k, y, direction, derivatives, 1.0,
+                          &out->pair_y, &out->pair_u, &out->pair_p, k0 + k);
+    }
+  }
+
+  // Active constraint (c = 0 kept): its multiplier lambda (velocity level); inactive: c.
+  void EventIndicators(const BlockContext& context, const ConstVectorRef& y,
+                       const ConstVectorRef& v, const std::vector<bool>& a_zero,
+                       Derivatives derivatives, IndicatorEvaluation* out) override {
+    const int nx = num_states_;
+    const int nu = static_cast<int>(context.inputs->size());
+    const int np = static_cast<int>(context.parameters->size());
+    const int k0 = layout.pair_offset;
+    const int z0 = layout.z_offset;
+    const bool all = derivatives == Derivatives::kAll;
+    x_ = y.head(nx);
+    set_.constraints.Jacobian(x_, *context.inputs, y[context.clock_index], *context.parameters,
+                              all ? Wrt::All() : Wrt::XT(), &c_, &jacobian_);
+    const int t_col = all ? nx + nu : nx;
+    for (int k = 0; k < num_constraints_; ++k) {
+      if (a_zero[static_cast<std::size_t>(k0 + k)]) {
+        out->values[k0 + k] = v[z0 + k];
+        if (derivatives != Derivatives::kNone) out->d_v(k0 + k, z0 + k) = 1.0;
+        continue;
+      }
+      out->values[k0 + k] = c_[k];
+      if (derivatives == Derivatives::kNone) continue;
+      out->d_y.block(k0 + k, 0, 1, nx) = jacobian_.block(k, 0, 1, nx);
+      out->d_y(k0 + k, context.clock_index) = jacobian_(k, t_col);
+      if (all) {
+        out->d_u.row(k0 + k) = jacobian_.block(k, nx, 1, nu);
+        out->d_p.row(k0 + k) = jacobian_.block(k, t_col + 1, 1, np);
+      }
+    }
+  }
+
   std::vector<Event> StatusEvents(double t, const std::vector<bool>& before,
                                   const std::vector<bool>& after) const override {
     std::vector<Event> events;

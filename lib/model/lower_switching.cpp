@@ -167,6 +167,62 @@ class StewartBlock final : public SwitchingBlockBase {
     }
   }
 
+  // theta is a jump variable; lambda and mu are continuous (lambda = g - min g).
+  std::vector<bool> ContinuousAlgebraic() const override {
+    std::vector<bool> continuous(static_cast<std::size_t>(2 * num_modes_ + 1), true);
+    for (int k = 0; k < num_modes_; ++k) continuous[static_cast<std::size_t>(k)] = false;
+    return continuous;
+  }
+  // g - lambda - mu e = 0 is differentiated; e^T theta = 1 holds on values.
+  std::vector<bool> DifferentiatedEquations() const override {
+    std::vector<bool> rows(static_cast<std::size_t>(num_modes_ + 1), true);
+    rows.back() = false;
+    return rows;
+  }
+
+  // Row k: d/d(y, u, p) [grad_y g_k . d] = -sum_j S_kj Hess c_j d.
+  void AddCurvature(const BlockContext& context, const ConstVectorRef& y,
+                    const ConstVectorRef& direction, Derivatives derivatives,
+                    CurvatureTerms* out) override {
+    for (int j = 0; j < num_surfaces_; ++j) {
+      for (int k = 0; k < num_modes_; ++k) {
+        AddHessianDirection(context, effect_.surfaces, j, y, direction, derivatives, -Sign(k, j),
+                            &out->equation_y, &out->equation_u, &out->equation_p,
+                            layout.g_offset + k);
+      }
+    }
+  }
+
+  // Active mode (lambda = 0 kept): theta (velocity level); inactive mode j:
+  // lambda_j = g_j - g_i, i the first active mode.
+  void EventIndicators(const BlockContext& context, const ConstVectorRef& y,
+                       const ConstVectorRef& v, const std::vector<bool>& a_zero,
+                       Derivatives derivatives, IndicatorEvaluation* out) override {
+    const int k0 = layout.pair_offset;
+    const int z0 = layout.z_offset;
+    int active = -1;
+    for (int k = 0; k < num_modes_ && active < 0; ++k) {
+      if (!a_zero[static_cast<std::size_t>(k0 + k)]) active = k;
+    }
+    MOREAU_ASSERT(active >= 0, "Stewart statuses without an active mode");
+    EvaluateSurfaces(context, y, derivatives);
+    for (int k = 0; k < num_modes_; ++k) {
+      if (!a_zero[static_cast<std::size_t>(k0 + k)]) {
+        out->values[k0 + k] = v[z0 + k];
+        if (derivatives != Derivatives::kNone) out->d_v(k0 + k, z0 + k) = 1.0;
+        continue;
+      }
+      double value = 0.0;
+      for (int j = 0; j < num_surfaces_; ++j) value -= (Sign(k, j) - Sign(active, j)) * c_[j];
+      out->values[k0 + k] = value;
+      if (derivatives == Derivatives::kNone) continue;
+      for (int j = 0; j < num_surfaces_; ++j) {
+        AddJacobian(context, c_jacobian_.middleRows(j, 1), -(Sign(k, j) - Sign(active, j)), k0 + k,
+                    derivatives, &out->d_y, &out->d_u, &out->d_p);
+      }
+    }
+  }
+
   // theta = e_k for the region containing y, lambda = g - min g, mu = min g. If y lies on
   // a switching surface (|c_j| at round-off level) the region does not decide: keep
   // `previous` (e.g. a sliding mode's theta) when given.
@@ -286,6 +342,53 @@ class HeavisideBlock final : public SwitchingBlockBase {
       out->B_z(k0 + 2 * j, z0 + nc + j) = 1.0;
       out->A_z(k0 + 2 * j + 1, z0 + j) = -1.0;
       out->B_z(k0 + 2 * j + 1, z0 + 2 * nc + j) = 1.0;
+    }
+  }
+
+  // alpha is a jump variable; lambda_n and lambda_p are continuous.
+  std::vector<bool> ContinuousAlgebraic() const override {
+    std::vector<bool> continuous(static_cast<std::size_t>(3 * num_surfaces_), true);
+    for (int j = 0; j < num_surfaces_; ++j) continuous[static_cast<std::size_t>(j)] = false;
+    return continuous;
+  }
+  std::vector<bool> DifferentiatedEquations() const override {
+    return std::vector<bool>(static_cast<std::size_t>(num_surfaces_), true);
+  }
+
+  // Row j: d/d(y, u, p) [grad_y c_j . d] = Hess c_j d.
+  void AddCurvature(const BlockContext& context, const ConstVectorRef& y,
+                    const ConstVectorRef& direction, Derivatives derivatives,
+                    CurvatureTerms* out) override {
+    for (int j = 0; j < num_surfaces_; ++j) {
+      AddHessianDirection(context, effect_.surfaces, j, y, direction, derivatives, 1.0,
+                          &out->equation_y, &out->equation_u, &out->equation_p,
+                          layout.g_offset + j);
+    }
+  }
+
+  // Pair 2j (alpha ⟂ lambda_n): alpha = 0 kept -> lambda_n = -c_j; else alpha. Pair 2j+1
+  // (1 - alpha ⟂ lambda_p): 1 - alpha = 0 kept -> lambda_p = c_j; else 1 - alpha.
+  void EventIndicators(const BlockContext& context, const ConstVectorRef& y,
+                       const ConstVectorRef& v, const std::vector<bool>& a_zero,
+                       Derivatives derivatives, IndicatorEvaluation* out) override {
+    const int k0 = layout.pair_offset;
+    const int z0 = layout.z_offset;
+    EvaluateSurfaces(context, y, derivatives);
+    for (int j = 0; j < num_surfaces_; ++j) {
+      for (int side = 0; side < 2; ++side) {
+        const int pair = k0 + 2 * j + side;
+        const double sign = side == 0 ? -1.0 : 1.0;  // lambda_n = -c, lambda_p = c
+        if (a_zero[static_cast<std::size_t>(pair)]) {
+          out->values[pair] = sign * c_[j];
+          if (derivatives != Derivatives::kNone) {
+            AddJacobian(context, c_jacobian_.middleRows(j, 1), sign, pair, derivatives, &out->d_y,
+                        &out->d_u, &out->d_p);
+          }
+        } else {
+          out->values[pair] = side == 0 ? v[z0 + j] : 1.0 - v[z0 + j];
+          if (derivatives != Derivatives::kNone) out->d_v(pair, z0 + j) = side == 0 ? 1.0 : -1.0;
+        }
+      }
     }
   }
 

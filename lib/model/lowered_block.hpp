@@ -53,6 +53,28 @@ class LoweredBlock {
   virtual void InitialGuess(const BlockContext& context, const ConstVectorRef& y,
                             const Vector* previous, VectorRef z) = 0;
 
+  // --- velocity level (docs/fesd-formulation.md, "Velocity-level problem") ---------------
+  // Per algebraic unknown of the block: true if it is continuous in time along solutions
+  // (its velocity-level slot holds its rate), false for jump variables (slot holds a value).
+  virtual std::vector<bool> ContinuousAlgebraic() const = 0;
+  // Per equation row of the block: true if the row is differentiated along the flow at
+  // velocity level (it involves the state and continuous unknowns only), false if it is
+  // imposed on values (it involves jump variables only).
+  virtual std::vector<bool> DifferentiatedEquations() const = 0;
+  // Second-derivative terms of the velocity-level rows along `direction` (a vector in
+  // y-space, in practice F): for every pair whose continuous side depends on y, and every
+  // differentiated equation row r, adds d/d(y, u, p) of [grad_y X(y) . direction] with the
+  // direction held fixed (rows at the block's pair and equation offsets of `out`).
+  virtual void AddCurvature(const BlockContext& context, const ConstVectorRef& y,
+                            const ConstVectorRef& direction, Derivatives derivatives,
+                            CurvatureTerms* out) = 0;
+  // Event indicators: the free side of every pair of the block (the side not enforced to
+  // zero by its status a_zero) at state y, with jump variables taken from the velocity-level
+  // values v; derivatives with respect to y and v (and u, p) when requested.
+  virtual void EventIndicators(const BlockContext& context, const ConstVectorRef& y,
+                               const ConstVectorRef& v, const std::vector<bool>& a_zero,
+                               Derivatives derivatives, IndicatorEvaluation* out) = 0;
+
   // Events implied by a change of the block's pair statuses between two times:
   // a_zero[k] is true when pair k has a_k = 0 (its first side vanishes), false when b_k = 0.
   virtual std::vector<Event> StatusEvents(double t, const std::vector<bool>& before,
@@ -60,6 +82,14 @@ class LoweredBlock {
 
   BlockLayout layout;
 };
+
+// Adds weight * d/d(y, u, p) [grad_y g_k(y) . direction] for output k of `function`
+// (evaluated at x = y[0..n_x), t = y[clock]) into row `row` of dy (and du, dp with kAll):
+// the second derivative of g_k contracted with the direction (x and clock components).
+void AddHessianDirection(const BlockContext& context, const SmoothFunction& function, int k,
+                         const ConstVectorRef& y, const ConstVectorRef& direction,
+                         Derivatives derivatives, double weight, Matrix* dy, Matrix* du, Matrix* dp,
+                         int row);
 
 // Factories, one per lowering (lower_*.cpp).
 std::unique_ptr<LoweredBlock> LowerMovingSet(const Scene& scene, const MovingSet& set);

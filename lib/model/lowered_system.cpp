@@ -56,6 +56,8 @@ void LoweredSystem::Build() {
   num_algebraic_ = num_equations_ = num_pairs_ = 0;
   algebraic_names_.clear();
   pairs_.clear();
+  continuous_algebraic_.clear();
+  differentiated_.clear();
   for (const Effect& effect : scene_.effects) {
     std::unique_ptr<internal::LoweredBlock> block = internal::LowerEffect(scene_, effect, options_);
     if (!block) continue;
@@ -64,6 +66,8 @@ void LoweredSystem::Build() {
     num_equations_ += block->num_equations();
     num_pairs_ += block->num_pairs();
     for (const std::string& name : block->AlgebraicNames()) algebraic_names_.push_back(name);
+    for (bool c : block->ContinuousAlgebraic()) continuous_algebraic_.push_back(c);
+    for (bool d : block->DifferentiatedEquations()) differentiated_.push_back(d);
     for (PairInfo info : block->Pairs()) {
       info.block = static_cast<int>(blocks_.size());
       pairs_.push_back(info);

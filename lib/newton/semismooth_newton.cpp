@@ -22,6 +22,8 @@ double MixedComplementaritySystem::EstimatedJacobianNonzeros() const {
 void SemismoothNewtonOptions::Validate() const {
   RequireArgument(std::isfinite(tolerance) && tolerance > 0.0,
                   "Newton tolerance must be positive, got ", tolerance);
+  RequireArgument(std::isfinite(smoothing) && smoothing >= 0.0,
+                  "smoothing must be non-negative, got ", smoothing);
   RequireArgument(max_iterations >= 1, "max Newton iterations must be >= 1, got ", max_iterations);
   RequireArgument(armijo > 0.0 && armijo < 0.5, "Armijo constant must be in (0, 0.5), got ",
                   armijo);
@@ -93,7 +95,14 @@ struct Point {
 
 }  // namespace
 
-SemismoothNewton::SemismoothNewton(const SemismoothNewtonOptions& options) : options_(options) {
+struct SemismoothNewton::Workspace {
+  Point current, trial;
+  Vector scaled_phi, gradient, direction, trial_w;
+  std::vector<double> history, merits;
+};
+
+SemismoothNewton::SemismoothNewton(const SemismoothNewtonOptions& options)
+    : options_(options), workspace_(std::make_unique<Workspace>()) {
   options_.Validate();
 }
 
@@ -129,18 +138,29 @@ SemismoothNewtonResult SemismoothNewton::Solve(MixedComplementaritySystem& syste
     p->db.resize(n_pairs);
     p->phi.head(n_eq) = p->r;
     for (int k = 0; k < n_pairs; ++k) {
-      const NcpValue v = EvaluateNcp(kind, p->a[k], p->b[k]);
+      const NcpValue v = kind == NcpFunctionKind::kFischerBurmeister && options_.smoothing > 0.0
+                             ? SmoothedFischerBurmeister(p->a[k], p->b[k], options_.smoothing)
+                             : EvaluateNcp(kind, p->a[k], p->b[k]);
       p->phi[n_eq + k] = v.value;
       p->da[k] = v.da;
       p->db[k] = v.db;
     }
     system.ResidualScale(w, &p->scale);
-    const Vector scaled = p->scale.cwiseProduct(p->phi);
-    p->valid = scaled.allFinite();
-    p->merit = p->valid ? 0.5 * scaled.squaredNorm() : std::numeric_limits<double>::infinity();
-    p->norm = p->valid ? scaled.lpNorm<Eigen::Infinity>() : std::numeric_limits<double>::infinity();
+    double merit = 0.0, norm = 0.0;
+    for (int i = 0; i < n; ++i) {
+      const double scaled = p->scale[i] * p->phi[i];
+      merit += scaled * scaled;
+      norm = std::max(norm, std::fabs(scaled));
+    }
+    p->valid = std::isfinite(merit);
+    p->merit = p->valid ? 0.5 * merit : std::numeric_limits<double>::infinity();
+    p->norm = p->valid ? norm : std::numeric_limits<double>::infinity();
   };
-  std::vector<double> history;
+  Workspace& ws = *workspace_;
+  std::vector<double>& history = ws.history;
+  std::vector<double>& merits = ws.merits;
+  history.clear();
+  merits.clear();
   auto finish = [&](NewtonStatus status, const Point& p, const std::string& reason) {
     result.status = status;
     result.solution = p.w;
@@ -173,22 +193,30 @@ SemismoothNewtonResult SemismoothNewton::Solve(MixedComplementaritySystem& syste
     return status == FactorizationStatus::kSuccess;
   };
 
-  Point current;
+  Point& current = ws.current;
   evaluate(initial_guess, true, options_.ncp_function, &current);
   if (!current.valid) {
     return finish(NewtonStatus::kNonFinite, current,
                   "the residual at the initial point is not finite or not defined");
   }
   history.push_back(current.norm);
-  std::vector<double> merits{current.merit};
+  merits.push_back(current.merit);
   double previous_norm = std::numeric_limits<double>::infinity();
   bool last_step_full = false;  // the previous Newton step was taken with length 1
-  Point trial;
+  Point& trial = ws.trial;
+  Vector& scaled_phi = ws.scaled_phi;
+  Vector& gradient = ws.gradient;
+  Vector& direction = ws.direction;
+  Vector& trial_w = ws.trial_w;
+  scaled_phi.resize(n);
+  gradient.resize(n);
+  direction.resize(n);
+  trial_w.resize(n);
 
   for (int k = 0;; ++k) {
-    if (current.norm <= options_.tolerance) {
+    if (current.norm <= options_.tolerance && k >= options_.min_iterations) {
       // Leave the Jacobian at the solution factorized for sensitivity computations.
-      factorize(current.da, current.db);
+      if (options_.factorize_at_solution) factorize(current.da, current.db);
       return finish(NewtonStatus::kConverged, current, "");
     }
     if (k >= options_.max_iterations) {
@@ -238,9 +266,9 @@ SemismoothNewtonResult SemismoothNewton::Solve(MixedComplementaritySystem& syste
 
     // Newton direction on the FB (or min) reformulation.
     const bool nonsingular = factorize(current.da, current.db);
-    const Vector scaled_phi = current.scale.cwiseProduct(current.scale).cwiseProduct(current.phi);
-    const Vector gradient = jacobian_.MultiplyTransposed(scaled_phi);  // grad theta = J^T S^2 Phi
-    Vector direction = -current.phi;
+    scaled_phi.noalias() = current.scale.cwiseProduct(current.scale).cwiseProduct(current.phi);
+    jacobian_.MultiplyTransposed(scaled_phi, &gradient);  // grad theta = J^T S^2 Phi
+    direction.noalias() = -current.phi;
     bool use_gradient = !nonsingular;
     if (nonsingular) {
       solver_->Solve(direction);
@@ -263,8 +291,12 @@ SemismoothNewtonResult SemismoothNewton::Solve(MixedComplementaritySystem& syste
     double t = 1.0;
     bool accepted = false;
     while (t >= options_.min_step) {
-      evaluate(current.w + t * direction, true, options_.ncp_function, &trial);
-      if (trial.valid && trial.merit <= current.merit + options_.armijo * t * slope) {
+      trial_w.noalias() = current.w + t * direction;
+      evaluate(trial_w, true, options_.ncp_function, &trial);
+      // A trial point that meets the tolerance is taken even without sufficient decrease:
+      // below the tolerance the merit is round-off (a correction forced by min_iterations).
+      if (trial.valid && (trial.merit <= current.merit + options_.armijo * t * slope ||
+                          trial.norm <= options_.tolerance)) {
         accepted = true;
         break;
       }

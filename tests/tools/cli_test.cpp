@@ -102,6 +102,33 @@ TEST(CliTest, NonsmoothScenesRunWithTimeStepping) {
   }
 }
 
+// Acceptance (issue 4): S1 to S4 and F1 to F4 run with FESD from the command line, writing the
+// element table (lengths and certificates) and the stage trajectory.
+TEST(CliTest, ReferenceScenesRunWithFesd) {
+  const std::filesystem::path directory =
+      std::filesystem::temp_directory_path() / "moreau_cli_test_fesd";
+  for (const char* scene : {"S1", "S2", "S3", "S4", "F1", "F2a", "F2b", "F2c", "F2d", "F3", "F4"}) {
+    std::filesystem::remove_all(directory);
+    const Outcome outcome = RunCli(std::string("run ") + scene +
+                                   " --integrator fesd --stages 3 --h 0.1 --fe 2 --quiet "
+                                   "--no-plot --out " +
+                                   directory.string());
+    EXPECT_EQ(outcome.exit_code, 0) << scene << "\n" << outcome.output;
+    std::ifstream json_file(directory / "summary.json");
+    const nlohmann::json summary = nlohmann::json::parse(json_file);
+    EXPECT_EQ(summary["status"], "success") << scene;
+    EXPECT_FALSE(summary["events"].empty()) << scene;  // F2d: the ambiguous start
+    EXPECT_LE(summary["stats"]["max_cross_complementarity"].get<double>(), 1e-10) << scene;
+    std::ifstream elements(directory / "elements.csv");
+    std::string header;
+    std::getline(elements, header);
+    EXPECT_EQ(header,
+              "t_start,length,ends_at_switch,newton_iterations,newton_residual,complementarity,"
+              "cross_complementarity");
+    EXPECT_TRUE(std::filesystem::exists(directory / "stages.csv")) << scene;
+  }
+}
+
 TEST(CliTest, ListAndShowDescribeScenes) {
   const Outcome list = RunCli("list");
   EXPECT_EQ(list.exit_code, 0);

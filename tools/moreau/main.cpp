@@ -161,7 +161,16 @@ int Run(Scene scene, const tool::RunSettings& settings, const std::string& out_d
   progress.Finish();
 
   std::filesystem::create_directories(out_directory);
-  tool::WriteTrajectoryCsv(report, out_directory + "/trajectory.csv");
+  tool::WriteTrajectoryCsv(report.trajectory, out_directory + "/trajectory.csv");
+  std::string extra_files;
+  if (report.stage_trajectory.size() > 0) {
+    tool::WriteTrajectoryCsv(report.stage_trajectory, out_directory + "/stages.csv");
+    extra_files += ", " + out_directory + "/stages.csv";
+  }
+  if (!report.element_columns.empty()) {
+    tool::WriteElementsCsv(report, out_directory + "/elements.csv");
+    extra_files += ", " + out_directory + "/elements.csv";
+  }
   tool::WriteSummaryJson(report, out_directory + "/summary.json");
   const std::string image = plot ? tool::WritePlot(report, out_directory) : "";
 
@@ -193,8 +202,8 @@ int Run(Scene scene, const tool::RunSettings& settings, const std::string& out_d
   std::printf("newton      %ld iterations\n", report.num_newton_iterations);
   std::printf("cpu time    %.3g s\n", report.cpu_seconds);
   std::printf("stats       %s\n", report.stats_summary.c_str());
-  std::printf("output      %s/trajectory.csv, %s/summary.json%s%s\n", out_directory.c_str(),
-              out_directory.c_str(), image.empty() ? "" : ", ", image.c_str());
+  std::printf("output      %s/trajectory.csv, %s/summary.json%s%s%s\n", out_directory.c_str(),
+              out_directory.c_str(), extra_files.c_str(), image.empty() ? "" : ", ", image.c_str());
   if (plot && image.empty()) {
     std::fprintf(stderr, "moreau: warning: no plot written (is gnuplot installed?)\n");
   }
@@ -236,6 +245,8 @@ int main(int argc, char** argv) {
       run->add_option("--linear-solver", settings.linear_solver, "auto, dense or sparse");
   auto* switching = run->add_option("--switching", settings.switching_form,
                                     "lowering of switching surfaces: stewart or heaviside");
+  auto* fe = run->add_option("--fe", settings.finite_elements,
+                             "finite elements per integration step (fesd)");
   run->add_flag("--no-plot", no_plot, "do not write trajectory.png");
   run->add_flag("--quiet", quiet, "no progress output");
 
@@ -255,9 +266,9 @@ int main(int argc, char** argv) {
       return 0;
     }
     const std::vector<std::pair<CLI::Option*, std::string>> tracked = {
-        {stages, "stages"},      {h, "h"},       {adaptive, "adaptive"},
-        {rtol, "rtol"},          {atol, "atol"}, {linear, "linear-solver"},
-        {switching, "switching"}};
+        {stages, "stages"},       {h, "h"},       {adaptive, "adaptive"},
+        {rtol, "rtol"},           {atol, "atol"}, {linear, "linear-solver"},
+        {switching, "switching"}, {fe, "fe"}};
     for (const auto& [option, name] : tracked) {
       if (option->count() > 0) settings.given.insert(name);
     }

@@ -13,10 +13,9 @@ namespace moreau::tool {
 
 namespace fs = std::filesystem;
 
-void WriteTrajectoryCsv(const RunReport& report, const std::string& path) {
+void WriteTrajectoryCsv(const Trajectory& trajectory, const std::string& path) {
   std::ofstream out(path);
   RequireArgument(out.good(), "cannot write '", path, "'");
-  const Trajectory& trajectory = report.trajectory;
   out << "t";
   for (const std::string& name : trajectory.state_names) out << "," << name;
   for (const std::string& name : trajectory.algebraic_names) out << "," << name;
@@ -34,6 +33,19 @@ void WriteTrajectoryCsv(const RunReport& report, const std::string& path) {
         out << algebraic[static_cast<Eigen::Index>(i)];
     }
     if (with_steps) out << "," << trajectory.step[k];
+    out << "\n";
+  }
+}
+
+void WriteElementsCsv(const RunReport& report, const std::string& path) {
+  std::ofstream out(path);
+  RequireArgument(out.good(), "cannot write '", path, "'");
+  for (std::size_t i = 0; i < report.element_columns.size(); ++i) {
+    out << (i ? "," : "") << report.element_columns[i];
+  }
+  out << "\n" << std::setprecision(17);
+  for (const std::vector<double>& row : report.element_rows) {
+    for (std::size_t i = 0; i < row.size(); ++i) out << (i ? "," : "") << row[i];
     out << "\n";
   }
 }

@@ -13,7 +13,9 @@ inline constexpr std::size_t kMaxPlottedStates = 8;
 
 // Header "t," then the state names, then algebraic names (multipliers) and "h" (the length
 // of the step or element ending at t) where the integrator has them.
-void WriteTrajectoryCsv(const RunReport& report, const std::string& path);
+void WriteTrajectoryCsv(const Trajectory& trajectory, const std::string& path);
+// elements.csv: one row per finite element (integrators with elements only).
+void WriteElementsCsv(const RunReport& report, const std::string& path);
 // The summary object: scene, integrator, options, status, message, t_final, x_final
 // (state name -> value), events (t, kind, what, detail) and stats.
 nlohmann::json SummaryJson(const RunReport& report);

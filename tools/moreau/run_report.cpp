@@ -1,6 +1,7 @@
 #include "run_report.hpp"
 
 #include "moreau/core/error.hpp"
+#include "moreau/integrators/fesd.hpp"
 #include "moreau/integrators/radau.hpp"
 #include "moreau/integrators/timestepping.hpp"
 #include "moreau/linalg/linear_solver.hpp"
@@ -13,6 +14,9 @@ const std::vector<std::pair<std::string, std::string>>& IntegratorNames() {
       {"timestepping",
        "fixed-step Radau IIA with stage complementarity (first-order baseline, no switch "
        "detection); moving sets, switching surfaces"},
+      {"fesd",
+       "FESD Radau IIA: switches on element boundaries, order 2s-1 across switches; moving "
+       "sets, switching surfaces"},
   };
   return names;
 }
@@ -109,6 +113,60 @@ RunReport RunTimeStepping(const Scene& scene, const RunSettings& settings,
   return report;
 }
 
+RunReport RunFesd(const Scene& scene, const RunSettings& settings,
+                  const ProgressCallback& progress) {
+  RequireOnly(settings, {"stages", "h", "fe", "switching", "linear-solver"});
+  FesdOptions options;
+  options.stages = settings.stages_given ? settings.stages : 2;
+  options.step_size = settings.step_size_given ? settings.step_size : 0.1;
+  options.finite_elements = settings.finite_elements;
+  options.switching_form = ParseSwitchingForm(settings.switching_form);
+  options.newton.linear_solver = ParseLinearSolverKind(settings.linear_solver);
+  options.record_stages = true;
+  const FesdResult result = SimulateFesd(scene, options, progress);
+
+  RunReport report;
+  report.options = {{"stages", options.stages},
+                    {"order", 2 * options.stages - 1},
+                    {"step_size", options.step_size},
+                    {"finite_elements", options.finite_elements},
+                    {"switching_form", settings.switching_form},
+                    {"newton_tolerance", options.newton.tolerance}};
+  report.status = ToString(result.status);
+  report.success = result.status == FesdStatus::kSuccess;
+  report.message = result.message;
+  report.final_time = result.final_time;
+  report.final_state = result.final_state;
+  report.trajectory = result.trajectory;
+  report.events = result.events;
+  const FesdStats& s = result.stats;
+  report.stats = {{"num_steps", s.num_steps},
+                  {"num_elements", s.num_elements},
+                  {"num_switches", s.num_switches},
+                  {"num_groups", s.num_groups},
+                  {"num_event_retries", s.num_event_retries},
+                  {"num_newton_iterations", s.num_newton_iterations},
+                  {"num_factorizations", s.num_factorizations},
+                  {"max_cross_complementarity", s.max_cross_complementarity},
+                  {"max_complementarity", s.max_complementarity},
+                  {"min_element_length", s.min_element_length},
+                  {"cpu_seconds", s.cpu_seconds}};
+  report.stats_summary = s.Summary();
+  report.num_steps = s.num_steps;
+  report.num_newton_iterations = s.num_newton_iterations;
+  report.cpu_seconds = s.cpu_seconds;
+  report.stage_trajectory = result.stage_trajectory;
+  report.element_columns = {
+      "t_start",         "length",          "ends_at_switch",       "newton_iterations",
+      "newton_residual", "complementarity", "cross_complementarity"};
+  for (const FesdElement& e : result.elements) {
+    report.element_rows.push_back({e.t_start, e.length, e.ends_at_switch ? 1.0 : 0.0,
+                                   static_cast<double>(e.newton_iterations), e.newton_residual,
+                                   e.complementarity, e.cross_complementarity});
+  }
+  return report;
+}
+
 }  // namespace
 
 RunReport RunScene(const Scene& scene, const RunSettings& settings,
@@ -118,6 +176,8 @@ RunReport RunScene(const Scene& scene, const RunSettings& settings,
     report = RunRadau(scene, settings, progress);
   } else if (settings.integrator == "timestepping") {
     report = RunTimeStepping(scene, settings, progress);
+  } else if (settings.integrator == "fesd") {
+    report = RunFesd(scene, settings, progress);
   } else {
     std::string valid;
     for (const auto& [name, description] : IntegratorNames()) {

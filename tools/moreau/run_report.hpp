@@ -46,6 +46,10 @@ struct RunReport {
   long num_newton_iterations = 0;
   double cpu_seconds = 0.0;
   Trajectory trajectory;
+  Trajectory stage_trajectory;  // written to stages.csv when not empty
+  // Per-element table (element.csv): column names and rows, when the integrator has elements.
+  std::vector<std::string> element_columns;
+  std::vector<std::vector<double>> element_rows;
 };
 
 // Names of the integrators `moreau run --integrator` accepts, with one-line descriptions.

@@ -31,6 +31,10 @@ struct NcpValue {
 };
 
 NcpValue FischerBurmeister(double a, double b);
+/// Smoothed Fischer-Burmeister (Kanzow): phi_mu(a, b) = a + b - sqrt(a^2 + b^2 + 2 mu^2), whose
+/// zeros are a > 0, b > 0, a b = mu^2. Continuously differentiable for mu > 0; mu = 0 gives
+/// FischerBurmeister. Used for continuation (mu -> 0) when plain semismooth Newton fails.
+NcpValue SmoothedFischerBurmeister(double a, double b, double mu);
 NcpValue MinMap(double a, double b);
 inline NcpValue EvaluateNcp(NcpFunctionKind kind, double a, double b) {
   return kind == NcpFunctionKind::kFischerBurmeister ? FischerBurmeister(a, b) : MinMap(a, b);

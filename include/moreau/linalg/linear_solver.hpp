@@ -57,6 +57,8 @@ class SystemMatrix {
   Vector Multiply(const Vector& x) const;
   /// y = A^T x (after Finalize).
   Vector MultiplyTransposed(const Vector& x) const;
+  /// *y = A^T x without allocating (y sized by the caller or resized).
+  void MultiplyTransposed(const Vector& x, Vector* y) const;
   /// max_i sum_j |A_ij| (after Finalize).
   double InfinityNorm() const;
 
@@ -70,14 +72,14 @@ class SystemMatrix {
 
 /// Result of a factorization.
 enum class FactorizationStatus {
-  kSuccess,    ///< factors computed and reciprocal condition estimate >= kSingularRcond
-  kSingular,   ///< a zero pivot or reciprocal condition estimate < kSingularRcond
+  kSuccess,    ///< factors computed and reciprocal_condition() >= kSingularRcond
+  kSingular,   ///< a zero pivot or reciprocal_condition() < kSingularRcond
   kNonFinite,  ///< the matrix contains NaN or infinity
 };
 std::string ToString(FactorizationStatus status);
 
-/// Matrices with a reciprocal condition estimate below this value count as singular:
-/// a solve would lose all digits (1 / eps).
+/// Matrices whose conditioning indicator (reciprocal_condition) is below this value count as
+/// singular: a solve would lose all digits (1 / eps).
 inline constexpr double kSingularRcond = 1e-15;
 
 /// Factorizes a SystemMatrix and solves with it.
@@ -95,7 +97,8 @@ class LinearSolver {
   virtual void SolveMatrix(MatrixRef rhs) const;
   /// Overwrites rhs with A^{-T} rhs (after a successful Factorize).
   virtual void SolveTransposed(VectorRef rhs) const = 0;
-  /// Reciprocal condition number estimate of the last factorization (1-norm).
+  /// Conditioning indicator of the last factorization: dense LU, min |u_ii| / max |u_ii| of
+  /// its pivots; KLU, its 1-norm reciprocal condition estimate (klu_rcond).
   virtual double reciprocal_condition() const = 0;
   /// Number of factorizations so far.
   int num_factorizations() const { return num_factorizations_; }

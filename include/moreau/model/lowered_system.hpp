@@ -70,6 +70,47 @@ struct PairInfo {
   int block = 0;  ///< index of the lowered effect (see block_names())
 };
 
+/// Second-derivative terms of the velocity-level rows (see LoweredSystem::EvaluateVelocityLevel):
+/// rows of d/d(y, u, p) [grad_y X(y) . d] for the continuous sides of pairs and for the
+/// differentiated equation rows, for a fixed direction d.
+struct CurvatureTerms {
+  Matrix pair_y, pair_u, pair_p;              ///< n_pairs rows
+  Matrix equation_y, equation_u, equation_p;  ///< n_G rows
+};
+
+/// Event indicators (free side of every pair) and their derivatives.
+struct IndicatorEvaluation {
+  Vector values;              ///< n_pairs
+  Matrix d_y, d_v, d_u, d_p;  ///< n_pairs rows
+};
+
+/// Role of a pair in the velocity-level problem.
+enum class PairRole {
+  kAZero,          ///< a = 0 is kept (continuous a: a' = 0; jump a: a = 0)
+  kBZero,          ///< b = 0 is kept (continuous b: b' = 0; jump b: b = 0)
+  kComplementary,  ///< 0 <= jump side ⟂ rate of the continuous side >= 0
+};
+
+/// Rows of the velocity-level problem and their derivatives (see EvaluateVelocityLevel).
+struct VelocityLevelEvaluation {
+  Vector equations;  ///< n_G rows, then one row per pair with a decided role
+  Vector a, b;       ///< complementary pairs: (jump side value, continuous-side rate)
+  Matrix equations_v, a_v, b_v;
+  Matrix equations_y, a_y, b_y;  ///< with Derivatives::kStates or kAll
+  Matrix equations_u, a_u, b_u;  ///< with Derivatives::kAll
+  Matrix equations_p, a_p, b_p;
+};
+
+/// Outcome of LoweredSystem::DecideStatuses.
+struct StatusDecision {
+  bool solved = false;       ///< a consistent assignment was found
+  std::vector<bool> a_zero;  ///< per pair: true if a = 0 holds next, false if b = 0
+  Vector v;                  ///< velocity-level values for that assignment
+  bool ambiguous = false;    ///< several continuations with different velocities
+  int candidates = 0;        ///< pairs that were zero on both sides at y
+  std::string message;       ///< why not solved, or what was ambiguous
+};
+
 /// Which side of a pair is zero: a if a <= b (ties, both zero, count as a = 0).
 inline bool PairStatusIsAZero(double a, double b) { return a <= b; }
 
@@ -117,8 +158,50 @@ class LoweredSystem {
   void Evaluate(const ConstVectorRef& y, const ConstVectorRef& z, Derivatives derivatives,
                 PointEvaluation* out) const;
 
+  /// Velocity-level structure: continuous algebraic unknowns (rates at velocity level) and
+  /// differentiated equations (see EvaluateVelocityLevel).
+  const std::vector<bool>& continuous_algebraic() const { return continuous_algebraic_; }
+  const std::vector<bool>& differentiated_equations() const { return differentiated_; }
+
+  /// Candidate sets larger than this are resolved by one semismooth Newton solve of the
+  /// velocity-level complementarity problem instead of enumeration (no ambiguity check).
+  static constexpr int kMaxEnumeratedCandidates = 10;
+
   /// Number of structurally nonzero entries of F_y (for choosing dense or sparse LU).
   double EstimatedNonzerosFy() const;
+
+  // --- velocity level -------------------------------------------------------------------
+  /// The velocity-level problem at state y (docs/fesd-formulation.md): unknowns v in the
+  /// layout of z, jump variables (theta, alpha, moving-set lambda) as values and continuous
+  /// variables (Stewart's lambda and mu, Heaviside's lambda_n, lambda_p) as rates. Rows:
+  /// the equations G (differentiated along the flow, G_y F + G_z v_c, or on values), then for
+  /// each pair with a decided role one equation (the kept side's rate if it is continuous,
+  /// its value if it is a jump variable); pairs with kComplementary give (a, b) =
+  /// (jump side, rate of the continuous side). Derivatives with respect to v always; with
+  /// respect to y (and u, p) per `derivatives`, including the second-derivative terms.
+  void EvaluateVelocityLevel(const ConstVectorRef& y, const ConstVectorRef& v,
+                             const std::vector<PairRole>& roles, Derivatives derivatives,
+                             VelocityLevelEvaluation* out) const;
+  /// Event indicators at y: the free side of every pair for statuses a_zero (continuous
+  /// sides from y, jump sides from the velocity-level values v).
+  void EvaluateEventIndicators(const ConstVectorRef& y, const ConstVectorRef& v,
+                               const std::vector<bool>& a_zero, Derivatives derivatives,
+                               IndicatorEvaluation* out) const;
+  /// Roles for fixed statuses (every pair decided).
+  static std::vector<PairRole> RolesFor(const std::vector<bool>& a_zero);
+  /// Solves the velocity-level problem for fixed statuses (smooth, square) from v0. Returns
+  /// false if Newton does not converge.
+  bool SolveVelocityLevel(const Vector& y, const std::vector<bool>& a_zero, const Vector& v0,
+                          Vector* v) const;
+  /// Decides the statuses that continue from state y (the slow solution): pairs whose
+  /// continuous side is not zero keep their jump side at zero; candidate pairs (continuous
+  /// side within candidate_tolerance of zero) are resolved by the velocity-level
+  /// complementarity problem, all assignments of up to kMaxEnumeratedCandidates candidates
+  /// being checked. Several valid assignments with different velocities are ambiguous: the
+  /// one of least velocity norm is taken (slow solution). Valid assignments with equal
+  /// velocities (degenerate pairs, zero on both sides at velocity level) are broken in favour
+  /// of the continuous side being free, i.e. the pair leaves zero (second-order departure).
+  StatusDecision DecideStatuses(const Vector& y, double candidate_tolerance) const;
 
   /// Events implied by a change of pair statuses: a_zero[k] is true when pair k has its
   /// first side a_k = 0, false when b_k = 0 (see PairStatusIsAZero).
@@ -137,6 +220,8 @@ class LoweredSystem {
   std::vector<std::string> state_names_;
   std::vector<std::string> algebraic_names_;
   std::vector<PairInfo> pairs_;
+  std::vector<bool> continuous_algebraic_;
+  std::vector<bool> differentiated_;
   Vector inputs_;
   Vector parameters_;
   std::vector<std::unique_ptr<internal::LoweredBlock>> blocks_;

@@ -58,8 +58,16 @@ struct SemismoothNewtonOptions {
   NcpFunctionKind ncp_function = NcpFunctionKind::kFischerBurmeister;
   /// Converged when ||S Phi(w)||_inf <= tolerance, > 0.
   double tolerance = 1e-12;
+  /// Smoothing mu >= 0 of the Fischer-Burmeister function (SmoothedFischerBurmeister): with
+  /// mu > 0 the pairs solve a b = mu^2 instead of a b = 0 (continuation stages only).
+  double smoothing = 0.0;
   /// Newton iterations before kMaxIterations, >= 1.
   int max_iterations = 100;
+  /// Iterations taken even if the initial guess already meets the tolerance, in
+  /// [0, max_iterations]. Integrators use 1: an accepted extrapolated guess carries its
+  /// round-off into every later step, while one Newton correction removes it (linear rows,
+  /// like the clock, are then satisfied to round-off).
+  int min_iterations = 0;
   /// Armijo constant sigma in theta(w + t d) <= theta(w) + sigma t grad theta . d, in (0, 1/2).
   double armijo = 1e-4;
   /// Backtracking factor for the step length t, in (0, 1).
@@ -77,6 +85,9 @@ struct SemismoothNewtonOptions {
   bool active_set_polish = true;
   double polish_ratio = 0.2;
   LinearSolverKind linear_solver = LinearSolverKind::kAutomatic;
+  /// On convergence, factorize the generalized Jacobian at the solution (one more
+  /// factorization) so that last_jacobian_solver() serves sensitivity computations.
+  bool factorize_at_solution = false;
 
   /// Throws std::invalid_argument naming the first out-of-range option.
   void Validate() const;
@@ -128,10 +139,11 @@ class SemismoothNewton {
   SemismoothNewton& operator=(const SemismoothNewton&) = delete;
 
   const SemismoothNewtonOptions& options() const { return options_; }
-  /// Solves from `initial_guess`. The generalized Jacobian at the solution stays factorized
-  /// (see last_jacobian_solver) for sensitivity computations.
+  /// Solves from `initial_guess`. With options().factorize_at_solution the generalized
+  /// Jacobian at the solution stays factorized (see last_jacobian_solver).
   SemismoothNewtonResult Solve(MixedComplementaritySystem& system, const Vector& initial_guess);
-  /// The linear solver holding the factorization of the last assembled Jacobian.
+  /// The linear solver holding the last factorization (at the solution after a converged solve
+  /// with factorize_at_solution).
   const LinearSolver* last_jacobian_solver() const { return solver_.get(); }
 
  private:
@@ -139,6 +151,8 @@ class SemismoothNewton {
   std::unique_ptr<LinearSolver> solver_;
   int solver_size_ = -1;
   SystemMatrix jacobian_;
+  struct Workspace;  // iterates and work vectors, kept across solves (no allocation per solve)
+  std::unique_ptr<Workspace> workspace_;
 };
 
 }  // namespace moreau

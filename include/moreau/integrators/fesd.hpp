@@ -1,0 +1,155 @@
+#pragma once
+/// @file
+/// FESD Radau IIA: finite elements with switch detection, solved by semismooth Newton.
+///
+/// Method (docs/fesd-formulation.md). The scene is lowered to a DCS (LoweredSystem). Every
+/// integration step of length H (the control interval) holds N_fe finite elements of s-stage
+/// Radau IIA collocation whose lengths are unknowns. Elements are solved in *groups*: a group
+/// is a run of m elements of equal length h (step equilibration) in which every
+/// complementarity pair keeps one status, the one decided at the group's start (cross
+/// complementarity: a side that is zero at one stage or at the start is zero at all stages).
+/// Per group the system is square:
+///   - Radau IIA collocation and the algebraic equations G at every stage;
+///   - one status equation per pair and stage: a_k = 0 or b_k = 0;
+///   - the velocity-level problem at the group's end state (consistent multipliers);
+///   - one element-length complementarity  0 <= (h_max - h)/h_max  ⟂  iota(y_end) >= 0,
+///     where iota is the smallest scaled event indicator (the free side of every pair,
+///     evaluated from the end state: c for inactive constraints, the velocity-level
+///     multiplier for active ones, lambda = g_j - g_i for inactive Stewart modes, theta for
+///     sliding ones). Either the group covers the rest of the step (h = h_max) or it ends
+///     exactly on a switch (iota = 0).
+/// It is solved by the semismooth Newton method on the Fischer-Burmeister reformulation of
+/// that complementarity. Switches therefore lie on element boundaries; indicators taken from
+/// the end state (not from stage multipliers, which converge with order s only) keep the
+/// Radau IIA order 2s - 1 for states and switch times across switches.
+/// Statuses after a switch come from the velocity-level complementarity problem at the
+/// switch point (LoweredSystem::DecideStatuses: projection on the tangent cone, the slow
+/// solution; non-unique continuations are reported as EventKind::kAmbiguous).
+/// Groups start with a trial pass (elements of fixed length R/N_r, i.e. plain Radau IIA
+/// steps with fixed statuses); only when a free side turns negative is the group re-solved
+/// with the event equation. A scene without effects therefore costs what smooth Radau IIA
+/// costs.
+///
+/// Sensitivities: with FesdOptions::sensitivities, the implicit function theorem on every
+/// converged group system (including the switch-determined element lengths) gives
+/// dx(T)/dx(0), dx(T)/dp and dx(T)/du for the piecewise-constant inputs of every control
+/// segment. These are the derivatives of the discrete solution map; they converge to those of
+/// the exact flow, whereas the time-stepping baseline misses the dependence of switch times.
+///
+/// Effects: moving sets and switching surfaces. Hysteresis relays are lowered by
+/// time-freezing (separate issue); path constraints belong to the alpha-method stepper.
+
+#include <string>
+#include <vector>
+
+#include "moreau/integrators/simulation.hpp"
+#include "moreau/model/lowered_system.hpp"
+#include "moreau/model/scene.hpp"
+#include "moreau/newton/semismooth_newton.hpp"
+
+namespace moreau {
+
+struct FesdOptions {
+  /// Radau IIA stages s in [1, kMaxRadauStages]; order 2s - 1 (1, 3, 5, 7 for s = 1..4).
+  int stages = 2;
+  /// Integration step H > 0 (control interval; steps never cross control breakpoints).
+  double step_size = 0.1;
+  /// Nominal finite elements per step N_fe >= 1.
+  int finite_elements = 2;
+  /// Lowering of switching surfaces.
+  SwitchingForm switching_form = SwitchingForm::kStewart;
+  /// Newton options for the element and group systems (tolerance on the scaled residual).
+  SemismoothNewtonOptions newton = DefaultNewtonOptions();
+  /// Pairs whose continuous side is within this of zero are decided by the velocity-level
+  /// problem; free sides below minus this (times 1 + their scale) count as switches. > 0.
+  double event_tolerance = 1e-9;
+  /// After a switch, a remainder of the step shorter than this fraction of a nominal element
+  /// (H / N_fe) is merged into the next step, unless the step ends at a control breakpoint or
+  /// the final time. In (0, 0.5].
+  double min_element_fraction = 1e-3;
+  /// Re-solves allowed per switch (other element counts or guesses) before failing, >= 1.
+  int max_event_retries = 6;
+  /// Compute dx(T)/dx(0), dx(T)/dp, dx(T)/du (FesdResult::sensitivities).
+  bool sensitivities = false;
+  /// Record the stage trajectory (FesdResult::stage_trajectory).
+  bool record_stages = false;
+  /// Record element ends in the trajectory (false: initial and final points only).
+  bool record_trajectory = true;
+
+  static SemismoothNewtonOptions DefaultNewtonOptions();
+  /// Throws std::invalid_argument naming the first out-of-range option.
+  void Validate() const;
+};
+
+/// Outcome of a FESD run.
+enum class FesdStatus {
+  kSuccess,                ///< reached the final time
+  kNewtonFailure,          ///< a fixed-length element (no switch) did not converge
+  kEventLocationFailure,   ///< a switch was detected but no group solve ended on it within
+                           ///< max_event_retries (Newton failure or inconsistent signs)
+  kStatusDecisionFailure,  ///< no consistent continuation at a switch point
+};
+std::string ToString(FesdStatus status);
+
+/// One finite element of the solution.
+struct FesdElement {
+  double t_start = 0.0;         ///< integration time at the element start
+  double length = 0.0;          ///< h
+  bool ends_at_switch = false;  ///< a switch lies on its end boundary
+  int newton_iterations = 0;    ///< of the solve that produced it (shared by a group)
+  /// ||S Phi||_inf of that solve at convergence: collocation, algebraic, status, velocity-level
+  /// and element-length equations (collocation rows scaled by 1 / (1 + |y_start|)).
+  double newton_residual = 0.0;
+  /// max over pairs and stage pairs (i, j), start boundary included, of |min(a_i, b_j)|:
+  /// zero iff one side of every pair vanishes on the whole element and the other is >= 0.
+  double cross_complementarity = 0.0;
+  double complementarity = 0.0;  ///< max over stages and pairs of |min(a, b)|
+};
+
+/// Derivatives of the final scene state (rows) with respect to (columns):
+struct FesdSensitivities {
+  Matrix initial_state;  ///< n_x x n_x: dx(T)/dx(0)
+  Matrix parameters;     ///< n_x x n_p: dx(T)/dp
+  /// n_x x (n_u * segments): dx(T)/du_k for the input values u_k held on control segment k
+  /// (segments between the scene's control breakpoints, in order).
+  Matrix inputs;
+  std::vector<double> segment_starts;  ///< start time of every control segment
+};
+
+struct FesdStats {
+  long num_steps = 0;
+  long num_elements = 0;
+  long num_groups = 0;    ///< group solves with the event equation
+  long num_switches = 0;  ///< element boundaries with a switch
+  long num_newton_iterations = 0;
+  long num_factorizations = 0;
+  long num_event_retries = 0;
+  double max_cross_complementarity = 0.0;
+  double max_complementarity = 0.0;
+  double min_element_length = 0.0;
+  double cpu_seconds = 0.0;
+
+  FesdStats& operator+=(const FesdStats& other);
+  std::string Summary() const;
+};
+
+struct FesdResult {
+  FesdStatus status = FesdStatus::kSuccess;
+  std::string message;
+  double final_time = 0.0;
+  Vector final_state;           ///< scene states
+  Vector final_algebraic;       ///< algebraic unknowns at the last stage
+  Trajectory trajectory;        ///< element ends (h column: element lengths)
+  Trajectory stage_trajectory;  ///< every stage point (with record_stages)
+  std::vector<Event> events;
+  std::vector<FesdElement> elements;
+  FesdSensitivities sensitivities;  ///< with FesdOptions::sensitivities
+  FesdStats stats;
+};
+
+/// Simulates `scene` over [t0, tf]. Throws std::invalid_argument for invalid options, an
+/// invalid scene or an unsupported effect (naming it).
+FesdResult SimulateFesd(const Scene& scene, const FesdOptions& options,
+                        const ProgressCallback& progress = {});
+
+}  // namespace moreau

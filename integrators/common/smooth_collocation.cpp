@@ -1,0 +1,98 @@
+#include "smooth_collocation.hpp"
+
+#include <cmath>
+
+#include "moreau/core/error.hpp"
+
+namespace moreau::internal {
+
+SmoothCollocationSolver::SmoothCollocationSolver(LoweredSystem* system, int stages,
+                                                 LinearSolverKind kind)
+    : system_(system), tableau_(RadauIIA(stages)), n_(system->num_states()), s_(stages) {
+  MOREAU_ASSERT(system->num_algebraic() == 0, "smooth collocation needs n_z = 0");
+  const double nonzeros = s_ * static_cast<double>(s_) * system->EstimatedNonzerosFy() + s_ * n_;
+  solver_ = MakeLinearSolver(kind, s_ * n_, nonzeros);
+  stage_f_.resize(n_, s_);
+  stage_jacobians_.resize(static_cast<std::size_t>(s_));
+  stage_sparse_.resize(static_cast<std::size_t>(s_));
+  rhs_.resize(s_ * n_);
+}
+
+SmoothCollocationSolver::Outcome SmoothCollocationSolver::Solve(double h, const Vector& y0,
+                                                                const Stopping& stopping, Matrix* z,
+                                                                int* iterations) {
+  const Vector no_algebraic;
+  double previous_increment = 0.0;
+  for (int k = 1; k <= stopping.max_iterations; ++k) {
+    *iterations = k;
+    ++newton_iterations_;
+    for (int j = 0; j < s_; ++j) {
+      point_ = y0 + z->col(j);
+      system_->Evaluate(point_, no_algebraic, Derivatives::kStates, &eval_);
+      ++function_evaluations_;
+      if (!eval_.F.allFinite()) return Outcome::kNonFinite;
+      stage_f_.col(j) = eval_.F;
+      sparse_jacobians_ = eval_.has_sparse_F_y;
+      if (sparse_jacobians_) {
+        stage_sparse_[static_cast<std::size_t>(j)] = eval_.F_y_sparse;
+      } else {
+        stage_jacobians_[static_cast<std::size_t>(j)] = eval_.F_y;
+      }
+    }
+    // (Radau IIA collocation) residual -(Z_i - h sum_j a_ij F_j), stacked stage by stage.
+    for (int i = 0; i < s_; ++i) {
+      auto r = rhs_.segment(i * n_, n_);
+      r = -z->col(i);
+      for (int j = 0; j < s_; ++j) r += h * tableau_.a(i, j) * stage_f_.col(j);
+    }
+    // Newton matrix: delta_ij I - h a_ij F_y(Y_j).
+    matrix_.Reset(s_ * n_, solver_->wants_sparse());
+    for (int i = 0; i < s_; ++i) {
+      matrix_.AddDiagonal(i * n_, i * n_, n_, 1.0);
+      for (int j = 0; j < s_; ++j) {
+        const auto index = static_cast<std::size_t>(j);
+        if (sparse_jacobians_) {
+          matrix_.AddSparseBlock(i * n_, j * n_, stage_sparse_[index], -h * tableau_.a(i, j));
+        } else {
+          matrix_.AddBlock(i * n_, j * n_, stage_jacobians_[index], -h * tableau_.a(i, j));
+        }
+      }
+    }
+    matrix_.Finalize();
+    const FactorizationStatus status = solver_->Factorize(matrix_);
+    if (status == FactorizationStatus::kNonFinite) return Outcome::kNonFinite;
+    if (status == FactorizationStatus::kSingular) return Outcome::kSingular;
+    solver_->Solve(rhs_);
+    if (!rhs_.allFinite()) return Outcome::kNonFinite;
+    double increment = 0.0;
+    for (int j = 0; j < s_; ++j) {
+      z->col(j) += rhs_.segment(j * n_, n_);
+      increment = std::max(increment, ScaledIncrement(rhs_.segment(j * n_, n_), y0, stopping));
+    }
+    if (increment <= stopping.tolerance) return Outcome::kConverged;
+    // Diverging (contraction rate >= 1 after the first correction) or stalled at round-off.
+    if (k >= 3 && increment >= previous_increment) {
+      return increment <= 1e3 * stopping.tolerance ? Outcome::kConverged : Outcome::kNotConverged;
+    }
+    previous_increment = increment;
+  }
+  return Outcome::kNotConverged;
+}
+
+double SmoothCollocationSolver::ScaledIncrement(const Eigen::Ref<const Vector>& dz,
+                                                const Vector& y0, const Stopping& stopping) const {
+  if (!stopping.weighted_rms) {
+    double m = 0.0;
+    for (int i = 0; i < n_; ++i) m = std::max(m, std::fabs(dz[i]) / (1.0 + std::fabs(y0[i])));
+    return m;
+  }
+  const int nx = system_->num_scene_states();
+  double sum = 0.0;
+  for (int i = 0; i < nx; ++i) {
+    const double w = stopping.absolute_tolerance + stopping.relative_tolerance * std::fabs(y0[i]);
+    sum += (dz[i] / w) * (dz[i] / w);
+  }
+  return std::sqrt(sum / nx);
+}
+
+}  // namespace moreau::internal

@@ -1,0 +1,63 @@
+#pragma once
+// Full Newton for the Radau IIA collocation of a lowered system without algebraic unknowns,
+//   Z_i - h sum_j a_ij F(y0 + Z_j) = 0,  i = 1..s,
+// with the exact stage Jacobians (matrix delta_ij I - h a_ij F_y(Y_j), dense or sparse LU).
+// Shared by the smooth Radau IIA integrator and by FESD for elements without complementarity
+// pairs, so that a scene without effects costs FESD what it costs Radau IIA (private to
+// moreau::integrators).
+
+#include <memory>
+#include <vector>
+
+#include "moreau/integrators/radau_tableau.hpp"
+#include "moreau/linalg/linear_solver.hpp"
+#include "moreau/model/lowered_system.hpp"
+
+namespace moreau::internal {
+
+class SmoothCollocationSolver {
+ public:
+  enum class Outcome { kConverged, kNotConverged, kSingular, kNonFinite };
+
+  // Newton stops when the scaled increment is <= tolerance: max_i |dZ_i| / (1 + |y0_i|)
+  // (relative), or the weighted RMS over the scene states with weights
+  // atol + rtol |y0_i| (weighted_rms). Contraction failure (an increment not smaller than the
+  // previous one from the third iteration on) ends the solve: converged if the increment is
+  // within 1e3 tolerances (round-off stall), not converged otherwise.
+  struct Stopping {
+    bool weighted_rms = false;
+    double tolerance = 1e-12;
+    double relative_tolerance = 0.0;
+    double absolute_tolerance = 0.0;
+    int max_iterations = 25;
+  };
+
+  SmoothCollocationSolver(LoweredSystem* system, int stages, LinearSolverKind kind);
+
+  // Solves from the stage increments in z (n_y x s, column j = Z_j); z holds the result.
+  Outcome Solve(double h, const Vector& y0, const Stopping& stopping, Matrix* z, int* iterations);
+
+  long num_newton_iterations() const { return newton_iterations_; }
+  long num_function_evaluations() const { return function_evaluations_; }
+  long num_factorizations() const { return solver_->num_factorizations(); }
+
+ private:
+  double ScaledIncrement(const Eigen::Ref<const Vector>& dz, const Vector& y0,
+                         const Stopping& stopping) const;
+
+  LoweredSystem* system_;
+  const RadauTableau& tableau_;
+  int n_, s_;
+  std::unique_ptr<LinearSolver> solver_;
+  SystemMatrix matrix_;
+  PointEvaluation eval_;
+  Matrix stage_f_;
+  std::vector<Matrix> stage_jacobians_;
+  std::vector<SparseMatrix> stage_sparse_;
+  bool sparse_jacobians_ = false;
+  Vector rhs_, point_;
+  long newton_iterations_ = 0;
+  long function_evaluations_ = 0;
+};
+
+}  // namespace moreau::internal

@@ -1,0 +1,250 @@
+#include "group_system.hpp"
+
+#include <cmath>
+#include <limits>
+
+#include "moreau/core/error.hpp"
+
+namespace moreau::internal {
+
+GroupSystem::GroupSystem(LoweredSystem* system, int stages)
+    : system_(system),
+      s_(stages),
+      ny_(system->num_states()),
+      nz_(system->num_algebraic()),
+      ng_(system->num_equations()),
+      np_(system->num_pairs()) {
+  element_size_ = s_ * (ny_ + nz_);
+  element_rows_ = s_ * (ny_ + ng_ + np_);
+  MOREAU_ASSERT(element_size_ == element_rows_, "FESD element system is not square");
+}
+
+void GroupSystem::Configure(const GroupSetup& setup) {
+  MOREAU_ASSERT(setup.elements >= 1, "a group needs at least one element");
+  MOREAU_ASSERT(static_cast<int>(setup.a_zero.size()) == np_, "wrong number of statuses");
+  setup_ = setup;
+  while (static_cast<int>(elements_.size()) < setup.elements) {
+    elements_.emplace_back(system_, s_);
+    value_elements_.emplace_back(system_, s_);
+  }
+  da_status_.resize(s_ * np_);
+  db_status_.resize(s_ * np_);
+  for (int i = 0; i < s_; ++i) {
+    for (int k = 0; k < np_; ++k) {
+      const bool a_zero = setup.a_zero[static_cast<std::size_t>(k)];
+      da_status_[i * np_ + k] = a_zero ? 1.0 : 0.0;
+      db_status_[i * np_ + k] = a_zero ? 0.0 : 1.0;
+    }
+  }
+}
+
+int GroupSystem::num_unknowns() const {
+  return setup_.elements * element_size_ + (setup_.with_event ? nz_ + 1 : 0);
+}
+
+int GroupSystem::num_equations() const {
+  return setup_.elements * element_rows_ + (setup_.with_event ? nz_ : 0);
+}
+
+double GroupSystem::EstimatedJacobianNonzeros() const {
+  const double n = num_unknowns();
+  return n * n;
+}
+
+Vector GroupSystem::ElementStart(const ConstVectorRef& w, int e) const {
+  Vector y = setup_.y_start;
+  const int last = (s_ - 1) * (ny_ + nz_);
+  for (int k = 0; k < e; ++k) y += w.segment(element_offset(k) + last, ny_);
+  return y;
+}
+
+Vector GroupSystem::EndState(const ConstVectorRef& w) const {
+  return ElementStart(w, setup_.elements);
+}
+
+void GroupSystem::EvaluateAll(const Vector& w, Derivatives derivatives,
+                              std::vector<CollocationStages>* target) {
+  start_scratch_ = setup_.y_start;
+  const int last = (s_ - 1) * (ny_ + nz_);
+  for (int e = 0; e < setup_.elements; ++e) {
+    const auto w_e = w.segment(element_offset(e), element_size_);
+    (*target)[static_cast<std::size_t>(e)].Evaluate(start_scratch_, w_e, derivatives);
+    start_scratch_ += w_e.segment(last, ny_);  // the next element starts at this one's end
+  }
+}
+
+bool GroupSystem::Evaluate(const Vector& w, bool with_jacobian, Vector* r, Vector* a, Vector* b) {
+  const double h = H(w);
+  if (!(h > 0.0) || !std::isfinite(h)) return false;  // element lengths must stay positive
+  std::vector<CollocationStages>& target = with_jacobian ? elements_ : value_elements_;
+  if (with_jacobian) h_jacobian_ = h;
+  EvaluateAll(w, with_jacobian ? Derivatives::kStates : Derivatives::kNone, &target);
+  r->resize(num_equations());
+  pair_a_.resize(s_ * np_);
+  pair_b_.resize(s_ * np_);
+  Vector& pair_a = pair_a_;
+  Vector& pair_b = pair_b_;
+  for (int e = 0; e < setup_.elements; ++e) {
+    const int row0 = e * element_rows_;
+    const int equations = s_ * (ny_ + ng_);
+    const CollocationStages& stages = target[static_cast<std::size_t>(e)];
+    stages.Residual(h, w.segment(element_offset(e), element_size_), r->segment(row0, equations),
+                    pair_a, pair_b);
+    // Status equations: the side that the group's status keeps at zero, at every stage.
+    r->segment(row0 + equations, s_ * np_) =
+        da_status_.cwiseProduct(pair_a) + db_status_.cwiseProduct(pair_b);
+  }
+  a->resize(num_pairs());
+  b->resize(num_pairs());
+  if (setup_.with_event) {
+    const Vector y_end = EndState(w);
+    const auto v = w.segment(v_offset(), nz_);
+    const Derivatives level = with_jacobian ? Derivatives::kStates : Derivatives::kNone;
+    VelocityLevelEvaluation velocity;
+    IndicatorEvaluation indicators;
+    system_->EvaluateVelocityLevel(y_end, v, LoweredSystem::RolesFor(setup_.a_zero), level,
+                                   &velocity);
+    system_->EvaluateEventIndicators(y_end, v, setup_.a_zero, level, &indicators);
+    // (velocity level) consistent multipliers at the group's end state.
+    r->segment(setup_.elements * element_rows_, nz_) = velocity.equations;
+    // (element-length complementarity) 0 <= (h_max - h)/h_max ⟂ min_k scaled iota_k >= 0.
+    const double tau = h / setup_.h_reference;
+    int best = -1;
+    double smallest = std::numeric_limits<double>::infinity();
+    for (int k = 0; k < np_; ++k) {
+      const double scaled = setup_.indicator_weights[k] * indicators.values[k] /
+                            std::pow(tau, setup_.indicator_power[static_cast<std::size_t>(k)]);
+      if (scaled < smallest) {
+        smallest = scaled;
+        best = k;
+      }
+    }
+    (*a)[0] = (setup_.h_max - h) / setup_.h_max;
+    (*b)[0] = best >= 0 ? smallest : 1.0;
+    if (with_jacobian) {
+      velocity_ = std::move(velocity);
+      indicators_ = std::move(indicators);
+      event_b_ = (*b)[0];
+      event_pair_ = best;
+      tau_ = tau;
+    }
+  }
+  return r->allFinite() && a->allFinite() && b->allFinite();
+}
+
+void GroupSystem::AssembleJacobian(const Vector& da, const Vector& db, SystemMatrix* jacobian) {
+  const int m = setup_.elements;
+  const int last = (s_ - 1) * (ny_ + nz_);
+  const int equations = s_ * (ny_ + ng_);
+  const double h = h_jacobian_;  // h of the last with-Jacobian evaluation
+  for (int e = 0; e < m; ++e) {
+    const int row0 = e * element_rows_;
+    const CollocationStages& stages = elements_[static_cast<std::size_t>(e)];
+    stages.AddJacobian(h, da_status_, db_status_, row0, row0 + equations, element_offset(e),
+                       jacobian);
+    // Element e starts where element e' < e ended: y_e0 depends on every earlier Z_{e', s}.
+    for (int k = 0; k < e; ++k) {
+      stages.AddStartJacobian(h, da_status_, db_status_, row0, row0 + equations,
+                              element_offset(k) + last, jacobian);
+    }
+    if (setup_.with_event) {
+      const Vector dh = stages.ResidualDerivativeH();
+      for (int i = 0; i < equations; ++i) {
+        if (dh[i] != 0.0) jacobian->AddEntry(row0 + i, h_index(), dh[i]);
+      }
+    }
+  }
+  if (!setup_.with_event) return;
+  const int velocity_row = m * element_rows_;
+  jacobian->AddBlock(velocity_row, v_offset(), velocity_.equations_v);
+  for (int e = 0; e < m; ++e) {
+    jacobian->AddBlock(velocity_row, element_offset(e) + last, velocity_.equations_y);
+  }
+  const int event_row = num_equations();
+  jacobian->AddEntry(event_row, h_index(), da[0] * (-1.0 / setup_.h_max));
+  if (event_pair_ >= 0) {
+    const int k = event_pair_;
+    const int power = setup_.indicator_power[static_cast<std::size_t>(k)];
+    const double weight = setup_.indicator_weights[k] / std::pow(tau_, power);
+    const Matrix dy = db[0] * weight * indicators_.d_y.row(k);
+    for (int e = 0; e < m; ++e) jacobian->AddBlock(event_row, element_offset(e) + last, dy);
+    jacobian->AddBlock(event_row, v_offset(), db[0] * weight * indicators_.d_v.row(k));
+    if (power > 0) {
+      // d/dh of iota / tau^p with tau = h / h_ref.
+      const double d_tau = -power * weight * indicators_.values[k] / tau_ / setup_.h_reference;
+      jacobian->AddEntry(event_row, h_index(), db[0] * d_tau);
+    }
+  }
+}
+
+void GroupSystem::ResidualScale(const Vector& /*w*/, Vector* scale) {
+  scale->setOnes(num_unknowns());
+  for (int e = 0; e < setup_.elements; ++e) {
+    for (int i = 0; i < s_; ++i) {
+      for (int k = 0; k < ny_; ++k) {
+        (*scale)[e * element_rows_ + i * (ny_ + ng_) + k] =
+            1.0 / (1.0 + std::fabs(setup_.y_start[k]));
+      }
+    }
+  }
+}
+
+void GroupSystem::EvaluateForSensitivities(const Vector& w) {
+  EvaluateAll(w, Derivatives::kAll, &elements_);
+  if (!setup_.with_event) return;
+  const Vector y_end = EndState(w);
+  const auto v = w.segment(v_offset(), nz_);
+  system_->EvaluateVelocityLevel(y_end, v, LoweredSystem::RolesFor(setup_.a_zero),
+                                 Derivatives::kAll, &velocity_);
+  system_->EvaluateEventIndicators(y_end, v, setup_.a_zero, Derivatives::kAll, &indicators_);
+}
+
+void GroupSystem::SensitivityBlocks(const Vector& w, double event_da, double event_db,
+                                    ParameterBlocks* out) const {
+  const int rows = num_equations() + num_pairs();
+  const int nu = system_->num_inputs(), np = system_->num_parameters();
+  const int equations = s_ * (ny_ + ng_);
+  const double h = H(w);
+  out->y_start.setZero(rows, ny_);
+  out->p.setZero(rows, np);
+  out->u.setZero(rows, nu);
+  out->h_fixed.setZero(rows);
+  out->h_max.setZero(rows);
+  out->h_reference.setZero(rows);
+  for (int e = 0; e < setup_.elements; ++e) {
+    const int row0 = e * element_rows_;
+    const CollocationStages& stages = elements_[static_cast<std::size_t>(e)];
+    // Every element start is y_start plus earlier increments: d y_e0 / d y_start = I.
+    SystemMatrix block;
+    block.Reset(std::max(element_rows_, ny_), false);
+    stages.AddStartJacobian(h, da_status_, db_status_, 0, equations, 0, &block);
+    out->y_start.middleRows(row0, element_rows_) = block.dense().topLeftCorner(element_rows_, ny_);
+    Matrix d_u, d_p;
+    stages.ParameterJacobian(h, da_status_, db_status_, &d_u, &d_p);
+    out->u.middleRows(row0, element_rows_) = d_u;
+    out->p.middleRows(row0, element_rows_) = d_p;
+    if (!setup_.with_event) out->h_fixed.segment(row0, equations) = stages.ResidualDerivativeH();
+  }
+  if (!setup_.with_event) return;
+  const int velocity_row = setup_.elements * element_rows_;
+  out->y_start.middleRows(velocity_row, nz_) = velocity_.equations_y;
+  out->u.middleRows(velocity_row, nz_) = velocity_.equations_u;
+  out->p.middleRows(velocity_row, nz_) = velocity_.equations_p;
+  const int event_row = num_equations();
+  out->h_max[event_row] = event_da * h / (setup_.h_max * setup_.h_max);
+  if (event_pair_ >= 0) {
+    const int k = event_pair_;
+    const int power = setup_.indicator_power[static_cast<std::size_t>(k)];
+    const double weight = setup_.indicator_weights[k] / std::pow(tau_, power);
+    out->y_start.row(event_row) = event_db * weight * indicators_.d_y.row(k);
+    out->u.row(event_row) = event_db * weight * indicators_.d_u.row(k);
+    out->p.row(event_row) = event_db * weight * indicators_.d_p.row(k);
+    if (power > 0) {
+      // d/dh_ref of w iota (h_ref / h)^p = p w iota tau^{-p} / h_ref.
+      out->h_reference[event_row] =
+          event_db * power * weight * indicators_.values[k] / setup_.h_reference;
+    }
+  }
+}
+
+}  // namespace moreau::internal
