@@ -39,6 +39,6 @@ Scene MakeScene(const std::string& name) {
   ThrowInvalidArgument("unknown scene '", name, "'; available scenes: ", available);
 }
 
-std::string DefaultSceneName() { return "vanderpol"; }
+std::string DefaultSceneName() { return "S3"; }
 
 }  // namespace moreau

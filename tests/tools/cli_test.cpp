@@ -44,7 +44,9 @@ TEST(CliTest, BadInputGivesClearErrorsAndExitCode2) {
   ExpectUsageError("run hopf --tf -1", "horizon must be positive");
   ExpectUsageError("run hopf --set x0.x=nan", "must be finite");
   ExpectUsageError("run hopf --integrator nope", "unknown integrator 'nope'");
-  ExpectUsageError("run hopf --rtol 1e-3", "option --rtol does not apply to integrator 'radau'");
+  ExpectUsageError("run hopf --integrator radau --rtol 1e-3",
+                   "option --rtol does not apply to integrator 'radau'");
+  ExpectUsageError("run S3 --integrator radau", "does not support the moving set 'floor'");
   ExpectUsageError("run hopf --h 0", "step size h must be positive");
   ExpectUsageError("run hopf --stages 0", "stages must be in [1, 7]");
   ExpectUsageError("run hopf --linear-solver qr", "unknown linear solver 'qr'");

@@ -231,7 +231,9 @@ int main(int argc, char** argv) {
   double tf = 0.0;
   bool no_plot = false, quiet = false;
   run->add_option("scene", run_scene, "scene name (default: " + run_scene + ")");
-  run->add_option("--integrator", settings.integrator, "integrator (see `moreau list`)");
+  run->add_option("--integrator", settings.integrator,
+                  "integrator (see `moreau list`; default auto: radau without effects, fesd "
+                  "otherwise)");
   auto* stages = run->add_option("--stages", settings.stages, "Radau IIA stages s (order 2s-1)");
   auto* h = run->add_option("--h", settings.step_size, "step size (initial step if adaptive)");
   auto* tf_option = run->add_option("--tf", tf, "final time (overrides the scene's horizon)");

@@ -10,6 +10,7 @@ namespace moreau::tool {
 
 const std::vector<std::pair<std::string, std::string>>& IntegratorNames() {
   static const std::vector<std::pair<std::string, std::string>> names = {
+      {"auto", "radau for scenes without effects, fesd for moving sets and switching surfaces"},
       {"radau", "smooth Radau IIA (fixed step or --adaptive); scenes without effects"},
       {"timestepping",
        "fixed-step Radau IIA with stage complementarity (first-order baseline, no switch "
@@ -117,8 +118,8 @@ RunReport RunFesd(const Scene& scene, const RunSettings& settings,
                   const ProgressCallback& progress) {
   RequireOnly(settings, {"stages", "h", "fe", "switching", "linear-solver"});
   FesdOptions options;
-  options.stages = settings.stages_given ? settings.stages : 2;
-  options.step_size = settings.step_size_given ? settings.step_size : 0.1;
+  if (settings.stages_given) options.stages = settings.stages;
+  if (settings.step_size_given) options.step_size = settings.step_size;
   options.finite_elements = settings.finite_elements;
   options.switching_form = ParseSwitchingForm(settings.switching_form);
   options.newton.linear_solver = ParseLinearSolverKind(settings.linear_solver);
@@ -169,8 +170,15 @@ RunReport RunFesd(const Scene& scene, const RunSettings& settings,
 
 }  // namespace
 
-RunReport RunScene(const Scene& scene, const RunSettings& settings,
+// The integrator `auto` picks for a scene: the smooth one without effects, FESD otherwise.
+std::string AutomaticIntegrator(const Scene& scene) {
+  return scene.effects.empty() ? "radau" : "fesd";
+}
+
+RunReport RunScene(const Scene& scene, const RunSettings& requested,
                    const ProgressCallback& progress) {
+  RunSettings settings = requested;
+  if (settings.integrator == "auto") settings.integrator = AutomaticIntegrator(scene);
   RunReport report;
   if (settings.integrator == "radau") {
     report = RunRadau(scene, settings, progress);

@@ -16,7 +16,7 @@ namespace moreau::tool {
 // Command-line settings shared by all integrators; `given` lists the options the user set
 // explicitly, so that an option the chosen integrator does not use is reported as an error.
 struct RunSettings {
-  std::string integrator = "radau";
+  std::string integrator = "auto";
   int stages = 3;
   bool stages_given = false;
   double step_size = 0.01;
@@ -51,6 +51,9 @@ struct RunReport {
   std::vector<std::string> element_columns;
   std::vector<std::vector<double>> element_rows;
 };
+
+// The integrator that `--integrator auto` picks for a scene.
+std::string AutomaticIntegrator(const Scene& scene);
 
 // Names of the integrators `moreau run --integrator` accepts, with one-line descriptions.
 const std::vector<std::pair<std::string, std::string>>& IntegratorNames();

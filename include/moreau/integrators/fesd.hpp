@@ -51,7 +51,7 @@ namespace moreau {
 
 struct FesdOptions {
   /// Radau IIA stages s in [1, kMaxRadauStages]; order 2s - 1 (1, 3, 5, 7 for s = 1..4).
-  int stages = 2;
+  int stages = 3;
   /// Integration step H > 0 (control interval; steps never cross control breakpoints).
   double step_size = 0.1;
   /// Nominal finite elements per step N_fe >= 1.
