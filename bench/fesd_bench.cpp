@@ -15,7 +15,8 @@
 
 namespace {
 
-const char* const kScenes[] = {"F1", "S2", "S3"};
+// H1, H3: hysteresis by time-freezing (one and two relays).
+const char* const kScenes[] = {"F1", "S2", "S3", "H1", "H3"};
 
 double Median(std::vector<double> values) {
   std::sort(values.begin(), values.end());
@@ -32,7 +33,7 @@ void BM_FesdScene(benchmark::State& state) {
   options.finite_elements = 2;
   options.record_trajectory = false;
   std::vector<double> iterations;
-  long elements = 0;
+  long elements = 0, switches = 0;
   for (auto _ : state) {
     const moreau::FesdResult result = moreau::SimulateFesd(scene, options);
     if (result.status != moreau::FesdStatus::kSuccess) {
@@ -40,6 +41,7 @@ void BM_FesdScene(benchmark::State& state) {
       break;
     }
     elements += result.stats.num_elements;
+    switches = result.stats.num_switches;
     if (iterations.empty()) {
       for (const moreau::FesdElement& e : result.elements)
         iterations.push_back(e.newton_iterations);
@@ -48,6 +50,7 @@ void BM_FesdScene(benchmark::State& state) {
   state.SetLabel(kScenes[state.range(0)]);
   state.counters["elements"] =
       static_cast<double>(elements) / static_cast<double>(state.iterations());
+  state.counters["switches"] = static_cast<double>(switches);
   state.counters["time_per_element"] = benchmark::Counter(
       static_cast<double>(elements), benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
   if (!iterations.empty()) {
@@ -57,7 +60,7 @@ void BM_FesdScene(benchmark::State& state) {
   }
 }
 BENCHMARK(BM_FesdScene)
-    ->ArgsProduct({{0, 1, 2}, {2, 3}})
+    ->ArgsProduct({{0, 1, 2, 3, 4}, {2, 3}})
     ->ArgNames({"scene", "stages"})
     ->Unit(benchmark::kMillisecond);
 

@@ -26,6 +26,11 @@ const std::vector<SceneDefinition>& SceneCatalog() {
       {"F2d", "spontaneous switch (non-unique solution)", scenes::MakeF2d},
       {"F3", "sliding to the origin, x' in -sign(x)", scenes::MakeF3},
       {"F4", "Stewart-Anitescu IVP, x' in 2 - sign(x)", scenes::MakeF4},
+      {"H1", "thermostat with hysteresis (time-freezing)", scenes::MakeH1},
+      {"H2", "turbo car with a hysteresis turbo and a given control (time-freezing)",
+       scenes::MakeH2},
+      {"H3", "two rooms with their own thermostats: interleaved relay switches",
+       scenes::MakeTwoThermostats},
   };
   return catalog;
 }

@@ -29,4 +29,9 @@ Scene MakeF2d();
 Scene MakeF3();
 Scene MakeF4();
 
+// Hybrid systems with hysteresis (hysteresis.cpp).
+Scene MakeH1();
+Scene MakeH2();
+Scene MakeTwoThermostats();
+
 }  // namespace moreau::scenes

@@ -14,6 +14,12 @@ void Trajectory::Append(double time, const Vector& state, const Vector& algebrai
   step.push_back(length);
 }
 
+int RelaySignal::ValueAt(double t) const {
+  int value = initial_value;
+  for (std::size_t k = 0; k < jump_times.size() && jump_times[k] <= t; ++k) value = values[k];
+  return value;
+}
+
 std::vector<double> FixedStepGrid(double t0, double tf, double h) {
   RequireArgument(std::isfinite(h) && h > 0.0, "step size h must be positive and finite, got ", h);
   RequireArgument(tf > t0, "grid needs tf > t0, got t0 = ", t0, ", tf = ", tf);

@@ -1,5 +1,6 @@
 #include "moreau/integrators/fesd.hpp"
 
+#include <Eigen/Dense>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -62,6 +63,7 @@ FesdStats& FesdStats::operator+=(const FesdStats& other) {
   max_cross_complementarity = std::max(max_cross_complementarity, other.max_cross_complementarity);
   max_complementarity = std::max(max_complementarity, other.max_complementarity);
   min_element_length = std::min(min_element_length, other.min_element_length);
+  frozen_time += other.frozen_time;
   cpu_seconds += other.cpu_seconds;
   return *this;
 }
@@ -107,6 +109,7 @@ struct SolveRecord {
   Vector z_last;
   Vector a_last, b_last;  // pair sides at the last stage (next boundary values)
   double length = 0.0;    // total integration time covered
+  bool frozen = false;    // physical time frozen (a relay jumping): not in physical outputs
   Transfer transfer;
 };
 
@@ -139,6 +142,16 @@ class FesdRun {
       t->state_names = scene.state_names;
       t->algebraic_names = system_.algebraic_names();
     }
+    if (system_.time_freezing()) {
+      result_.numerical_trajectory.state_names = system_.state_names();
+      result_.numerical_trajectory.algebraic_names = system_.algebraic_names();
+      for (const std::string& name : system_.relay_names()) {
+        RelaySignal signal;
+        signal.relay = name;
+        signal.initial_value = static_cast<int>(y_[RelayMemoryIndex(signal)]);
+        result_.relays.push_back(signal);
+      }
+    }
     result_.stats.min_element_length = std::numeric_limits<double>::infinity();
     segment_ends_ = SegmentEnds(scene.initial_time, scene.final_time, scene.ControlBreakpoints());
     if (options_.sensitivities) InitializeSensitivities();
@@ -152,7 +165,12 @@ class FesdRun {
       boundary_a_ = initial.A;
       boundary_b_ = initial.B;
       result_.trajectory.Append(scene.initial_time, y_.head(nx_), Vector(), 0.0);
-      Integrate();
+      if (system_.time_freezing()) {
+        result_.numerical_trajectory.Append(tau_, y_, z_guess_, 0.0);
+        IntegrateTimeFreezing();
+      } else {
+        Integrate();
+      }
     }
     return Finish(start);
   }
@@ -205,6 +223,45 @@ class FesdRun {
     }
   }
 
+  // Time-freezing (hysteresis relays): the integration variable is numerical time tau and the
+  // clock runs at rate 1, or 0 while a relay jumps. A step that starts while physical time
+  // runs has length (target - clock)/n, n = ceil((target - clock)/H), so that the clock lands
+  // on the next control breakpoint (or tf) unless something switches; a step that starts
+  // frozen has length H (the clock stands still). After a switch a new step starts from the
+  // current clock. Sensitivities: row n_y of sensitivity_ tracks tau - step_end, whose
+  // derivative at a step start is d(clock)/n (running) or 0 (frozen).
+  void IntegrateTimeFreezing() {
+    const Scene& scene = system_.scene();
+    const int clock = system_.clock_index();
+    for (std::size_t segment = 0; segment + 1 < segment_ends_.size() && !failed(); ++segment) {
+      segment_ = static_cast<int>(segment);
+      system_.SetInputs(scene.InputValues(segment_ends_[segment]));
+      const double target = segment_ends_[segment + 1];
+      const double tolerance = kClockTolerance * std::max(1.0, std::fabs(target));
+      while (!failed() && target - y_[clock] > tolerance) {
+        double length = options_.step_size;
+        if (!system_.TimeFrozen(a_zero_)) {
+          const double rest = target - y_[clock];
+          const double n = std::max(1.0, std::ceil(rest / options_.step_size - 1e-9));
+          length = rest / n;
+          if (options_.sensitivities) sensitivity_.row(ny_) = sensitivity_.row(clock) / n;
+        } else if (options_.sensitivities) {
+          sensitivity_.row(ny_).setZero();
+        }
+        const double step_end = tau_ + length;
+        int remaining = options_.finite_elements;
+        while (remaining > 0 && !failed()) {
+          if (Advance(step_end, &remaining)) break;  // a switch: a new step from the clock
+        }
+        ++result_.stats.num_steps;
+      }
+    }
+  }
+
+  // The clock counts as having reached a target within this relative distance (it lands on
+  // it up to the Newton tolerance times the step length).
+  static constexpr double kClockTolerance = 1e-11;
+
   FesdResult Finish(std::chrono::steady_clock::time_point start) {
     result_.final_time = y_[system_.clock_index()];
     result_.final_state = y_.head(nx_);
@@ -246,14 +303,32 @@ class FesdRun {
     if (decision.ambiguous) {
       result_.events.push_back({t, EventKind::kAmbiguous, system_.scene().name, decision.message});
     }
-    if (previous != nullptr) {
-      for (Event& event : system_.StatusEvents(t, *previous, decision.a_zero)) {
-        result_.events.push_back(std::move(event));
+    const std::vector<Event> events = previous != nullptr
+                                          ? system_.StatusEvents(t, *previous, decision.a_zero)
+                                          : system_.InitialEvents(t, decision.a_zero);
+    result_.events.insert(result_.events.end(), events.begin(), events.end());
+    if (system_.time_freezing()) {
+      // A relay jumps (in physical time) when it starts travelling between 0 and 1.
+      const std::vector<int> after = system_.MemoryTargets(decision.a_zero);
+      const std::vector<int> before = previous != nullptr ? system_.MemoryTargets(*previous)
+                                                          : std::vector<int>(after.size(), -1);
+      for (std::size_t i = 0; i < after.size(); ++i) {
+        if (after[i] >= 0 && before[i] < 0) {
+          result_.relays[i].jump_times.push_back(t);
+          result_.relays[i].values.push_back(after[i]);
+        }
       }
     }
     a_zero_ = decision.a_zero;
     v_ = decision.v;
     return true;
+  }
+
+  // Index in y of a relay's memory state (relays follow the scene states in order).
+  int RelayMemoryIndex(const RelaySignal& signal) const {
+    const auto& names = system_.relay_names();
+    const auto it = std::find(names.begin(), names.end(), signal.relay);
+    return nx_ + static_cast<int>(it - names.begin());
   }
 
   // Algebraic guess at y: consistent values of the continuous variables from y, jump
@@ -487,15 +562,53 @@ class FesdRun {
     Vector scaled(np_);
     for (int k = 0; k < np_; ++k)
       scaled[k] = end.values[k] / std::max(1.0, std::fabs(end.values[k]));
-    if (scaled.minCoeff() > options_.event_tolerance) return false;
+    Eigen::Index first = 0;
+    if (scaled.minCoeff(&first) > options_.event_tolerance) return false;
     const std::vector<bool> previous = a_zero_;
+    const Vector v_before = v_;
     if (!Decide(y_[system_.clock_index()], &previous)) return true;
     if (previous != a_zero_) {
       ++result_.stats.num_switches;
       z_guess_ = ConsistentGuess(y_, v_);
       have_last_w_ = false;
+      if (options_.sensitivities) ApplySaltation(previous, v_before, static_cast<int>(first));
     }
     return false;
+  }
+
+  // A switch found exactly on a step boundary was not located by an event equation, so the
+  // local transfers miss how its time moves with the data. The saltation matrix restores it:
+  // with iota the indicator of pair k under the old statuses (its total derivative includes
+  // the velocity-level values, v = v(y, p, u) from E(y, v, p, u) = 0), the switch time moves by
+  // dtau_s = -(diota)/(diota/dtau), diota/dtau = iota_y F_-, and the state at the boundary by
+  // (F_- - F_+) dtau_s, F_-/F_+ the fields before and after the switch.
+  void ApplySaltation(const std::vector<bool>& before, const Vector& v_before, int k) {
+    const int np = system_.num_parameters(), nu = system_.num_inputs();
+    IndicatorEvaluation indicator;
+    system_.EvaluateEventIndicators(y_, v_before, before, Derivatives::kAll, &indicator);
+    VelocityLevelEvaluation velocity;
+    system_.EvaluateVelocityLevel(y_, v_before, LoweredSystem::RolesFor(before), Derivatives::kAll,
+                                  &velocity);
+    Eigen::RowVectorXd g_y = indicator.d_y.row(k), g_p = indicator.d_p.row(k),
+                       g_u = indicator.d_u.row(k);
+    if (nz_ > 0 && indicator.d_v.row(k).lpNorm<Eigen::Infinity>() > 0.0) {
+      const Eigen::PartialPivLU<Matrix> lu(velocity.equations_v.transpose());
+      const Eigen::RowVectorXd weights =
+          lu.solve(Vector(indicator.d_v.row(k).transpose())).transpose();
+      g_y -= weights * velocity.equations_y;
+      g_p -= weights * velocity.equations_p;
+      g_u -= weights * velocity.equations_u;
+    }
+    PointEvaluation before_switch, after_switch;
+    system_.Evaluate(y_, ConsistentGuess(y_, v_before), Derivatives::kNone, &before_switch);
+    system_.Evaluate(y_, ConsistentGuess(y_, v_), Derivatives::kNone, &after_switch);
+    const double rate = g_y.dot(before_switch.F);
+    // A grazing switch (zero rate) has no derivative; leave the transfers as they are.
+    if (std::fabs(rate) <= 1e-12 * (1.0 + g_y.norm() * before_switch.F.norm())) return;
+    Eigen::RowVectorXd d_iota = g_y * sensitivity_.topRows(ny_);
+    d_iota.segment(nx_, np) += g_p;
+    d_iota.segment(nx_ + np + nu * segment_, nu) += g_u;
+    sensitivity_.topRows(ny_) -= (before_switch.F - after_switch.F) * (d_iota / rate);
   }
 
   // Guess of a group of m elements of length h_guess from the trial elements.
@@ -602,6 +715,7 @@ class FesdRun {
     const GroupSetup& setup = group_.setup();
     const int m = setup.elements;
     SolveRecord record;
+    record.frozen = system_.TimeFrozen(a_zero_);
     if (options_.sensitivities) record.transfer = LocalTransfer(w, m, remaining);
     Vector y0 = setup.y_start;
     Vector a_previous = a0, b_previous = b0;
@@ -610,12 +724,14 @@ class FesdRun {
       const auto w_e = w.segment(group_.element_offset(e), group_.element_size());
       FesdElement element;
       element.length = h;
+      element.physical_start = y0[system_.clock_index()];
+      element.frozen = record.frozen;
       element.ends_at_switch = ends_at_switch && e + 1 == m;
       element.newton_iterations = static_cast<int>(solved.stats.iterations);
       element.newton_residual = solved.residual_norm;
       Certificates(stages, y0, w_e, a_previous, b_previous, &element);
       record.elements.push_back(element);
-      if (options_.record_stages) {
+      if (options_.record_stages && !record.frozen) {
         for (int i = 0; i < s_; ++i) {
           const Vector yi = y0 + w_e.segment(stages.state_offset(i), ny_);
           record.stage_points.Append(yi[system_.clock_index()], yi.head(nx_),
@@ -643,6 +759,7 @@ class FesdRun {
       FesdElement element = record.elements[e];
       element.t_start = tau_;
       tau_ += element.length;
+      if (record.frozen) result_.stats.frozen_time += element.length;
       result_.elements.push_back(element);
       result_.stats.max_cross_complementarity =
           std::max(result_.stats.max_cross_complementarity, element.cross_complementarity);
@@ -651,11 +768,17 @@ class FesdRun {
       result_.stats.min_element_length = std::min(result_.stats.min_element_length, element.length);
       ++result_.stats.num_elements;
       if (options_.record_trajectory) {
-        // Interior ends of a group were stored; the last end is the record's y_end.
+        // Interior ends of a group were stored; the last end is the record's y_end. Frozen
+        // elements leave the physical trajectory (x and the clock do not move).
         const bool last = e + 1 == record.elements.size();
         const Vector& y = last ? record.y_end : record.ends[e];
-        result_.trajectory.Append(y[system_.clock_index()], y.head(nx_),
-                                  last ? record.z_last : record.algebraic[e], element.length);
+        const Vector& z = last ? record.z_last : record.algebraic[e];
+        if (!record.frozen) {
+          result_.trajectory.Append(y[system_.clock_index()], y.head(nx_), z, element.length);
+        }
+        if (system_.time_freezing()) {
+          result_.numerical_trajectory.Append(tau_, y, z, element.length);
+        }
       }
     }
     for (std::size_t i = 0; i < record.stage_points.size(); ++i) {
@@ -828,10 +951,7 @@ FesdResult SimulateFesd(const Scene& scene, const FesdOptions& options,
                         const ProgressCallback& progress) {
   options.Validate();
   for (const Effect& effect : scene.effects) {
-    if (std::holds_alternative<MovingSet>(effect) ||
-        std::holds_alternative<SwitchingSurfaces>(effect)) {
-      continue;
-    }
+    if (!std::holds_alternative<PathConstraints>(effect)) continue;
     ThrowInvalidArgument("the FESD integrator does not support the ", EffectKind(effect), " '",
                          EffectName(effect), "' of scene '", scene.name, "'");
   }

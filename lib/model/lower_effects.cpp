@@ -10,11 +10,12 @@ std::unique_ptr<LoweredBlock> LowerEffect(const Scene& scene, const Effect& effe
     return options.switching_form == SwitchingForm::kStewart ? LowerStewart(scene, *switching)
                                                              : LowerHeaviside(scene, *switching);
   }
-  if (std::holds_alternative<PathConstraints>(effect)) return nullptr;  // DAI stepper only
-  ThrowInvalidArgument("scene '", scene.name, "': the ", EffectKind(effect), " '",
-                       EffectName(effect),
-                       "' has no complementarity lowering in this version (time-freezing for "
-                       "hysteresis relays is not implemented yet)");
+  // Path constraints belong to the DAI stepper; hysteresis relays are lowered together, by
+  // LowerHysteresis, because their clock rates multiply.
+  MOREAU_ASSERT(std::holds_alternative<PathConstraints>(effect) ||
+                    std::holds_alternative<HysteresisRelay>(effect),
+                "LowerEffect: unknown effect type");
+  return nullptr;
 }
 
 }  // namespace moreau::internal

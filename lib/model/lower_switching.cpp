@@ -22,6 +22,9 @@ class SwitchingBlockBase : public LoweredBlock {
         num_surfaces_(static_cast<int>(effect.surface_names.size())),
         num_modes_(1 << num_surfaces_) {}
 
+  // The mode fields are physical-time dynamics (time-freezing scales them).
+  bool ScaledByClockRate() const override { return true; }
+
  protected:
   // Evaluates the surfaces c (with derivatives per `derivatives`, columns x, [u], t, [p]).
   void EvaluateSurfaces(const BlockContext& context, const ConstVectorRef& y,
@@ -248,6 +251,14 @@ class StewartBlock final : public SwitchingBlockBase {
     z[z0 + 2 * m] = g_min;
   }
 
+  // Some theta must be free: they sum to one.
+  bool AdmitsRoles(const std::vector<PairRole>& roles) const override {
+    for (PairRole role : roles) {
+      if (role != PairRole::kAZero) return true;
+    }
+    return false;
+  }
+
   // Pair k has b = lambda_k = 0 (a_zero false) exactly when mode k is active.
   std::vector<Event> StatusEvents(double t, const std::vector<bool>& before,
                                   const std::vector<bool>& after) const override {
@@ -408,6 +419,17 @@ class HeavisideBlock final : public SwitchingBlockBase {
       z[z0 + nc + j] = std::max(-c_[j], 0.0);
       z[z0 + 2 * nc + j] = std::max(c_[j], 0.0);
     }
+  }
+
+  // alpha_j = 0 and 1 - alpha_j = 0 cannot both be kept.
+  bool AdmitsRoles(const std::vector<PairRole>& roles) const override {
+    for (int j = 0; j < num_surfaces_; ++j) {
+      if (roles[static_cast<std::size_t>(2 * j)] == PairRole::kAZero &&
+          roles[static_cast<std::size_t>(2 * j + 1)] == PairRole::kAZero) {
+        return false;
+      }
+    }
+    return true;
   }
 
   // Surface j: pair 2j has a_zero when alpha_j = 0 (negative side), pair 2j+1 when

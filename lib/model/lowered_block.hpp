@@ -12,6 +12,7 @@ namespace moreau::internal {
 
 // Where a block's unknowns and equations sit in the lowered system.
 struct BlockLayout {
+  int y_offset = 0;     // first internal state of the block in y (after x, before the clock)
   int z_offset = 0;     // first algebraic unknown of the block in z
   int g_offset = 0;     // first algebraic equation in G
   int pair_offset = 0;  // first complementarity pair
@@ -75,6 +76,38 @@ class LoweredBlock {
                                const ConstVectorRef& v, const std::vector<bool>& a_zero,
                                Derivatives derivatives, IndicatorEvaluation* out) = 0;
 
+  // --- internal states and time-freezing (docs/lowering.md, "Hysteresis relays") ---------
+  // Internal states of the block (hysteresis memories), stored in y from layout.y_offset.
+  virtual int num_internal_states() const { return 0; }
+  virtual std::vector<std::string> InternalStateNames() const { return {}; }
+  // Writes the initial values of the internal states into their slots of y.
+  virtual void InitialInternalStates(VectorRef /*y*/) const {}
+  // True if the block's contribution to F belongs to the physical-time dynamics, which
+  // time-freezing multiplies by the clock rate (mode fields of switching surfaces). False for
+  // multipliers (moving sets: lambda adapts, and scaling it would leave it undetermined while
+  // time is frozen) and for the time-freezing block itself.
+  virtual bool ScaledByClockRate() const { return false; }
+  // Time-freezing blocks only: the clock rate P(z) (1 when physical time runs, 0 while it is
+  // frozen) and dP/dz (a row of length n_z).
+  virtual bool HasClockRate() const { return false; }
+  virtual double ClockRate(const ConstVectorRef& /*z*/, Eigen::RowVectorXd* /*d_rate_dz*/) const {
+    return 1.0;
+  }
+  // Per relay of the block: -1 while it is in a mode (physical time runs), otherwise the
+  // memory value (0 or 1) it is travelling to while physical time is frozen.
+  virtual std::vector<int> MemoryTargets(const std::vector<bool>& /*a_zero*/) const { return {}; }
+  // Events implied by the statuses decided at the initial time (a relay whose memory is
+  // inconsistent with its input and is re-initialized while time is frozen).
+  virtual std::vector<Event> InitialEvents(double /*t*/,
+                                           const std::vector<bool>& /*a_zero*/) const {
+    return {};
+  }
+
+  // False if the block-local pair roles of a velocity-level assignment are contradictory by
+  // construction (e.g. every theta of a Stewart subsystem kept at zero although they sum to
+  // one), so that DecideStatuses need not try it.
+  virtual bool AdmitsRoles(const std::vector<PairRole>& /*roles*/) const { return true; }
+
   // Events implied by a change of the block's pair statuses between two times:
   // a_zero[k] is true when pair k has a_k = 0 (its first side vanishes), false when b_k = 0.
   virtual std::vector<Event> StatusEvents(double t, const std::vector<bool>& before,
@@ -95,5 +128,8 @@ void AddHessianDirection(const BlockContext& context, const SmoothFunction& func
 std::unique_ptr<LoweredBlock> LowerMovingSet(const Scene& scene, const MovingSet& set);
 std::unique_ptr<LoweredBlock> LowerStewart(const Scene& scene, const SwitchingSurfaces& effect);
 std::unique_ptr<LoweredBlock> LowerHeaviside(const Scene& scene, const SwitchingSurfaces& effect);
+// All hysteresis relays of a scene in one time-freezing block (their clock rates multiply).
+std::unique_ptr<LoweredBlock> LowerHysteresis(const Scene& scene,
+                                              const std::vector<HysteresisRelay>& relays);
 
 }  // namespace moreau::internal

@@ -50,18 +50,15 @@ LoweredSystem& LoweredSystem::operator=(const LoweredSystem& other) {
 
 void LoweredSystem::Build() {
   blocks_.clear();
-  state_names_ = scene_.state_names;
-  state_names_.push_back("clock");
-  num_states_ = scene_.num_states() + 1;
+  clock_rate_block_ = -1;
   num_algebraic_ = num_equations_ = num_pairs_ = 0;
   algebraic_names_.clear();
   pairs_.clear();
   continuous_algebraic_.clear();
   differentiated_.clear();
-  for (const Effect& effect : scene_.effects) {
-    std::unique_ptr<internal::LoweredBlock> block = internal::LowerEffect(scene_, effect, options_);
-    if (!block) continue;
-    block->layout = {num_algebraic_, num_equations_, num_pairs_};
+  relay_names_.clear();
+  auto add = [this](std::unique_ptr<internal::LoweredBlock> block, int y_offset) {
+    block->layout = {y_offset, num_algebraic_, num_equations_, num_pairs_};
     num_algebraic_ += block->num_algebraic();
     num_equations_ += block->num_equations();
     num_pairs_ += block->num_pairs();
@@ -72,8 +69,28 @@ void LoweredSystem::Build() {
       info.block = static_cast<int>(blocks_.size());
       pairs_.push_back(info);
     }
+    if (block->HasClockRate()) clock_rate_block_ = static_cast<int>(blocks_.size());
     blocks_.push_back(std::move(block));
+  };
+  std::vector<HysteresisRelay> relays;
+  for (const Effect& effect : scene_.effects) {
+    if (const auto* relay = std::get_if<HysteresisRelay>(&effect)) {
+      relays.push_back(*relay);
+      relay_names_.push_back(relay->name);
+      continue;
+    }
+    std::unique_ptr<internal::LoweredBlock> block = internal::LowerEffect(scene_, effect, options_);
+    if (block) add(std::move(block), scene_.num_states());
   }
+  // All relays share one time-freezing block; its memories follow the scene states.
+  state_names_ = scene_.state_names;
+  if (!relays.empty()) {
+    auto block = internal::LowerHysteresis(scene_, relays);
+    for (const std::string& name : block->InternalStateNames()) state_names_.push_back(name);
+    add(std::move(block), scene_.num_states());
+  }
+  state_names_.push_back("clock");
+  num_states_ = static_cast<int>(state_names_.size());
   MOREAU_ASSERT(num_algebraic_ == num_equations_ + num_pairs_,
                 "lowered stage system is not square");
   inputs_ = scene_.InputValues(scene_.initial_time);
@@ -95,8 +112,43 @@ void LoweredSystem::Build() {
 Vector LoweredSystem::InitialState() const {
   Vector y(num_states_);
   y.head(scene_.num_states()) = scene_.initial_state;
+  for (const auto& block : blocks_) block->InitialInternalStates(y);
   y[clock_index()] = scene_.initial_time;
   return y;
+}
+
+namespace {
+// The slice of per-pair statuses belonging to one block.
+std::vector<bool> BlockStatuses(const std::vector<bool>& a_zero,
+                                const internal::LoweredBlock& block) {
+  const auto first = a_zero.begin() + block.layout.pair_offset;
+  return std::vector<bool>(first, first + block.num_pairs());
+}
+}  // namespace
+
+std::vector<int> LoweredSystem::MemoryTargets(const std::vector<bool>& a_zero) const {
+  MOREAU_ASSERT(static_cast<int>(a_zero.size()) == num_pairs_, "wrong number of statuses");
+  if (clock_rate_block_ < 0) return {};
+  const auto& block = *blocks_[static_cast<std::size_t>(clock_rate_block_)];
+  return block.MemoryTargets(BlockStatuses(a_zero, block));
+}
+
+bool LoweredSystem::TimeFrozen(const std::vector<bool>& a_zero) const {
+  for (int target : MemoryTargets(a_zero)) {
+    if (target >= 0) return true;
+  }
+  return false;
+}
+
+std::vector<Event> LoweredSystem::InitialEvents(double t, const std::vector<bool>& a_zero) const {
+  MOREAU_ASSERT(static_cast<int>(a_zero.size()) == num_pairs_, "wrong number of statuses");
+  std::vector<Event> events;
+  for (const auto& block : blocks_) {
+    for (Event& event : block->InitialEvents(t, BlockStatuses(a_zero, *block))) {
+      events.push_back(std::move(event));
+    }
+  }
+  return events;
 }
 
 Vector LoweredSystem::InitialAlgebraicGuess(const Vector& y, const Vector* previous) const {
@@ -128,13 +180,8 @@ std::vector<Event> LoweredSystem::StatusEvents(double t, const std::vector<bool>
                 "StatusEvents: wrong number of pair statuses");
   std::vector<Event> events;
   for (const auto& block : blocks_) {
-    const auto first = before.begin() + block->layout.pair_offset;
-    const auto last = first + block->num_pairs();
-    const std::vector<bool> block_before(first, last);
-    const std::vector<bool> block_after(
-        after.begin() + block->layout.pair_offset,
-        after.begin() + block->layout.pair_offset + block->num_pairs());
-    for (Event& event : block->StatusEvents(t, block_before, block_after)) {
+    for (Event& event :
+         block->StatusEvents(t, BlockStatuses(before, *block), BlockStatuses(after, *block))) {
       events.push_back(std::move(event));
     }
   }
@@ -217,7 +264,30 @@ void LoweredSystem::Evaluate(const ConstVectorRef& y, const ConstVectorRef& z,
   }
 
   internal::BlockContext context{nx, clock, &inputs_, &parameters_};
-  for (const auto& block : blocks_) block->Evaluate(context, y, z, derivatives, out);
+  if (clock_rate_block_ < 0) {
+    for (const auto& block : blocks_) block->Evaluate(context, y, z, derivatives, out);
+    return;
+  }
+  // Time-freezing: the physical-time dynamics (f, the clock and the switching modes) run at
+  // the clock rate P(z): F = P F_phys, F_z = P F_phys_z + F_phys dP/dz.
+  for (const auto& block : blocks_) {
+    if (block->ScaledByClockRate()) block->Evaluate(context, y, z, derivatives, out);
+  }
+  const double rate = blocks_[static_cast<std::size_t>(clock_rate_block_)]->ClockRate(
+      z, with_states ? &rate_gradient_ : nullptr);
+  if (with_states) {
+    out->F_z *= rate;
+    out->F_z.noalias() += out->F * rate_gradient_;
+    out->F_y *= rate;
+  }
+  if (with_all) {
+    out->F_u *= rate;
+    out->F_p *= rate;
+  }
+  out->F *= rate;
+  for (const auto& block : blocks_) {
+    if (!block->ScaledByClockRate()) block->Evaluate(context, y, z, derivatives, out);
+  }
 }
 
 }  // namespace moreau

@@ -357,6 +357,12 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
       trial[static_cast<std::size_t>(k)] =
           (jump_zero == continuous_a) ? PairRole::kBZero : PairRole::kAZero;
     }
+    bool admitted = true;
+    for (const auto& block : blocks_) {
+      const auto first = trial.begin() + block->layout.pair_offset;
+      admitted &= block->AdmitsRoles(std::vector<PairRole>(first, first + block->num_pairs()));
+    }
+    if (!admitted) continue;
     VelocitySystem system(*this, y, trial);
     const SemismoothNewtonResult result = newton.Solve(system, guess);
     if (!result.converged()) continue;

@@ -342,6 +342,31 @@ TEST(FesdSensitivityTest, TimeSteppingDerivativeIsWrongAcrossTheSwitch) {
       << "time-stepping derivative " << stepped << ", exact " << exact;
 }
 
+// A switch exactly on a step boundary is found at the step end, not by an event equation; the
+// saltation matrix must still carry the dependence of its time on the data. F2a (x' = below
+// for x < 0, above for x > 0, both plus slope * t; x0 = -1) switches at t_s = 0.5 = 5 h, and
+// Radau IIA is exact for its polynomial pieces, so the derivatives are exact:
+// x(T) = int_{t_s}^T (above + slope t) dt with t_s = -x0/below at slope = 0.
+TEST(FesdSensitivityTest, SwitchOnAStepBoundaryUsesTheSaltationMatrix) {
+  const Scene scene = MakeScene("F2a");
+  FesdOptions options;
+  options.stages = 2;
+  options.step_size = 0.1;
+  options.sensitivities = true;
+  const FesdResult result = SimulateFesd(scene, options);
+  ASSERT_EQ(result.status, FesdStatus::kSuccess) << result.message;
+  ASSERT_EQ(result.events.size(), 1u);
+  ASSERT_EQ(result.events[0].t, 0.5);  // on the boundary of the fifth step
+  const double below = 2.0, above = 0.2, x0 = -1.0, tf = 1.5, ts = 0.5;
+  constexpr double kExact = 1e-12;  // polynomial pieces: round-off only
+  EXPECT_NEAR(result.sensitivities.initial_state(0, 0), above / below, kExact);
+  // Parameters (below, above, slope).
+  EXPECT_NEAR(result.sensitivities.parameters(0, 0), -above * x0 / (below * below), kExact);
+  EXPECT_NEAR(result.sensitivities.parameters(0, 1), tf - ts, kExact);
+  EXPECT_NEAR(result.sensitivities.parameters(0, 2),
+              (tf * tf - ts * ts) / 2 + above * ts * ts / (2 * below), kExact);
+}
+
 TEST(FesdTest, WithoutEffectsFesdIsRadauIIA) {
   // No pairs: every element is a Radau IIA step; N_fe = 1 reproduces the smooth integrator.
   const Scene scene = MakeScene("hopf");

@@ -2,6 +2,7 @@
 
 #include <random>
 
+#include "../problems/test_scenes.hpp"
 #include "moreau/model/lowered_system.hpp"
 #include "moreau/scenes/catalog.hpp"
 
@@ -12,51 +13,6 @@ namespace {
 // ~1e-10 |f|; derivatives of O(1)-O(10) functions agree to this relative tolerance.
 constexpr double kFiniteDifference = 1e-6;
 constexpr double kDerivativeAgreement = 1e-6;
-
-// A two-surface Filippov scene (four modes) and a moving set with a projection subspace.
-Scene TwoSurfaceScene() {
-  Scene scene;
-  scene.name = "two_surfaces";
-  scene.state_names = {"a", "b"};
-  scene.initial_state = Vector{{0.3, -0.2}};
-  scene.final_time = 1.0;
-  const int k = scene.AddParameter("k", 1.5, "coefficient");
-  InputSpec input;
-  input.name = "u";
-  input.signal.values = {0.7};
-  scene.inputs.push_back(input);
-  SwitchingSurfaces switching;
-  switching.name = "quadrants";
-  switching.surface_names = {"c0", "c1"};
-  switching.surfaces = MakeSmoothFunction(
-      "c", 2, [k](const auto& x, const auto& u, const auto& t, const auto& p, auto& out) {
-        using std::sin;
-        out[0] = x[0] - 0.1 * sin(t) + p[k] * u[0] * x[1] * x[1];
-        out[1] = x[1] + x[0] * x[0] * p[k];
-      });
-  switching.mode_names = {"m0", "m1", "m2", "m3"};
-  for (int mode = 0; mode < 4; ++mode) {
-    switching.modes.push_back(MakeSmoothFunction(
-        "f" + std::to_string(mode), 2,
-        [mode, k](const auto& x, const auto& u, const auto& t, const auto& p, auto& out) {
-          using std::cos;
-          out[0] = (mode + 1.0) * x[1] + u[0] * t;
-          out[1] = -p[k] * x[0] * (mode - 1.5) + cos(x[0] * x[1]);
-        }));
-  }
-  scene.effects.push_back(switching);
-  MovingSet set;
-  set.name = "disc";
-  set.constraint_names = {"inside"};
-  set.constraints = MakeSmoothFunction(
-      "disc.c", 1, [k](const auto& x, const auto&, const auto& t, const auto& p, auto& out) {
-        using std::cos;
-        out[0] = 4.0 - (x[0] - cos(t)) * (x[0] - cos(t)) - p[k] * x[1] * x[1] * x[0];
-      });
-  set.projection_basis = Matrix{{1.0}, {0.0}};  // project along the first state only
-  scene.effects.push_back(set);
-  return scene;
-}
 
 // Checks every derivative block of `system` at (y, z) against central differences.
 void CheckDerivatives(LoweredSystem* system, const Vector& y, const Vector& z,
@@ -137,7 +93,9 @@ class LoweringDerivativeTest
 
 TEST_P(LoweringDerivativeTest, AllBlocksMatchCentralDifferences) {
   const auto& [name, form] = GetParam();
-  const Scene scene = name == "two_surfaces" ? TwoSurfaceScene() : MakeScene(name);
+  const Scene scene = name == "two_surfaces"       ? testing::TwoSurfaceScene()
+                      : name == "mixed_hysteresis" ? testing::MixedHysteresisScene()
+                                                   : MakeScene(name);
   LoweringOptions options;
   options.switching_form = form;
   LoweredSystem system(scene, options);
@@ -161,7 +119,11 @@ INSTANTIATE_TEST_SUITE_P(
                       std::pair{std::string("F2c"), SwitchingForm::kStewart},
                       std::pair{std::string("F2c"), SwitchingForm::kHeaviside},
                       std::pair{std::string("two_surfaces"), SwitchingForm::kStewart},
-                      std::pair{std::string("two_surfaces"), SwitchingForm::kHeaviside}),
+                      std::pair{std::string("two_surfaces"), SwitchingForm::kHeaviside},
+                      std::pair{std::string("H2"), SwitchingForm::kStewart},
+                      std::pair{std::string("H3"), SwitchingForm::kStewart},
+                      std::pair{std::string("mixed_hysteresis"), SwitchingForm::kStewart},
+                      std::pair{std::string("mixed_hysteresis"), SwitchingForm::kHeaviside}),
     [](const auto& test_info) {
       return test_info.param.first + "_" + ToString(test_info.param.second);
     });
@@ -176,7 +138,8 @@ TEST(LoweringTest, SizesAreSquarePerStageAndOnlyDeclaredEffectsCost) {
   EXPECT_EQ(sweeping.num_pairs(), 2);
   LoweringOptions heaviside;
   heaviside.switching_form = SwitchingForm::kHeaviside;
-  const LoweredSystem stewart(TwoSurfaceScene()), step(TwoSurfaceScene(), heaviside);
+  const LoweredSystem stewart(testing::TwoSurfaceScene()),
+      step(testing::TwoSurfaceScene(), heaviside);
   // Stewart: 4 modes -> theta, lambda (4 each) and mu; plus the disc's lambda.
   EXPECT_EQ(stewart.num_algebraic(), 2 * 4 + 1 + 1);
   EXPECT_EQ(stewart.num_equations(), 4 + 1);
@@ -200,6 +163,64 @@ TEST(LoweringTest, InitialGuessSelectsTheRegion) {
   PointEvaluation e;
   system.Evaluate(Vector{{2.0, 0.0, 0.0}}, z, Derivatives::kNone, &e);
   EXPECT_LE(e.G.lpNorm<Eigen::Infinity>(), 1e-15);
+}
+
+TEST(LoweringTest, HysteresisRelaysAddMemoriesAndStewartRegions) {
+  const LoweredSystem h3(MakeScene("H3"));
+  // y = (xa, xb, thermostat_a.w, thermostat_b.w, clock); 9 unknowns, 5 equations, 4 pairs
+  // per relay.
+  EXPECT_EQ(h3.num_states(), 5);
+  EXPECT_EQ(h3.state_names()[2], "thermostat_a.w");
+  EXPECT_EQ(h3.num_algebraic(), 18);
+  EXPECT_EQ(h3.num_equations(), 10);
+  EXPECT_EQ(h3.num_pairs(), 8);
+  EXPECT_TRUE(h3.time_freezing());
+  const Vector y0 = h3.InitialState();
+  EXPECT_EQ(y0[2], 0.0);  // room a starts with the heater on (w = 0)
+  EXPECT_EQ(y0[3], 1.0);  // room b with the heater off
+  // At y0 both relays lie on a region boundary (w = 0: R1/R2; w = 1 with psi > 1: R3/R4):
+  // the guess splits theta evenly, which is the sliding value, and P = 1.
+  const Vector z = h3.InitialAlgebraicGuess(y0);
+  EXPECT_EQ(z.segment(0, 4), Vector({{0.5, 0.5, 0.0, 0.0}}).eval());
+  EXPECT_EQ(z.segment(9, 4), Vector({{0.0, 0.0, 0.5, 0.5}}).eval());
+  PointEvaluation e;
+  h3.Evaluate(y0, z, Derivatives::kNone, &e);
+  EXPECT_LE(e.G.lpNorm<Eigen::Infinity>(), 1e-15);
+  EXPECT_EQ(e.F[4], 1.0);  // clock' = P = 1
+  EXPECT_EQ(e.F[2], 0.0);  // memories at rest
+  EXPECT_EQ(e.F[3], 0.0);
+  // Physical dynamics of room a (heater on): -0.2 * 15 + 5; room b (off): -0.3 * 22.
+  EXPECT_DOUBLE_EQ(e.F[0], 2.0);
+  EXPECT_DOUBLE_EQ(e.F[1], -6.6);
+  // Relay b jumping (theta_to_A = 1): physical time and both rooms freeze.
+  Vector frozen = z;
+  frozen.segment(9, 4) << 0.0, 1.0, 0.0, 0.0;
+  h3.Evaluate(y0, frozen, Derivatives::kNone, &e);
+  EXPECT_EQ(e.F[0], 0.0);
+  EXPECT_EQ(e.F[1], 0.0);
+  EXPECT_EQ(e.F[4], 0.0);
+  EXPECT_EQ(e.F[3], -1.0);  // w_b travels down at the auxiliary gain a = 1
+}
+
+TEST(LoweringTest, RelayStatusesNameTheJumpAndFreezeTime) {
+  const LoweredSystem system(MakeScene("H1"));
+  // Regions (mode_A, to_A, to_B, mode_B); a_zero false = region active.
+  const std::vector<bool> sliding_a = {false, false, true, true};
+  const std::vector<bool> jumping_to_b = {true, true, false, true};
+  const std::vector<bool> sliding_b = {true, true, false, false};
+  EXPECT_FALSE(system.TimeFrozen(sliding_a));
+  EXPECT_TRUE(system.TimeFrozen(jumping_to_b));
+  EXPECT_EQ(system.MemoryTargets(jumping_to_b), std::vector<int>{1});
+  EXPECT_EQ(system.MemoryTargets(sliding_b), std::vector<int>{-1});
+  const auto events = system.StatusEvents(3.0, sliding_a, jumping_to_b);
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events[0].kind, EventKind::kRelaySwitch);
+  EXPECT_EQ(events[0].what, "thermostat");
+  EXPECT_EQ(events[0].detail, "A -> B");
+  // The end of the frozen interval is not another switch.
+  EXPECT_TRUE(system.StatusEvents(3.0, jumping_to_b, sliding_b).empty());
+  EXPECT_EQ(system.InitialEvents(0.0, jumping_to_b).size(), 1u);
+  EXPECT_TRUE(system.InitialEvents(0.0, sliding_a).empty());
 }
 
 TEST(LoweringTest, StatusEventsNameTheSwitch) {

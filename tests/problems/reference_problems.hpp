@@ -83,4 +83,57 @@ inline ReferenceProblem F4() {
       "F4", {1.0 / 3}, [](double t) { return Vector{{t < 1.0 / 3 ? -1 + 3 * t : t - 1.0 / 3}}; }};
 }
 
+// A room with a thermostat (H1 and H3): x' = -k x + q with the heater on (w = 0), -k x with
+// it off (w = 1); off when x reaches x_off, on when it falls to x_on. The closed form follows
+// the exponentials phase by phase: heating from a to b takes (1/k) ln((q/k - a)/(q/k - b)),
+// cooling from a to b takes (1/k) ln(a/b). A memory inconsistent with x0 (w0 = 0 with
+// x0 >= x_off, w0 = 1 with x0 <= x_on) is re-initialized at t0.
+struct Thermostat {
+  double k = 0.2, q = 5.0, x_on = 18.0, x_off = 20.0, x0 = 15.0;
+  int w0 = 0;
+
+  struct Switch {
+    double t;
+    double x;     // x at the switch (x_off or x_on)
+    int w_after;  // memory after it
+  };
+  // Every switch in (t0, tf] (and a re-initialization at t0 = 0).
+  std::vector<Switch> Switches(double tf) const {
+    std::vector<Switch> switches;
+    int w = w0;
+    if (w == 0 && x0 >= x_off) w = 1;
+    if (w == 1 && x0 <= x_on) w = 0;
+    if (w != w0) switches.push_back({0.0, x0, w});
+    double t = 0.0, x = x0;
+    while (true) {
+      const double target = w == 0 ? x_off : x_on;
+      const double duration =
+          w == 0 ? std::log((q / k - x) / (q / k - target)) / k : std::log(x / target) / k;
+      if (t + duration > tf) break;
+      t += duration;
+      x = target;
+      w = 1 - w;
+      switches.push_back({t, x, w});
+    }
+    return switches;
+  }
+  // x(t).
+  double State(double t) const {
+    double start = 0.0, x = x0;
+    int w = w0;
+    for (const Switch& s : Switches(t)) {
+      start = s.t;
+      x = s.x;
+      w = s.w_after;
+    }
+    const double dt = t - start;
+    return w == 0 ? q / k + (x - q / k) * std::exp(-k * dt) : x * std::exp(-k * dt);
+  }
+};
+
+// H1: the seed's tutorial thermostat.
+inline Thermostat H1() { return {}; }
+// H3: room a as H1; room b: x' = -0.3 x + 7 (on), off at 21, on at 19, x(0) = 22, heater off.
+inline Thermostat H3RoomB() { return {0.3, 7.0, 19.0, 21.0, 22.0, 1}; }
+
 }  // namespace moreau::testing

@@ -125,10 +125,52 @@ TEST(CliTest, ReferenceScenesRunWithFesd) {
     std::string header;
     std::getline(elements, header);
     EXPECT_EQ(header,
-              "t_start,length,ends_at_switch,newton_iterations,newton_residual,complementarity,"
-              "cross_complementarity");
+              "t_start,physical_start,length,frozen,ends_at_switch,newton_iterations,"
+              "newton_residual,complementarity,cross_complementarity");
     EXPECT_TRUE(std::filesystem::exists(directory / "stages.csv")) << scene;
+    EXPECT_FALSE(std::filesystem::exists(directory / "relays.csv")) << scene;
   }
+}
+
+TEST(CliTest, HysteresisScenesReportPhysicalTimeAndRelaySignals) {
+  const std::filesystem::path directory =
+      std::filesystem::temp_directory_path() / "moreau_cli_test_hysteresis";
+  for (const char* scene : {"H1", "H2", "H3"}) {
+    std::filesystem::remove_all(directory);
+    const Outcome outcome =
+        RunCli(std::string("run ") + scene + " --quiet --no-plot --out " + directory.string());
+    EXPECT_EQ(outcome.exit_code, 0) << scene << "\n" << outcome.output;
+    EXPECT_NE(outcome.output.find("integrator  fesd"), std::string::npos) << outcome.output;
+    EXPECT_NE(outcome.output.find("relay_switch"), std::string::npos) << outcome.output;
+    std::ifstream json_file(directory / "summary.json");
+    const nlohmann::json summary = nlohmann::json::parse(json_file);
+    EXPECT_EQ(summary["status"], "success") << scene;
+    ASSERT_FALSE(summary["relays"].empty()) << scene;
+    EXPECT_FALSE(summary["relays"][0]["jumps"].empty()) << scene;
+    // Physical time: strictly increasing, ending at the horizon.
+    std::ifstream csv(directory / "trajectory.csv");
+    std::string line;
+    std::getline(csv, line);
+    double previous = -1.0, t = 0.0;
+    while (std::getline(csv, line)) {
+      t = std::stod(line.substr(0, line.find(',')));
+      EXPECT_GT(t, previous) << scene;
+      previous = t;
+    }
+    EXPECT_DOUBLE_EQ(t, summary["t_final"].get<double>());
+    EXPECT_TRUE(std::filesystem::exists(directory / "relays.csv")) << scene;
+    EXPECT_TRUE(std::filesystem::exists(directory / "numerical.csv")) << scene;
+  }
+  std::filesystem::remove_all(directory);
+  const Outcome numerical =
+      RunCli("run H1 --numerical-time --quiet --no-plot --out " + directory.string());
+  EXPECT_EQ(numerical.exit_code, 0) << numerical.output;
+  std::ifstream csv(directory / "trajectory.csv");
+  std::string header;
+  std::getline(csv, header);
+  EXPECT_EQ(header.rfind("t,x,thermostat.w,clock,", 0), 0u) << header;
+  ExpectUsageError("run S3 --numerical-time", "hysteresis relays only");
+  ExpectUsageError("run H1 --integrator timestepping", "hysteresis relay 'thermostat'");
 }
 
 TEST(CliTest, ListAndShowDescribeScenes) {

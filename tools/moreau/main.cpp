@@ -171,10 +171,18 @@ int Run(Scene scene, const tool::RunSettings& settings, const std::string& out_d
     tool::WriteElementsCsv(report, out_directory + "/elements.csv");
     extra_files += ", " + out_directory + "/elements.csv";
   }
+  if (!report.relays.empty()) {
+    tool::WriteRelaysCsv(report, out_directory + "/relays.csv");
+    extra_files += ", " + out_directory + "/relays.csv";
+  }
+  if (report.numerical_trajectory.size() > 0 && !settings.numerical_time) {
+    tool::WriteTrajectoryCsv(report.numerical_trajectory, out_directory + "/numerical.csv");
+    extra_files += ", " + out_directory + "/numerical.csv";
+  }
   tool::WriteSummaryJson(report, out_directory + "/summary.json");
   const std::string image = plot ? tool::WritePlot(report, out_directory) : "";
 
-  const auto& names = report.trajectory.state_names;
+  const auto& names = report.state_names;
   std::ostringstream state;
   state.precision(12);
   for (std::size_t i = 0; i < names.size() && i < 8; ++i) {
@@ -197,6 +205,10 @@ int Run(Scene scene, const tool::RunSettings& settings, const std::string& out_d
                   e.what.c_str(), e.detail.c_str());
     }
     if (report.events.size() > 10) std::printf("  ... (all in summary.json)\n");
+  }
+  for (const moreau::RelaySignal& relay : report.relays) {
+    std::printf("relay       %s: w = %d at t0, %zu jumps, w = %d at t_final\n", relay.relay.c_str(),
+                relay.initial_value, relay.jump_times.size(), relay.FinalValue());
   }
   std::printf("steps       %ld\n", report.num_steps);
   std::printf("newton      %ld iterations\n", report.num_newton_iterations);
@@ -249,6 +261,10 @@ int main(int argc, char** argv) {
                                     "lowering of switching surfaces: stewart or heaviside");
   auto* fe = run->add_option("--fe", settings.finite_elements,
                              "finite elements per integration step (fesd)");
+  auto* numerical_time = run->add_flag(
+      "--numerical-time", settings.numerical_time,
+      "hysteresis scenes (fesd): trajectory.csv in numerical time tau, with the relay "
+      "memories and the clock (default: physical time)");
   run->add_flag("--no-plot", no_plot, "do not write trajectory.png");
   run->add_flag("--quiet", quiet, "no progress output");
 
@@ -270,7 +286,7 @@ int main(int argc, char** argv) {
     const std::vector<std::pair<CLI::Option*, std::string>> tracked = {
         {stages, "stages"},       {h, "h"},       {adaptive, "adaptive"},
         {rtol, "rtol"},           {atol, "atol"}, {linear, "linear-solver"},
-        {switching, "switching"}, {fe, "fe"}};
+        {switching, "switching"}, {fe, "fe"},     {numerical_time, "numerical-time"}};
     for (const auto& [option, name] : tracked) {
       if (option->count() > 0) settings.given.insert(name);
     }

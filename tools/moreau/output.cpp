@@ -1,5 +1,6 @@
 #include "output.hpp"
 
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -37,6 +38,32 @@ void WriteTrajectoryCsv(const Trajectory& trajectory, const std::string& path) {
   }
 }
 
+void WriteRelaysCsv(const RunReport& report, const std::string& path) {
+  std::ofstream out(path);
+  RequireArgument(out.good(), "cannot write '", path, "'");
+  out << "t";
+  for (const RelaySignal& relay : report.relays) out << "," << relay.relay;
+  out << "\n" << std::setprecision(17);
+  std::vector<double> times;
+  for (const RelaySignal& relay : report.relays) {
+    times.insert(times.end(), relay.jump_times.begin(), relay.jump_times.end());
+  }
+  std::sort(times.begin(), times.end());
+  times.erase(std::unique(times.begin(), times.end()), times.end());
+  const double t0 = report.trajectory.t.empty() ? 0.0 : report.trajectory.t.front();
+  out << t0;
+  for (const RelaySignal& relay : report.relays) out << "," << relay.initial_value;
+  out << "\n";
+  for (double t : times) {
+    out << t;
+    for (const RelaySignal& relay : report.relays) out << "," << relay.ValueAt(t);
+    out << "\n";
+  }
+  out << report.final_time;
+  for (const RelaySignal& relay : report.relays) out << "," << relay.FinalValue();
+  out << "\n";
+}
+
 void WriteElementsCsv(const RunReport& report, const std::string& path) {
   std::ofstream out(path);
   RequireArgument(out.good(), "cannot write '", path, "'");
@@ -59,8 +86,8 @@ nlohmann::json SummaryJson(const RunReport& report) {
   summary["message"] = report.message;
   summary["t_final"] = report.final_time;
   nlohmann::json x_final = nlohmann::json::object();
-  for (std::size_t i = 0; i < report.trajectory.state_names.size(); ++i) {
-    x_final[report.trajectory.state_names[i]] = report.final_state[static_cast<Eigen::Index>(i)];
+  for (std::size_t i = 0; i < report.state_names.size(); ++i) {
+    x_final[report.state_names[i]] = report.final_state[static_cast<Eigen::Index>(i)];
   }
   summary["x_final"] = x_final;
   nlohmann::json events = nlohmann::json::array();
@@ -71,6 +98,20 @@ nlohmann::json SummaryJson(const RunReport& report) {
                       {"detail", event.detail}});
   }
   summary["events"] = events;
+  if (!report.relays.empty()) {
+    nlohmann::json relays = nlohmann::json::array();
+    for (const RelaySignal& relay : report.relays) {
+      nlohmann::json jumps = nlohmann::json::array();
+      for (std::size_t k = 0; k < relay.jump_times.size(); ++k) {
+        jumps.push_back({{"t", relay.jump_times[k]}, {"w", relay.values[k]}});
+      }
+      relays.push_back({{"relay", relay.relay},
+                        {"initial", relay.initial_value},
+                        {"jumps", jumps},
+                        {"final", relay.FinalValue()}});
+    }
+    summary["relays"] = relays;
+  }
   summary["stats"] = report.stats;
   return summary;
 }
@@ -94,12 +135,18 @@ std::string WritePlot(const RunReport& report, const std::string& directory) {
          << "set datafile separator ','\n"
          << "set key outside right top\n"
          << "set grid\n"
-         << "set xlabel 't'\n"
+         << "set xlabel '" << (report.numerical_time_axis ? "numerical time tau" : "t") << "'\n"
          << "set title '" << report.scene << " (" << report.integrator << ", " << report.status
          << (shown < names.size() ? ", first " + std::to_string(shown) + " states" : "") << ")'\n";
-  for (const Event& event : report.events) {
+  for (const Event& event : report.numerical_time_axis ? std::vector<Event>() : report.events) {
     script << "set arrow from " << std::setprecision(17) << event.t << ", graph 0 to " << event.t
            << ", graph 1 nohead dashtype 2 lc rgb '#999999'\n";
+  }
+  // Relay memories (physical time) in a lower panel.
+  const bool relays = !report.relays.empty() && !report.numerical_time_axis &&
+                      fs::exists(directory + "/relays.csv");
+  if (relays) {
+    script << "set multiplot layout 2,1\nset lmargin at screen 0.08\nset rmargin at screen 0.8\n";
   }
   script << "plot ";
   for (std::size_t i = 0; i < shown; ++i) {
@@ -107,6 +154,14 @@ std::string WritePlot(const RunReport& report, const std::string& directory) {
            << names[i] << "'";
   }
   script << "\n";
+  if (relays) {
+    script << "unset title\nset ylabel 'w'\nset yrange [-0.1:1.1]\nplot ";
+    for (std::size_t i = 0; i < report.relays.size(); ++i) {
+      script << (i ? ", " : "") << "'" << directory << "/relays.csv' using 1:" << i + 2
+             << " with steps lw 2 title '" << report.relays[i].relay << ".w'";
+    }
+    script << "\nunset multiplot\n";
+  }
   script.close();
   const std::string command = "gnuplot '" + script_path + "' 2>&1";
   FILE* pipe = popen(command.c_str(), "r");

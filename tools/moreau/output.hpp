@@ -14,13 +14,18 @@ inline constexpr std::size_t kMaxPlottedStates = 8;
 // Header "t," then the state names, then algebraic names (multipliers) and "h" (the length
 // of the step or element ending at t) where the integrator has them.
 void WriteTrajectoryCsv(const Trajectory& trajectory, const std::string& path);
+// relays.csv: columns t and one per relay; a row at t0 with the initial memories, one per
+// jump time with the memories after it, and one at t_final (a step plot of w(t)).
+void WriteRelaysCsv(const RunReport& report, const std::string& path);
 // elements.csv: one row per finite element (integrators with elements only).
 void WriteElementsCsv(const RunReport& report, const std::string& path);
 // The summary object: scene, integrator, options, status, message, t_final, x_final
-// (state name -> value), events (t, kind, what, detail) and stats.
+// (state name -> value), events (t, kind, what, detail), stats, and for scenes with
+// hysteresis relays "relays" (name, initial, jumps [{t, w}], final).
 nlohmann::json SummaryJson(const RunReport& report);
 void WriteSummaryJson(const RunReport& report, const std::string& path);
-// Draws trajectory.png with gnuplot from DIR/trajectory.csv (events as dashed lines).
+// Draws trajectory.png with gnuplot from DIR/trajectory.csv (events as dashed lines), with
+// the relay memories from DIR/relays.csv in a second panel when the scene has relays.
 // Returns the image path, or "" if gnuplot is unavailable or failed.
 std::string WritePlot(const RunReport& report, const std::string& directory);
 

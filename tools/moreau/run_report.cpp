@@ -10,14 +10,14 @@ namespace moreau::tool {
 
 const std::vector<std::pair<std::string, std::string>>& IntegratorNames() {
   static const std::vector<std::pair<std::string, std::string>> names = {
-      {"auto", "radau for scenes without effects, fesd for moving sets and switching surfaces"},
+      {"auto", "radau for scenes without effects, fesd otherwise"},
       {"radau", "smooth Radau IIA (fixed step or --adaptive); scenes without effects"},
       {"timestepping",
        "fixed-step Radau IIA with stage complementarity (first-order baseline, no switch "
        "detection); moving sets, switching surfaces"},
       {"fesd",
        "FESD Radau IIA: switches on element boundaries, order 2s-1 across switches; moving "
-       "sets, switching surfaces"},
+       "sets, switching surfaces, hysteresis relays (time-freezing)"},
   };
   return names;
 }
@@ -116,7 +116,7 @@ RunReport RunTimeStepping(const Scene& scene, const RunSettings& settings,
 
 RunReport RunFesd(const Scene& scene, const RunSettings& settings,
                   const ProgressCallback& progress) {
-  RequireOnly(settings, {"stages", "h", "fe", "switching", "linear-solver"});
+  RequireOnly(settings, {"stages", "h", "fe", "switching", "linear-solver", "numerical-time"});
   FesdOptions options;
   if (settings.stages_given) options.stages = settings.stages;
   if (settings.step_size_given) options.step_size = settings.step_size;
@@ -140,6 +140,15 @@ RunReport RunFesd(const Scene& scene, const RunSettings& settings,
   report.final_state = result.final_state;
   report.trajectory = result.trajectory;
   report.events = result.events;
+  report.numerical_trajectory = result.numerical_trajectory;
+  report.relays = result.relays;
+  if (settings.numerical_time) {
+    RequireArgument(!result.relays.empty(),
+                    "--numerical-time applies to scenes with hysteresis "
+                    "relays only (elsewhere numerical and physical time coincide)");
+    report.trajectory = result.numerical_trajectory;
+    report.numerical_time_axis = true;
+  }
   const FesdStats& s = result.stats;
   report.stats = {{"num_steps", s.num_steps},
                   {"num_elements", s.num_elements},
@@ -151,17 +160,19 @@ RunReport RunFesd(const Scene& scene, const RunSettings& settings,
                   {"max_cross_complementarity", s.max_cross_complementarity},
                   {"max_complementarity", s.max_complementarity},
                   {"min_element_length", s.min_element_length},
+                  {"frozen_time", s.frozen_time},
                   {"cpu_seconds", s.cpu_seconds}};
   report.stats_summary = s.Summary();
   report.num_steps = s.num_steps;
   report.num_newton_iterations = s.num_newton_iterations;
   report.cpu_seconds = s.cpu_seconds;
   report.stage_trajectory = result.stage_trajectory;
-  report.element_columns = {
-      "t_start",         "length",          "ends_at_switch",       "newton_iterations",
-      "newton_residual", "complementarity", "cross_complementarity"};
+  report.element_columns = {"t_start",         "physical_start",  "length",
+                            "frozen",          "ends_at_switch",  "newton_iterations",
+                            "newton_residual", "complementarity", "cross_complementarity"};
   for (const FesdElement& e : result.elements) {
-    report.element_rows.push_back({e.t_start, e.length, e.ends_at_switch ? 1.0 : 0.0,
+    report.element_rows.push_back({e.t_start, e.physical_start, e.length, e.frozen ? 1.0 : 0.0,
+                                   e.ends_at_switch ? 1.0 : 0.0,
                                    static_cast<double>(e.newton_iterations), e.newton_residual,
                                    e.complementarity, e.cross_complementarity});
   }
@@ -195,6 +206,7 @@ RunReport RunScene(const Scene& scene, const RunSettings& requested,
   }
   report.scene = scene.name;
   report.integrator = settings.integrator;
+  report.state_names = scene.state_names;
   return report;
 }
 

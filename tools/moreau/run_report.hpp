@@ -27,6 +27,7 @@ struct RunSettings {
   int finite_elements = 2;
   std::string switching_form = "stewart";
   std::string linear_solver = "auto";
+  bool numerical_time = false;  // time-freezing scenes: trajectory in numerical time
   std::set<std::string> given;
 };
 
@@ -38,6 +39,7 @@ struct RunReport {
   bool success = false;
   std::string message;
   double final_time = 0.0;
+  std::vector<std::string> state_names;  // the scene's states (the entries of final_state)
   Vector final_state;
   std::vector<Event> events;
   nlohmann::json stats;
@@ -47,6 +49,11 @@ struct RunReport {
   double cpu_seconds = 0.0;
   Trajectory trajectory;
   Trajectory stage_trajectory;  // written to stages.csv when not empty
+  // Time-freezing scenes (hysteresis relays): the numerical-time trajectory (numerical.csv)
+  // and each relay's memory w(t) in physical time (relays.csv, plotted under the states).
+  Trajectory numerical_trajectory;
+  std::vector<RelaySignal> relays;
+  bool numerical_time_axis = false;  // `trajectory` is the numerical-time one
   // Per-element table (element.csv): column names and rows, when the integrator has elements.
   std::vector<std::string> element_columns;
   std::vector<std::vector<double>> element_rows;

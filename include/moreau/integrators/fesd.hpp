@@ -36,8 +36,17 @@
 /// segment. These are the derivatives of the discrete solution map; they converge to those of
 /// the exact flow, whereas the time-stepping baseline misses the dependence of switch times.
 ///
-/// Effects: moving sets and switching surfaces. Hysteresis relays are lowered by
-/// time-freezing (separate issue); path constraints belong to the alpha-method stepper.
+/// Effects: moving sets, switching surfaces and hysteresis relays; path constraints belong
+/// to the alpha-method stepper.
+///
+/// Hysteresis relays are lowered by time-freezing (docs/lowering.md): the integration
+/// variable becomes numerical time tau, in which a relay's memory w travels continuously
+/// between 0 and 1 while the clock (physical time) stands still. Steps have length H in tau;
+/// a step that starts while physical time runs is shortened so that the clock lands exactly
+/// on the next control breakpoint or tf unless a relay switches in it, and after a switch a
+/// new step starts from the clock. The run ends when the clock reaches tf. Results are in
+/// physical time (frozen elements are left out of the trajectories; the memories are
+/// reported as RelaySignal); the numerical-time trajectory is kept for inspection.
 
 #include <string>
 #include <vector>
@@ -52,7 +61,8 @@ namespace moreau {
 struct FesdOptions {
   /// Radau IIA stages s in [1, kMaxRadauStages]; order 2s - 1 (1, 3, 5, 7 for s = 1..4).
   int stages = 3;
-  /// Integration step H > 0 (control interval; steps never cross control breakpoints).
+  /// Integration step H > 0 (control interval; steps never cross control breakpoints). With
+  /// hysteresis relays H is measured in numerical time (see the file comment).
   double step_size = 0.1;
   /// Nominal finite elements per step N_fe >= 1.
   int finite_elements = 2;
@@ -93,8 +103,10 @@ std::string ToString(FesdStatus status);
 
 /// One finite element of the solution.
 struct FesdElement {
-  double t_start = 0.0;         ///< integration time at the element start
-  double length = 0.0;          ///< h
+  double t_start = 0.0;         ///< integration time at the element start (numerical time tau)
+  double physical_start = 0.0;  ///< clock at the element start (= t_start without relays)
+  double length = 0.0;          ///< h (in the integration variable)
+  bool frozen = false;          ///< physical time frozen on it (a relay jumping)
   bool ends_at_switch = false;  ///< a switch lies on its end boundary
   int newton_iterations = 0;    ///< of the solve that produced it (shared by a group)
   /// ||S Phi||_inf of that solve at convergence: collocation, algebraic, status, velocity-level
@@ -127,6 +139,7 @@ struct FesdStats {
   double max_cross_complementarity = 0.0;
   double max_complementarity = 0.0;
   double min_element_length = 0.0;
+  double frozen_time = 0.0;  ///< numerical time spent with physical time frozen (relays)
   double cpu_seconds = 0.0;
 
   FesdStats& operator+=(const FesdStats& other);
@@ -136,11 +149,16 @@ struct FesdStats {
 struct FesdResult {
   FesdStatus status = FesdStatus::kSuccess;
   std::string message;
-  double final_time = 0.0;
+  double final_time = 0.0;      ///< physical time reached (the clock)
   Vector final_state;           ///< scene states
   Vector final_algebraic;       ///< algebraic unknowns at the last stage
-  Trajectory trajectory;        ///< element ends (h column: element lengths)
-  Trajectory stage_trajectory;  ///< every stage point (with record_stages)
+  Trajectory trajectory;        ///< element ends in physical time (h column: element lengths)
+  Trajectory stage_trajectory;  ///< every stage point (with record_stages), physical time
+  /// With hysteresis relays: every element end in numerical time tau (frozen ones included),
+  /// states y = (x, relay memories w, clock).
+  Trajectory numerical_trajectory;
+  /// With hysteresis relays: each relay's memory w(t) in physical time.
+  std::vector<RelaySignal> relays;
   std::vector<Event> events;
   std::vector<FesdElement> elements;
   FesdSensitivities sensitivities;  ///< with FesdOptions::sensitivities

@@ -26,6 +26,21 @@ struct Trajectory {
   void Append(double time, const Vector& state, const Vector& algebraic_values, double length);
 };
 
+/// The memory w(t) of a hysteresis relay in physical time, a piecewise-constant signal:
+/// initial_value on [t0, jump_times[0]), values[k] on [jump_times[k], jump_times[k + 1]).
+/// A relay whose initial memory is inconsistent with its input jumps at t0.
+struct RelaySignal {
+  std::string relay;
+  int initial_value = 0;
+  std::vector<double> jump_times;
+  std::vector<int> values;  ///< the value after each jump
+
+  /// w(t) (right-continuous: the new value at a jump time).
+  int ValueAt(double t) const;
+  /// The value after the last jump.
+  int FinalValue() const { return values.empty() ? initial_value : values.back(); }
+};
+
 /// Called by integrators with the current time during long runs (may be empty).
 using ProgressCallback = std::function<void(double t)>;
 

@@ -12,7 +12,14 @@
 ///
 /// Only the effects a scene declares are lowered; a scene without effects gives n_z = 0.
 /// The lowering of each effect (gradient form for moving sets, Stewart or Heaviside step
-/// form for switching surfaces) is documented with its equations in docs/lowering.md.
+/// form for switching surfaces, time-freezing for hysteresis relays) is documented with its
+/// equations in docs/lowering.md.
+///
+/// Time-freezing: with hysteresis relays the integration variable is *numerical time* tau,
+/// the internal states are the relay memories w_i, and the clock runs at rate P(z) in {0, 1}
+/// along solutions: 1 while the relays evolve in their modes, 0 while a relay's memory
+/// travels between 0 and 1 (its jump, frozen in physical time). The physical-time dynamics
+/// (smooth f and switching modes) are multiplied by P; moving-set multipliers are not.
 ///
 /// Every complementarity pair has a *continuous side*: the quantity that is continuous in
 /// time along solutions (e.g. c(x, t) for a moving set, lambda_i = g_i - min g in Stewart's
@@ -130,6 +137,18 @@ class LoweredSystem {
   const LoweringOptions& options() const { return options_; }
   int num_states() const { return num_states_; }                ///< n_y
   int num_scene_states() const { return scene_.num_states(); }  ///< n_x (y[0..n_x))
+  /// Hysteresis relays, in the order of their memory states y[n_x + i] (time-freezing).
+  const std::vector<std::string>& relay_names() const { return relay_names_; }
+  /// True if the scene has hysteresis relays: the clock is then not the integration variable.
+  bool time_freezing() const { return !relay_names_.empty(); }
+  /// Per relay under the pair statuses a_zero: -1 while it evolves in a mode, otherwise the
+  /// memory value (0 or 1) it travels to while physical time is frozen (an auxiliary region).
+  std::vector<int> MemoryTargets(const std::vector<bool>& a_zero) const;
+  /// True if physical time is frozen under the pair statuses a_zero (some relay is jumping).
+  bool TimeFrozen(const std::vector<bool>& a_zero) const;
+  /// Events implied by the statuses decided at the initial time: relays whose memory w0 is
+  /// inconsistent with psi(x0) and are re-initialized while time is frozen.
+  std::vector<Event> InitialEvents(double t, const std::vector<bool>& a_zero) const;
   int clock_index() const { return num_states_ - 1; }
   int num_algebraic() const { return num_algebraic_; }  ///< n_z
   int num_equations() const { return num_equations_; }  ///< n_G
@@ -140,7 +159,7 @@ class LoweredSystem {
   const std::vector<std::string>& algebraic_names() const { return algebraic_names_; }
   const std::vector<PairInfo>& pairs() const { return pairs_; }
 
-  /// y0 = (x0, internal initial states, t0).
+  /// y0 = (x0, internal initial states (relay memories w0), t0).
   Vector InitialState() const;
   /// A guess of the algebraic unknowns at state y, for Newton's first iterate: Stewart's
   /// theta selects the region containing y, Heaviside's alpha follows the signs of c, and
@@ -218,6 +237,7 @@ class LoweredSystem {
   int num_equations_ = 0;
   int num_pairs_ = 0;
   std::vector<std::string> state_names_;
+  std::vector<std::string> relay_names_;
   std::vector<std::string> algebraic_names_;
   std::vector<PairInfo> pairs_;
   std::vector<bool> continuous_algebraic_;
@@ -225,10 +245,12 @@ class LoweredSystem {
   Vector inputs_;
   Vector parameters_;
   std::vector<std::unique_ptr<internal::LoweredBlock>> blocks_;
+  int clock_rate_block_ = -1;     // the time-freezing block (hysteresis relays), or -1
   bool sparse_dynamics_ = false;  // dynamics with a hand-written sparse Jacobian
   double nonzeros_fy_ = 0.0;
   mutable Vector x_scratch_, f_scratch_;
   mutable Matrix jac_scratch_;
+  mutable Eigen::RowVectorXd rate_gradient_;
   mutable SparseMatrix sparse_scratch_;
 };
 

@@ -95,9 +95,11 @@ struct HysteresisRelay {
   int upper_threshold = -1;  ///< index of the parameter at which A -> B
   SmoothFunction mode_a;     ///< contribution f_A(x, u, t, p) while w = 0
   SmoothFunction mode_b;     ///< contribution f_B(x, u, t, p) while w = 1
-  int initial_memory = 0;    ///< w(t0) in {0, 1}
-  /// Gain a > 0 of the auxiliary fields gamma(s) = a s^2 / (1 + s^2) of the time-freezing
-  /// reformulation (how fast w travels while physical time is frozen).
+  int initial_memory = 0;    ///< w(t0) in {0, 1}; inconsistent values are re-initialized
+  /// Speed a > 0 of the auxiliary fields of the time-freezing reformulation: w travels
+  /// between 0 and 1 at rate a in numerical time while physical time is frozen, so a jump
+  /// lasts 1/a (docs/lowering.md, "Hysteresis relays", on the departure from the paper's
+  /// gamma(s) = a s^2/(1 + s^2)).
   double auxiliary_gain = 1.0;
 };
 

@@ -1,0 +1,129 @@
+#pragma once
+// Scenes used only by tests: generic enough to exercise every derivative block.
+
+#include <cmath>
+#include <string>
+
+#include "moreau/model/scene.hpp"
+
+namespace moreau::testing {
+
+// Switching surfaces for a scene with parameter k and one input u: 1 or 2 surfaces
+// (2 or 4 modes), with fields depending on x, u, t and p.
+inline SwitchingSurfaces Switching(int k, int surfaces) {
+  SwitchingSurfaces switching;
+  switching.name = "quadrants";
+  switching.surface_names = {"c0", "c1"};
+  switching.surface_names.resize(static_cast<std::size_t>(surfaces));
+  switching.surfaces = MakeSmoothFunction(
+      "c", surfaces,
+      [k, surfaces](const auto& x, const auto& u, const auto& t, const auto& p, auto& out) {
+        using std::sin;
+        out[0] = x[0] - 0.1 * sin(t) + p[k] * u[0] * x[1] * x[1];
+        if (surfaces > 1) out[1] = x[1] + x[0] * x[0] * p[k];
+      });
+  const int modes = 1 << surfaces;
+  for (int mode = 0; mode < modes; ++mode) {
+    switching.mode_names.push_back("m" + std::to_string(mode));
+    switching.modes.push_back(MakeSmoothFunction(
+        "f" + std::to_string(mode), 2,
+        [mode, k](const auto& x, const auto& u, const auto& t, const auto& p, auto& out) {
+          using std::cos;
+          out[0] = (mode + 1.0) * x[1] + u[0] * t;
+          out[1] = -p[k] * x[0] * (mode - 1.5) + cos(x[0] * x[1]);
+        }));
+  }
+  return switching;
+}
+
+// A time-varying disc, projected along the first state only (ePDS with E = e_1).
+inline MovingSet Disc(int k) {
+  MovingSet set;
+  set.name = "disc";
+  set.constraint_names = {"inside"};
+  set.constraints = MakeSmoothFunction(
+      "disc.c", 1, [k](const auto& x, const auto&, const auto& t, const auto& p, auto& out) {
+        using std::cos;
+        out[0] = 4.0 - (x[0] - cos(t)) * (x[0] - cos(t)) - p[k] * x[1] * x[1] * x[0];
+      });
+  set.projection_basis = Matrix{{1.0}, {0.0}};
+  return set;
+}
+
+// A two-surface Filippov scene (four modes) and a moving set with a projection subspace.
+inline Scene TwoSurfaceScene() {
+  Scene scene;
+  scene.name = "two_surfaces";
+  scene.state_names = {"a", "b"};
+  scene.initial_state = Vector{{0.3, -0.2}};
+  scene.final_time = 1.0;
+  const int k = scene.AddParameter("k", 1.5, "coefficient");
+  InputSpec input;
+  input.name = "u";
+  input.signal.values = {0.7};
+  scene.inputs.push_back(input);
+  scene.effects.push_back(Switching(k, 2));
+  scene.effects.push_back(Disc(k));
+  return scene;
+}
+
+// Two hysteresis relays (thresholds as parameters, inputs and modes depending on x, u, t and
+// p) together with a switching surface and a moving set: the time-freezing lowering scales
+// the smooth dynamics and the switching modes by the product of the relays' clock rates, and
+// leaves the moving-set multiplier unscaled.
+inline Scene MixedHysteresisScene() {
+  Scene scene;
+  scene.name = "mixed_hysteresis";
+  scene.state_names = {"a", "b"};
+  scene.initial_state = Vector{{0.4, -0.3}};
+  scene.final_time = 1.0;
+  const int k = scene.AddParameter("k", 1.3, "coefficient");
+  const int low1 = scene.AddParameter("low1", -0.5, "relay 1 lower threshold");
+  const int high1 = scene.AddParameter("high1", 0.8, "relay 1 upper threshold");
+  const int low2 = scene.AddParameter("low2", -1.0, "relay 2 lower threshold");
+  const int high2 = scene.AddParameter("high2", 0.2, "relay 2 upper threshold");
+  InputSpec input;
+  input.name = "u";
+  input.signal.values = {0.6};
+  scene.inputs.push_back(input);
+  scene.dynamics = MakeSmoothFunction(
+      "f", 2, [k](const auto& x, const auto& u, const auto& t, const auto& p, auto& out) {
+        using std::sin;
+        out[0] = -p[k] * x[0] + u[0] * sin(t) * x[1];
+        out[1] = x[0] * x[1] - 0.3 * x[1] * x[1];
+      });
+  auto relay = [&](const std::string& name, int low, int high, double sign) {
+    HysteresisRelay r;
+    r.name = name;
+    r.input = MakeSmoothFunction(
+        name + ".input", 1,
+        [k, sign](const auto& x, const auto& u, const auto& t, const auto& p, auto& out) {
+          using std::cos;
+          out[0] = sign * x[0] * x[1] + p[k] * u[0] * cos(t) + x[1] * x[1];
+        });
+    r.lower_threshold = low;
+    r.upper_threshold = high;
+    r.mode_a = MakeSmoothFunction(
+        name + ".A", 2,
+        [k, sign](const auto& x, const auto& u, const auto& t, const auto& p, auto& out) {
+          out[0] = sign * u[0] * x[1] * t;
+          out[1] = p[k] * x[0] * x[0];
+        });
+    r.mode_b = MakeSmoothFunction(
+        name + ".B", 2,
+        [k, sign](const auto& x, const auto& u, const auto&, const auto& p, auto& out) {
+          using std::exp;
+          out[0] = -sign * exp(0.2 * x[0]) * p[k];
+          out[1] = u[0] * x[0] - x[1];
+        });
+    r.auxiliary_gain = sign > 0 ? 1.0 : 2.5;
+    return r;
+  };
+  scene.effects.push_back(relay("relay1", low1, high1, 1.0));
+  scene.effects.push_back(Switching(k, 1));
+  scene.effects.push_back(Disc(k));
+  scene.effects.push_back(relay("relay2", low2, high2, -1.0));
+  return scene;
+}
+
+}  // namespace moreau::testing
