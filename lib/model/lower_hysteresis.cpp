@@ -45,9 +45,10 @@ constexpr int kEquationsPerRelay = kRegions + 1;
 
 double PointNormSquared(int k) { return kPointPsi[k] * kPointPsi[k] + kPointW[k] * kPointW[k]; }
 
-class HysteresisBlock final : public LoweredBlock {
+// What both relay lowerings share: the memories, the normalized inputs psi and the mode fields.
+class RelayBlockBase : public LoweredBlock {
  public:
-  HysteresisBlock(const Scene& scene, const std::vector<HysteresisRelay>& relays)
+  RelayBlockBase(const Scene& scene, const std::vector<HysteresisRelay>& relays)
       : relays_(relays),
         num_states_(scene.num_states()),
         num_relays_(static_cast<int>(relays.size())) {
@@ -57,12 +58,6 @@ class HysteresisBlock final : public LoweredBlock {
                       "lambda (MakeSmoothFunction)");
     }
   }
-  std::unique_ptr<LoweredBlock> Clone() const override {
-    return std::make_unique<HysteresisBlock>(*this);
-  }
-  int num_algebraic() const override { return kUnknownsPerRelay * num_relays_; }
-  int num_equations() const override { return kEquationsPerRelay * num_relays_; }
-  int num_pairs() const override { return kRegions * num_relays_; }
   int num_internal_states() const override { return num_relays_; }
   std::vector<std::string> InternalStateNames() const override {
     std::vector<std::string> names;
@@ -74,6 +69,106 @@ class HysteresisBlock final : public LoweredBlock {
       y[MemoryIndex(i)] = relays_[static_cast<std::size_t>(i)].initial_memory;
     }
   }
+
+ protected:
+  // Normalized input psi_i = (input - L)/(U - L) and its derivatives.
+  struct Psi {
+    double value = 0.0;
+    double width = 1.0;  // U - L
+    Eigen::RowVectorXd d_y, d_u, d_p;
+  };
+
+  int MemoryIndex(int i) const { return layout.y_offset + i; }
+
+  void EvaluateInputs(const BlockContext& context, const ConstVectorRef& y,
+                      Derivatives derivatives) {
+    const int nx = num_states_;
+    const int ny = context.clock_index + 1;
+    const Vector& u = *context.inputs;
+    const Vector& params = *context.parameters;
+    const int nu = static_cast<int>(u.size());
+    const int np = static_cast<int>(params.size());
+    const bool all = derivatives == Derivatives::kAll;
+    x_ = y.head(nx);
+    const double t = y[context.clock_index];
+    psi_.resize(static_cast<std::size_t>(num_relays_));
+    for (int i = 0; i < num_relays_; ++i) {
+      const HysteresisRelay& relay = relays_[static_cast<std::size_t>(i)];
+      Psi& p = psi_[static_cast<std::size_t>(i)];
+      const double lower = params[relay.lower_threshold];
+      const double upper = params[relay.upper_threshold];
+      p.width = upper - lower;
+      if (derivatives == Derivatives::kNone) {
+        relay.input.Evaluate(x_, u, t, params, &input_);
+        p.value = (input_[0] - lower) / p.width;
+        continue;
+      }
+      relay.input.Jacobian(x_, u, t, params, all ? Wrt::All() : Wrt::XT(), &input_,
+                           &input_jacobian_);
+      p.value = (input_[0] - lower) / p.width;
+      const int t_col = all ? nx + nu : nx;
+      p.d_y.setZero(ny);
+      p.d_y.head(nx) = input_jacobian_.block(0, 0, 1, nx) / p.width;
+      p.d_y[context.clock_index] = input_jacobian_(0, t_col) / p.width;
+      if (!all) continue;
+      p.d_u = input_jacobian_.block(0, nx, 1, nu) / p.width;
+      p.d_p = input_jacobian_.block(0, t_col + 1, 1, np) / p.width;
+      // psi = (v - L)/(U - L): dpsi/dL = (v - U)/(U - L)^2, dpsi/dU = -(v - L)/(U - L)^2.
+      p.d_p[relay.lower_threshold] += (input_[0] - upper) / (p.width * p.width);
+      p.d_p[relay.upper_threshold] -= (input_[0] - lower) / (p.width * p.width);
+    }
+  }
+
+  // f_A,i and f_B,i (with Jacobians, columns x, [u], t, [p]).
+  void EvaluateModes(const BlockContext& context, const ConstVectorRef& y, int i,
+                     Derivatives derivatives) {
+    const HysteresisRelay& relay = relays_[static_cast<std::size_t>(i)];
+    const double t = y[context.clock_index];
+    const Vector& u = *context.inputs;
+    const Vector& params = *context.parameters;
+    if (derivatives == Derivatives::kNone) {
+      relay.mode_a.Evaluate(x_, u, t, params, &mode_a_);
+      relay.mode_b.Evaluate(x_, u, t, params, &mode_b_);
+      return;
+    }
+    const Wrt wrt = derivatives == Derivatives::kAll ? Wrt::All() : Wrt::XT();
+    relay.mode_a.Jacobian(x_, u, t, params, wrt, &mode_a_, &mode_a_jacobian_);
+    relay.mode_b.Jacobian(x_, u, t, params, wrt, &mode_b_, &mode_b_jacobian_);
+  }
+
+  // Adds weight * d(mode field)/d(y, u, p) into the x rows of F_y (x and clock columns),
+  // F_u and F_p.
+  void AddModeJacobian(const BlockContext& context, const Matrix& jacobian, double weight,
+                       Derivatives derivatives, PointEvaluation* out) const {
+    const int nx = num_states_;
+    const int nu = static_cast<int>(context.inputs->size());
+    const int np = static_cast<int>(context.parameters->size());
+    const bool all = derivatives == Derivatives::kAll;
+    const int t_col = all ? nx + nu : nx;
+    out->F_y.topLeftCorner(nx, nx) += weight * jacobian.leftCols(nx);
+    out->F_y.block(0, context.clock_index, nx, 1) += weight * jacobian.col(t_col);
+    if (!all) return;
+    out->F_u.topRows(nx) += weight * jacobian.middleCols(nx, nu);
+    out->F_p.topRows(nx) += weight * jacobian.rightCols(np);
+  }
+
+  std::vector<HysteresisRelay> relays_;
+  int num_states_;
+  int num_relays_;
+  std::vector<Psi> psi_;
+  Vector x_, input_, mode_a_, mode_b_;
+  Matrix input_jacobian_, mode_a_jacobian_, mode_b_jacobian_;
+};
+
+class HysteresisBlock final : public RelayBlockBase {
+ public:
+  using RelayBlockBase::RelayBlockBase;
+  std::unique_ptr<LoweredBlock> Clone() const override {
+    return std::make_unique<HysteresisBlock>(*this);
+  }
+  int num_algebraic() const override { return kUnknownsPerRelay * num_relays_; }
+  int num_equations() const override { return kEquationsPerRelay * num_relays_; }
+  int num_pairs() const override { return kRegions * num_relays_; }
   std::vector<std::string> AlgebraicNames() const override {
     std::vector<std::string> names;
     for (const HysteresisRelay& relay : relays_) {
@@ -340,17 +435,9 @@ class HysteresisBlock final : public LoweredBlock {
   }
 
  private:
-  // Normalized input psi_i = (input - L)/(U - L) and its derivatives.
-  struct Psi {
-    double value = 0.0;
-    double width = 1.0;  // U - L
-    Eigen::RowVectorXd d_y, d_u, d_p;
-  };
-
   // Boundary tie tolerance for the initial guess (round-off of a state on w = 0 or w = 1).
   static constexpr double kBoundaryTolerance = 1e-10;
 
-  int MemoryIndex(int i) const { return layout.y_offset + i; }
   int Theta(int i, int k) const { return layout.z_offset + kUnknownsPerRelay * i + k; }
   int Lambda(int i, int k) const { return layout.z_offset + kUnknownsPerRelay * i + kRegions + k; }
   int Mu(int i) const { return layout.z_offset + kUnknownsPerRelay * i + 2 * kRegions; }
@@ -386,85 +473,63 @@ class HysteresisBlock final : public LoweredBlock {
     return product;
   }
 
-  void EvaluateInputs(const BlockContext& context, const ConstVectorRef& y,
-                      Derivatives derivatives) {
-    const int nx = num_states_;
-    const int ny = context.clock_index + 1;
-    const Vector& u = *context.inputs;
-    const Vector& params = *context.parameters;
-    const int nu = static_cast<int>(u.size());
-    const int np = static_cast<int>(params.size());
-    const bool all = derivatives == Derivatives::kAll;
-    x_ = y.head(nx);
-    const double t = y[context.clock_index];
-    psi_.resize(static_cast<std::size_t>(num_relays_));
-    for (int i = 0; i < num_relays_; ++i) {
-      const HysteresisRelay& relay = relays_[static_cast<std::size_t>(i)];
-      Psi& p = psi_[static_cast<std::size_t>(i)];
-      const double lower = params[relay.lower_threshold];
-      const double upper = params[relay.upper_threshold];
-      p.width = upper - lower;
-      if (derivatives == Derivatives::kNone) {
-        relay.input.Evaluate(x_, u, t, params, &input_);
-        p.value = (input_[0] - lower) / p.width;
-        continue;
-      }
-      relay.input.Jacobian(x_, u, t, params, all ? Wrt::All() : Wrt::XT(), &input_,
-                           &input_jacobian_);
-      p.value = (input_[0] - lower) / p.width;
-      const int t_col = all ? nx + nu : nx;
-      p.d_y.setZero(ny);
-      p.d_y.head(nx) = input_jacobian_.block(0, 0, 1, nx) / p.width;
-      p.d_y[context.clock_index] = input_jacobian_(0, t_col) / p.width;
-      if (!all) continue;
-      p.d_u = input_jacobian_.block(0, nx, 1, nu) / p.width;
-      p.d_p = input_jacobian_.block(0, t_col + 1, 1, np) / p.width;
-      // psi = (v - L)/(U - L): dpsi/dL = (v - U)/(U - L)^2, dpsi/dU = -(v - L)/(U - L)^2.
-      p.d_p[relay.lower_threshold] += (input_[0] - upper) / (p.width * p.width);
-      p.d_p[relay.upper_threshold] -= (input_[0] - lower) / (p.width * p.width);
-    }
-  }
-
-  // f_A,i and f_B,i (with Jacobians, columns x, [u], t, [p]).
-  void EvaluateModes(const BlockContext& context, const ConstVectorRef& y, int i,
-                     Derivatives derivatives) {
-    const HysteresisRelay& relay = relays_[static_cast<std::size_t>(i)];
-    const double t = y[context.clock_index];
-    const Vector& u = *context.inputs;
-    const Vector& params = *context.parameters;
-    if (derivatives == Derivatives::kNone) {
-      relay.mode_a.Evaluate(x_, u, t, params, &mode_a_);
-      relay.mode_b.Evaluate(x_, u, t, params, &mode_b_);
-      return;
-    }
-    const Wrt wrt = derivatives == Derivatives::kAll ? Wrt::All() : Wrt::XT();
-    relay.mode_a.Jacobian(x_, u, t, params, wrt, &mode_a_, &mode_a_jacobian_);
-    relay.mode_b.Jacobian(x_, u, t, params, wrt, &mode_b_, &mode_b_jacobian_);
-  }
-
-  // Adds weight * d(mode field)/d(y, u, p) into the x rows of F_y (x and clock columns),
-  // F_u and F_p.
-  void AddModeJacobian(const BlockContext& context, const Matrix& jacobian, double weight,
-                       Derivatives derivatives, PointEvaluation* out) const {
-    const int nx = num_states_;
-    const int nu = static_cast<int>(context.inputs->size());
-    const int np = static_cast<int>(context.parameters->size());
-    const bool all = derivatives == Derivatives::kAll;
-    const int t_col = all ? nx + nu : nx;
-    out->F_y.topLeftCorner(nx, nx) += weight * jacobian.leftCols(nx);
-    out->F_y.block(0, context.clock_index, nx, 1) += weight * jacobian.col(t_col);
-    if (!all) return;
-    out->F_u.topRows(nx) += weight * jacobian.middleCols(nx, nu);
-    out->F_p.topRows(nx) += weight * jacobian.rightCols(np);
-  }
-
-  std::vector<HysteresisRelay> relays_;
-  int num_states_;
-  int num_relays_;
-  std::vector<Psi> psi_;
   mutable Vector rates_;
-  Vector x_, input_, mode_a_, mode_b_, field_;
-  Matrix input_jacobian_, mode_a_jacobian_, mode_b_jacobian_;
+  Vector field_;
+};
+
+// Discrete memories for event-driven integrators: x' += (1 - w_i) f_A,i + w_i f_B,i with
+// w_i' = 0; the integrator flips w_i when the switching function (1 - psi_i while w_i = 0,
+// psi_i while w_i = 1) reaches zero.
+class DiscreteRelayBlock final : public RelayBlockBase {
+ public:
+  using RelayBlockBase::RelayBlockBase;
+  std::unique_ptr<LoweredBlock> Clone() const override {
+    return std::make_unique<DiscreteRelayBlock>(*this);
+  }
+  int num_algebraic() const override { return 0; }
+  int num_equations() const override { return 0; }
+  int num_pairs() const override { return 0; }
+  std::vector<std::string> AlgebraicNames() const override { return {}; }
+  std::vector<PairInfo> Pairs() const override { return {}; }
+  std::vector<bool> ContinuousAlgebraic() const override { return {}; }
+  std::vector<bool> DifferentiatedEquations() const override { return {}; }
+
+  void Evaluate(const BlockContext& context, const ConstVectorRef& y, const ConstVectorRef&,
+                Derivatives derivatives, PointEvaluation* out) override {
+    const int nx = num_states_;
+    x_ = y.head(nx);
+    for (int i = 0; i < num_relays_; ++i) {
+      const double w = y[MemoryIndex(i)];
+      EvaluateModes(context, y, i, derivatives);
+      // x' += (1 - w) f_A + w f_B (w is 0 or 1 along solutions).
+      out->F.head(nx) += (1.0 - w) * mode_a_ + w * mode_b_;
+      if (derivatives == Derivatives::kNone) continue;
+      AddModeJacobian(context, mode_a_jacobian_, 1.0 - w, derivatives, out);
+      AddModeJacobian(context, mode_b_jacobian_, w, derivatives, out);
+      out->F_y.block(0, MemoryIndex(i), nx, 1) += mode_b_ - mode_a_;
+    }
+  }
+
+  int num_memory_switches() const override { return num_relays_; }
+  void MemorySwitchingFunctions(const BlockContext& context, const ConstVectorRef& y,
+                                VectorRef out) override {
+    EvaluateInputs(context, y, Derivatives::kNone);
+    for (int i = 0; i < num_relays_; ++i) {
+      const double psi = psi_[static_cast<std::size_t>(i)].value;
+      out[i] = y[MemoryIndex(i)] < 0.5 ? 1.0 - psi : psi;
+    }
+  }
+
+  void AddCurvature(const BlockContext&, const ConstVectorRef&, const ConstVectorRef&, Derivatives,
+                    CurvatureTerms*) override {}
+  void EventIndicators(const BlockContext&, const ConstVectorRef&, const ConstVectorRef&,
+                       const std::vector<bool>&, Derivatives, IndicatorEvaluation*) override {}
+  void InitialGuess(const BlockContext&, const ConstVectorRef&, const Vector*, VectorRef) override {
+  }
+  std::vector<Event> StatusEvents(double, const std::vector<bool>&,
+                                  const std::vector<bool>&) const override {
+    return {};
+  }
 };
 
 }  // namespace
@@ -472,6 +537,11 @@ class HysteresisBlock final : public LoweredBlock {
 std::unique_ptr<LoweredBlock> LowerHysteresis(const Scene& scene,
                                               const std::vector<HysteresisRelay>& relays) {
   return std::make_unique<HysteresisBlock>(scene, relays);
+}
+
+std::unique_ptr<LoweredBlock> LowerDiscreteRelays(const Scene& scene,
+                                                  const std::vector<HysteresisRelay>& relays) {
+  return std::make_unique<DiscreteRelayBlock>(scene, relays);
 }
 
 }  // namespace moreau::internal

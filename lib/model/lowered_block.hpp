@@ -103,6 +103,11 @@ class LoweredBlock {
     return {};
   }
 
+  // Discrete-memory relays: switching functions (positive until a switch) into `out`.
+  virtual int num_memory_switches() const { return 0; }
+  virtual void MemorySwitchingFunctions(const BlockContext& /*context*/,
+                                        const ConstVectorRef& /*y*/, VectorRef /*out*/) {}
+
   // False if the block-local pair roles of a velocity-level assignment are contradictory by
   // construction (e.g. every theta of a Stewart subsystem kept at zero although they sum to
   // one), so that DecideStatuses need not try it.
@@ -131,5 +136,8 @@ std::unique_ptr<LoweredBlock> LowerHeaviside(const Scene& scene, const Switching
 // All hysteresis relays of a scene in one time-freezing block (their clock rates multiply).
 std::unique_ptr<LoweredBlock> LowerHysteresis(const Scene& scene,
                                               const std::vector<HysteresisRelay>& relays);
+// All hysteresis relays of a scene as discrete memories (event-driven integrators).
+std::unique_ptr<LoweredBlock> LowerDiscreteRelays(const Scene& scene,
+                                                  const std::vector<HysteresisRelay>& relays);
 
 }  // namespace moreau::internal

@@ -84,8 +84,12 @@ void LoweredSystem::Build() {
   }
   // All relays share one time-freezing block; its memories follow the scene states.
   state_names_ = scene_.state_names;
+  time_freezing_ = !relays.empty() && options_.relay_form == RelayForm::kTimeFreezing;
+  memory_block_ = -1;
   if (!relays.empty()) {
-    auto block = internal::LowerHysteresis(scene_, relays);
+    auto block = time_freezing_ ? internal::LowerHysteresis(scene_, relays)
+                                : internal::LowerDiscreteRelays(scene_, relays);
+    if (!time_freezing_) memory_block_ = static_cast<int>(blocks_.size());
     for (const std::string& name : block->InternalStateNames()) state_names_.push_back(name);
     add(std::move(block), scene_.num_states());
   }
@@ -131,6 +135,23 @@ std::vector<int> LoweredSystem::MemoryTargets(const std::vector<bool>& a_zero) c
   if (clock_rate_block_ < 0) return {};
   const auto& block = *blocks_[static_cast<std::size_t>(clock_rate_block_)];
   return block.MemoryTargets(BlockStatuses(a_zero, block));
+}
+
+Vector LoweredSystem::MemorySwitchingFunctions(const Vector& y) const {
+  MOREAU_ASSERT(y.size() == num_states_, "MemorySwitchingFunctions: wrong state size");
+  if (memory_block_ < 0) return Vector();
+  auto& block = *blocks_[static_cast<std::size_t>(memory_block_)];
+  Vector out(block.num_memory_switches());
+  internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
+  block.MemorySwitchingFunctions(context, y, out);
+  return out;
+}
+
+void LoweredSystem::SwitchMemory(int relay, Vector* y) const {
+  MOREAU_ASSERT(memory_block_ >= 0 && relay >= 0 && relay < static_cast<int>(relay_names_.size()),
+                "SwitchMemory: no such discrete-memory relay");
+  const int index = scene_.num_states() + relay;
+  (*y)[index] = (*y)[index] < 0.5 ? 1.0 : 0.0;
 }
 
 bool LoweredSystem::TimeFrozen(const std::vector<bool>& a_zero) const {

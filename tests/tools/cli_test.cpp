@@ -132,6 +132,27 @@ TEST(CliTest, ReferenceScenesRunWithFesd) {
   }
 }
 
+TEST(CliTest, IdaRunsWithTolerances) {
+  const std::filesystem::path directory =
+      std::filesystem::temp_directory_path() / "moreau_cli_test_ida";
+  for (const char* scene : {"S3", "F1", "H1"}) {
+    std::filesystem::remove_all(directory);
+    const Outcome outcome = RunCli(std::string("run ") + scene +
+                                   " --integrator ida --rtol 1e-10 --atol 1e-12 --quiet "
+                                   "--no-plot --out " +
+                                   directory.string());
+    EXPECT_EQ(outcome.exit_code, 0) << scene << "\n" << outcome.output;
+    std::ifstream json_file(directory / "summary.json");
+    const nlohmann::json summary = nlohmann::json::parse(json_file);
+    EXPECT_EQ(summary["status"], "success") << scene;
+    EXPECT_EQ(summary["options"]["rtol"], 1e-10) << scene;
+    EXPECT_FALSE(summary["events"].empty()) << scene;
+  }
+  ExpectUsageError("run S3 --integrator ida --stages 3",
+                   "option --stages does not apply to integrator 'ida'");
+  ExpectUsageError("run S3 --integrator ida --rtol 0", "relative tolerance must be positive");
+}
+
 TEST(CliTest, HysteresisScenesReportPhysicalTimeAndRelaySignals) {
   const std::filesystem::path directory =
       std::filesystem::temp_directory_path() / "moreau_cli_test_hysteresis";
@@ -170,6 +191,8 @@ TEST(CliTest, HysteresisScenesReportPhysicalTimeAndRelaySignals) {
   std::getline(csv, header);
   EXPECT_EQ(header.rfind("t,x,thermostat.w,clock,", 0), 0u) << header;
   ExpectUsageError("run S3 --numerical-time", "hysteresis relays only");
+  ExpectUsageError("run H1 --integrator ida --numerical-time",
+                   "option --numerical-time does not apply to integrator 'ida'");
   ExpectUsageError("run H1 --integrator timestepping", "hysteresis relay 'thermostat'");
 }
 

@@ -2,6 +2,7 @@
 
 #include "moreau/core/error.hpp"
 #include "moreau/integrators/fesd.hpp"
+#include "moreau/integrators/ida.hpp"
 #include "moreau/integrators/radau.hpp"
 #include "moreau/integrators/timestepping.hpp"
 #include "moreau/linalg/linear_solver.hpp"
@@ -18,6 +19,9 @@ const std::vector<std::pair<std::string, std::string>>& IntegratorNames() {
       {"fesd",
        "FESD Radau IIA: switches on element boundaries, order 2s-1 across switches; moving "
        "sets, switching surfaces, hysteresis relays (time-freezing)"},
+      {"ida",
+       "SUNDIALS IDA (adaptive BDF) between located events, --rtol/--atol; the reference "
+       "integrator; moving sets, switching surfaces, hysteresis relays"},
   };
   return names;
 }
@@ -179,6 +183,47 @@ RunReport RunFesd(const Scene& scene, const RunSettings& settings,
   return report;
 }
 
+RunReport RunIda(const Scene& scene, const RunSettings& settings,
+                 const ProgressCallback& progress) {
+  RequireOnly(settings, {"rtol", "atol", "switching", "linear-solver"});
+  IdaOptions options;
+  if (settings.given.count("rtol") > 0) options.relative_tolerance = settings.relative_tolerance;
+  if (settings.given.count("atol") > 0) options.absolute_tolerance = settings.absolute_tolerance;
+  options.switching_form = ParseSwitchingForm(settings.switching_form);
+  options.linear_solver = ParseLinearSolverKind(settings.linear_solver);
+  const IdaResult result = SimulateIda(scene, options, progress);
+
+  RunReport report;
+  report.options = {{"rtol", options.relative_tolerance},
+                    {"atol", options.absolute_tolerance},
+                    {"drift_rate", options.drift_rate},
+                    {"switching_form", settings.switching_form},
+                    {"linear_solver", settings.linear_solver}};
+  report.status = ToString(result.status);
+  report.success = result.status == IdaStatus::kSuccess;
+  report.message = result.message;
+  report.final_time = result.final_time;
+  report.final_state = result.final_state;
+  report.trajectory = result.trajectory;
+  report.events = result.events;
+  report.relays = result.relays;
+  const IdaStats& s = result.stats;
+  report.stats = {{"num_steps", s.num_steps},
+                  {"num_phases", s.num_phases},
+                  {"num_events", s.num_events},
+                  {"num_residual_evaluations", s.num_residual_evaluations},
+                  {"num_jacobian_evaluations", s.num_jacobian_evaluations},
+                  {"num_nonlinear_iterations", s.num_nonlinear_iterations},
+                  {"num_error_test_failures", s.num_error_test_failures},
+                  {"max_drift", s.max_drift},
+                  {"cpu_seconds", s.cpu_seconds}};
+  report.stats_summary = s.Summary();
+  report.num_steps = s.num_steps;
+  report.num_newton_iterations = s.num_nonlinear_iterations;
+  report.cpu_seconds = s.cpu_seconds;
+  return report;
+}
+
 }  // namespace
 
 // The integrator `auto` picks for a scene: the smooth one without effects, FESD otherwise.
@@ -197,6 +242,8 @@ RunReport RunScene(const Scene& scene, const RunSettings& requested,
     report = RunTimeStepping(scene, settings, progress);
   } else if (settings.integrator == "fesd") {
     report = RunFesd(scene, settings, progress);
+  } else if (settings.integrator == "ida") {
+    report = RunIda(scene, settings, progress);
   } else {
     std::string valid;
     for (const auto& [name, description] : IntegratorNames()) {

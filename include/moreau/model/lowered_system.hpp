@@ -43,8 +43,18 @@ enum class SwitchingForm {
 std::string ToString(SwitchingForm form);
 SwitchingForm ParseSwitchingForm(const std::string& name);
 
+/// How hysteresis relays are lowered.
+enum class RelayForm {
+  /// Time-freezing: a Stewart subsystem per relay in numerical time (FESD, time-stepping).
+  kTimeFreezing,
+  /// Discrete memory: w_i is a state with w_i' = 0 that event-driven integrators flip when the
+  /// relay's switching function (MemorySwitchingFunctions) reaches zero (IDA).
+  kDiscreteMemory,
+};
+
 struct LoweringOptions {
   SwitchingForm switching_form = SwitchingForm::kStewart;
+  RelayForm relay_form = RelayForm::kTimeFreezing;
 };
 
 /// Which derivatives LoweredSystem::Evaluate computes.
@@ -139,8 +149,14 @@ class LoweredSystem {
   int num_scene_states() const { return scene_.num_states(); }  ///< n_x (y[0..n_x))
   /// Hysteresis relays, in the order of their memory states y[n_x + i] (time-freezing).
   const std::vector<std::string>& relay_names() const { return relay_names_; }
-  /// True if the scene has hysteresis relays: the clock is then not the integration variable.
-  bool time_freezing() const { return !relay_names_.empty(); }
+  /// True if relays are lowered by time-freezing: the clock is then not the integration
+  /// variable.
+  bool time_freezing() const { return time_freezing_; }
+  /// Discrete-memory relays (RelayForm::kDiscreteMemory): per relay a switching function of y
+  /// that is positive until the relay switches, 1 - psi while w = 0 and psi while w = 1.
+  Vector MemorySwitchingFunctions(const Vector& y) const;
+  /// Flips relay i's memory in y (w -> 1 - w) after its switching function reached zero.
+  void SwitchMemory(int relay, Vector* y) const;
   /// Per relay under the pair statuses a_zero: -1 while it evolves in a mode, otherwise the
   /// memory value (0 or 1) it travels to while physical time is frozen (an auxiliary region).
   std::vector<int> MemoryTargets(const std::vector<bool>& a_zero) const;
@@ -245,7 +261,9 @@ class LoweredSystem {
   Vector inputs_;
   Vector parameters_;
   std::vector<std::unique_ptr<internal::LoweredBlock>> blocks_;
-  int clock_rate_block_ = -1;     // the time-freezing block (hysteresis relays), or -1
+  int clock_rate_block_ = -1;  // the time-freezing block (hysteresis relays), or -1
+  int memory_block_ = -1;      // the discrete-memory relay block, or -1
+  bool time_freezing_ = false;
   bool sparse_dynamics_ = false;  // dynamics with a hand-written sparse Jacobian
   double nonzeros_fy_ = 0.0;
   mutable Vector x_scratch_, f_scratch_;
