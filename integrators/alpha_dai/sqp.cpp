@@ -1,0 +1,456 @@
+#include "sqp.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "active_set_qp.hpp"
+#include "moreau/core/error.hpp"
+
+namespace moreau::internal {
+
+const char* ToString(SqpStatus status) {
+  switch (status) {
+    case SqpStatus::kConverged:
+      return "converged";
+    case SqpStatus::kInfeasible:
+      return "locally infeasible";
+    case SqpStatus::kRejectedWorkingSet:
+      return "working set rejected";
+    case SqpStatus::kMaxIterations:
+      return "iteration limit";
+    case SqpStatus::kLineSearchFailure:
+      return "line search failure";
+    case SqpStatus::kQpFailure:
+      return "QP failure";
+    case SqpStatus::kNonFinite:
+      return "non-finite values";
+  }
+  return "?";
+}
+
+namespace {
+
+constexpr double kInfinity = std::numeric_limits<double>::infinity();
+// Sufficient decrease (Armijo) on the l1 merit function, and the shortest step tried.
+constexpr double kArmijo = 1e-4;
+constexpr double kMinStepLength = 1e-10;
+// Relative round-off of the merit function's terms (100 ulps; see MeritNoise).
+constexpr double kMeritNoise = 100.0 * std::numeric_limits<double>::epsilon();
+// The penalty mu stays above this factor times the largest constraint multiplier, so that the
+// QP direction is a descent direction of the merit function (mu >= ||lambda||_inf suffices).
+constexpr double kPenaltyFactor = 2.0;
+// Elastic mode: the slacks get this curvature (Goldfarb-Idnani needs H > 0; at a slack of
+// order one it changes the penalty by a relative 1e-6/mu) and a penalty at least this large
+// relative to the objective gradient; the penalty grows tenfold while that still reduces the
+// linearized violation by 10%, at most kMaxEscalations times.
+constexpr double kElasticCurvature = 1e-6;
+constexpr double kElasticPenaltyMin = 1e2;
+constexpr int kMaxEscalations = 4;
+// A point is stationary for the l1 violation when the elastic QP with the objective removed
+// and this penalty predicts a relative decrease below kStationaryDecrease. The linear model
+// ignores curvature, so near a stationary point it still predicts decreases of the order of
+// the squared distance; 1e-6 of the violation stops there instead of crawling.
+constexpr double kStationarityPenalty = 1e6;
+constexpr double kStationaryDecrease = 1e-6;
+// kStallIterations elastic iterations in a row that each reduce the l1 violation by less than
+// kStallDecrease (relative) end the SQP as locally infeasible: near an infeasible stationary
+// point the linearization keeps predicting decreases that curvature (and the zig-zag between
+// competing constraints of the nonsmooth l1 function) takes away.
+constexpr int kStallIterations = 3;
+constexpr double kStallDecrease = 1e-2;
+
+// Rows of the QP's inequality block: c_I rows, then finite lower bounds, then finite upper.
+struct RowMap {
+  int num_constraints = 0;
+  std::vector<int> lower;  // variable of each lower-bound row
+  std::vector<int> upper;  // variable of each upper-bound row
+  int size() const { return num_constraints + static_cast<int>(lower.size() + upper.size()); }
+};
+
+class Sqp {
+ public:
+  Sqp(const SqpProblem& problem, const SqpOptions& options)
+      : problem_(problem), options_(options), n_(problem.num_variables) {
+    MOREAU_ASSERT(problem.lower.size() == n_ && problem.upper.size() == n_, "SQP bounds size");
+    MOREAU_ASSERT(problem.objective_weights.size() == n_ && problem.reference.size() == n_,
+                  "SQP objective size");
+    MOREAU_ASSERT(problem.hessian_diagonal.size() == n_, "SQP Hessian size");
+    for (int i = 0; i < n_; ++i) {
+      if (std::isfinite(problem.lower[i])) rows_.lower.push_back(i);
+      if (std::isfinite(problem.upper[i])) rows_.upper.push_back(i);
+    }
+  }
+
+  SqpResult Solve(const Vector& guess) {
+    SqpResult result;
+    z_ = guess.cwiseMax(problem_.lower).cwiseMin(problem_.upper);
+    result.z = z_;
+    if (!Evaluate(z_, true, &eval_, &result)) {
+      result.status = SqpStatus::kNonFinite;
+      return result;
+    }
+    m_eq_ = static_cast<int>(eval_.equalities.size());
+    rows_.num_constraints = static_cast<int>(eval_.inequalities.size());
+    double mu = 1.0;
+    for (int iteration = 0; iteration < options_.max_iterations; ++iteration) {
+      ++result.iterations;
+      const double violation = Violation(eval_);
+      Fill(&result);
+      // QP at z; elastic mode if its linearization is inconsistent.
+      QpSolution qp = SolveQp(BuildQp(), QpOptions{});
+      result.qp_iterations += qp.iterations;
+      bool elastic = false;
+      double linearized_violation = 0.0;
+      Vector step;
+      if (qp.status == QpStatus::kOptimal) {
+        step = qp.x;
+        stalled_ = 0;
+        previous_violation_ = std::numeric_limits<double>::infinity();
+        result.working_set = WorkingSet(qp.active_inequalities, Vector(), false);
+        StoreMultipliers(qp, &result);
+      } else if (qp.status == QpStatus::kInfeasible ||
+                 qp.status == QpStatus::kDependentEqualities) {
+        elastic = true;
+        double penalty =
+            std::max(mu, kElasticPenaltyMin * (1.0 + Gradient().lpNorm<Eigen::Infinity>()));
+        // Inequalities elastic first (the equalities stay hard, so that an infeasibility is
+        // measured on the equality manifold); all constraints elastic if that is inconsistent.
+        QpSolution elastic_qp;
+        soft_equalities_ = false;
+        if (!SolveElastic(Gradient(), penalty, &elastic_qp, &linearized_violation, &result)) {
+          soft_equalities_ = true;
+          if (!SolveElastic(Gradient(), penalty, &elastic_qp, &linearized_violation, &result)) {
+            result.status = SqpStatus::kQpFailure;
+            return result;
+          }
+        }
+        for (int escalation = 0; escalation < kMaxEscalations && linearized_violation > 0.0;
+             ++escalation) {
+          QpSolution stronger;
+          double stronger_violation = 0.0;
+          if (!SolveElastic(Gradient(), 10.0 * penalty, &stronger, &stronger_violation, &result))
+            break;
+          if (stronger_violation > 0.9 * linearized_violation) break;
+          penalty *= 10.0;
+          elastic_qp = stronger;
+          linearized_violation = stronger_violation;
+        }
+        mu = std::max(mu, penalty);
+        step = elastic_qp.x.head(n_);
+        result.working_set =
+            WorkingSet(elastic_qp.active_inequalities, elastic_qp.x.tail(SlackCount()), false);
+        // Local infeasibility: no predicted decrease of the violation even without the
+        // objective (z is a stationary point of the linearized l1 violation), or elastic
+        // iterations that stopped reducing it (see kStallIterations).
+        bool stationary = false;
+        if (linearized_violation >= violation * (1.0 - kStationaryDecrease)) {
+          QpSolution pure;
+          double pure_violation = 0.0;
+          stationary = SolveElastic(Vector::Zero(n_), kStationarityPenalty, &pure, &pure_violation,
+                                    &result) &&
+                       pure_violation >= violation * (1.0 - kStationaryDecrease);
+        }
+        const bool progress =
+            !std::isfinite(previous_violation_) ||
+            previous_violation_ - violation > kStallDecrease * previous_violation_;
+        stalled_ = progress ? 0 : stalled_ + 1;
+        previous_violation_ = violation;
+        if (stationary || stalled_ >= kStallIterations) {
+          result.status = SqpStatus::kInfeasible;
+          return result;
+        }
+      } else {
+        result.status = SqpStatus::kQpFailure;
+        return result;
+      }
+      bool converged = false;
+      if (!elastic) {
+        result.kkt_residual = KktResidual(result);
+        converged = result.equality_residual <= options_.equality_tolerance &&
+                    result.inequality_violation <= options_.inequality_tolerance &&
+                    result.kkt_residual <= options_.optimality_tolerance;
+        // At the solution the working set also holds the constraints that sit on zero.
+        if (converged) result.working_set = WorkingSet(qp.active_inequalities, Vector(), true);
+      }
+      if (problem_.check_working_set && !problem_.check_working_set(z_, result.working_set)) {
+        result.status = SqpStatus::kRejectedWorkingSet;
+        return result;
+      }
+      if (converged) {
+        result.status = SqpStatus::kConverged;
+        return result;
+      }
+      if (!elastic) {
+        double largest = 0.0;
+        if (m_eq_ > 0) largest = result.equality_multipliers.lpNorm<Eigen::Infinity>();
+        if (rows_.num_constraints > 0) {
+          largest = std::max(largest, result.inequality_multipliers.lpNorm<Eigen::Infinity>());
+        }
+        mu = std::max(mu, kPenaltyFactor * largest);
+      }
+      // Backtracking on the l1 merit function P = J + mu V.
+      const double merit = Objective(z_) + mu * violation;
+      const double slope =
+          std::min(0.0, Gradient().dot(step) - mu * (violation - linearized_violation));
+      const double noise = MeritNoise(mu);
+      double alpha = 1.0;
+      SqpEvaluation trial;
+      Vector z_trial;
+      bool accepted = false;
+      while (alpha >= kMinStepLength) {
+        z_trial = (z_ + alpha * step).cwiseMax(problem_.lower).cwiseMin(problem_.upper);
+        if (Evaluate(z_trial, false, &trial, &result)) {
+          const double trial_merit = Objective(z_trial) + mu * Violation(trial);
+          if (trial_merit <= merit + kArmijo * alpha * slope + noise) {
+            accepted = true;
+            break;
+          }
+        }
+        alpha *= 0.5;
+      }
+      if (!accepted || z_trial == z_) {
+        result.status = SqpStatus::kLineSearchFailure;
+        return result;
+      }
+      z_ = z_trial;
+      result.z = z_;
+      if (!Evaluate(z_, true, &eval_, &result)) {
+        result.status = SqpStatus::kNonFinite;  // finite without Jacobians, not with them
+        return result;
+      }
+    }
+    Fill(&result);
+    result.status = SqpStatus::kMaxIterations;
+    return result;
+  }
+
+ private:
+  bool Evaluate(const Vector& z, bool jacobians, SqpEvaluation* out, SqpResult* result) {
+    if (jacobians) {
+      ++result->jacobian_evaluations;
+    } else {
+      ++result->function_evaluations;
+    }
+    if (!problem_.evaluate(z, jacobians, out)) return false;
+    if (!out->equalities.allFinite() || !out->inequalities.allFinite()) return false;
+    if (jacobians && (!out->equality_jacobian.allFinite() || !out->inequality_jacobian.allFinite()))
+      return false;
+    return true;
+  }
+
+  double Objective(const Vector& z) const {
+    return 0.5 *
+           (problem_.objective_weights.array() * (z - problem_.reference).array().square()).sum();
+  }
+  Vector Gradient() const {
+    return problem_.objective_weights.cwiseProduct(z_ - problem_.reference);
+  }
+  // Round-off level of the merit function at z_: each residual carries an error of a few ulps
+  // of the terms it is computed from (scale_i for the equalities, max(1, |c_I,j|) for the
+  // inequalities). Below it the sufficient-decrease test compares noise.
+  double MeritNoise(double mu) const {
+    double scale = problem_.equality_scales.sum();
+    for (int j = 0; j < rows_.num_constraints; ++j) {
+      scale += std::max(1.0, std::fabs(eval_.inequalities[j]));
+    }
+    return kMeritNoise * (std::fabs(Objective(z_)) + mu * scale);
+  }
+
+  // l1 violation V = ||c_E||_1 + ||max(c_I, 0)||_1 (the bounds always hold).
+  static double Violation(const SqpEvaluation& e) {
+    return e.equalities.lpNorm<1>() + e.inequalities.cwiseMax(0.0).sum();
+  }
+
+  // Residual and violation of the current point.
+  void Fill(SqpResult* result) const {
+    result->z = z_;
+    result->equality_residual = 0.0;
+    for (int i = 0; i < m_eq_; ++i) {
+      result->equality_residual = std::max(
+          result->equality_residual, std::fabs(eval_.equalities[i]) / problem_.equality_scales[i]);
+    }
+    result->inequality_violation =
+        rows_.num_constraints > 0 ? std::max(0.0, eval_.inequalities.maxCoeff()) : 0.0;
+  }
+
+  // Elastic slacks: (s+, s-) for the equalities when they are soft, then t for c_I.
+  int EqualitySlacks() const { return soft_equalities_ ? 2 * m_eq_ : 0; }
+  int SlackCount() const { return EqualitySlacks() + rows_.num_constraints; }
+
+  // The QP at z_: A_eq d = -c_E; -J_I d >= c_I; d >= lower - z; -d >= z - upper.
+  DenseQp BuildQp() const {
+    DenseQp qp;
+    qp.hessian = problem_.hessian_diagonal.asDiagonal();
+    qp.gradient = Gradient();
+    qp.equality_matrix = eval_.equality_jacobian;
+    qp.equality_rhs = -eval_.equalities;
+    qp.inequality_matrix = Matrix::Zero(rows_.size(), n_);
+    qp.inequality_rhs.resize(rows_.size());
+    AddInequalityRows(0, 0, &qp);
+    return qp;
+  }
+
+  // Rows of the inequality block starting at row0 (constraint rows, then bounds), with the
+  // step d in columns [col0, col0 + n).
+  void AddInequalityRows(int row0, int col0, DenseQp* qp) const {
+    const int m = rows_.num_constraints;
+    if (m > 0) {
+      qp->inequality_matrix.block(row0, col0, m, n_) = -eval_.inequality_jacobian;
+      qp->inequality_rhs.segment(row0, m) = eval_.inequalities;
+    }
+    int row = row0 + m;
+    for (int j : rows_.lower) {
+      qp->inequality_matrix(row, col0 + j) = 1.0;
+      qp->inequality_rhs[row++] = problem_.lower[j] - z_[j];
+    }
+    for (int j : rows_.upper) {
+      qp->inequality_matrix(row, col0 + j) = -1.0;
+      qp->inequality_rhs[row++] = z_[j] - problem_.upper[j];
+    }
+  }
+
+  // Elastic QP in (d, s+, s-, t): minimize 1/2 d^T H d + g^T d + penalty 1^T (s+ + s- + t)
+  // + kElasticCurvature/2 |slacks|^2 subject to J_E d - s+ + s- = -c_E, c_I + J_I d <= t,
+  // slacks >= 0 and the bounds (always feasible). Without soft_equalities_ there are no s+, s-
+  // and J_E d = -c_E is hard. Returns the linearized violation sum(slacks); false if the QP
+  // failed (infeasible only with hard equalities).
+  bool SolveElastic(const Vector& gradient, double penalty, QpSolution* solution,
+                    double* linearized_violation, SqpResult* result) const {
+    const int ns = SlackCount();
+    const int m = rows_.num_constraints;
+    const int nv = n_ + ns;
+    DenseQp qp;
+    qp.hessian = Matrix::Zero(nv, nv);
+    qp.hessian.diagonal().head(n_) = problem_.hessian_diagonal;
+    qp.hessian.diagonal().tail(ns).setConstant(kElasticCurvature);
+    qp.gradient.resize(nv);
+    qp.gradient << gradient, Vector::Constant(ns, penalty);
+    qp.equality_matrix = Matrix::Zero(m_eq_, nv);
+    if (m_eq_ > 0) {
+      qp.equality_matrix.leftCols(n_) = eval_.equality_jacobian;
+      if (soft_equalities_) {
+        qp.equality_matrix.block(0, n_, m_eq_, m_eq_) = -Matrix::Identity(m_eq_, m_eq_);
+        qp.equality_matrix.block(0, n_ + m_eq_, m_eq_, m_eq_) = Matrix::Identity(m_eq_, m_eq_);
+      }
+    }
+    qp.equality_rhs = -eval_.equalities;
+    const int rows = rows_.size() + ns;
+    qp.inequality_matrix = Matrix::Zero(rows, nv);
+    qp.inequality_rhs = Vector::Zero(rows);
+    AddInequalityRows(0, 0, &qp);
+    if (m > 0) {
+      qp.inequality_matrix.block(0, n_ + EqualitySlacks(), m, m) = Matrix::Identity(m, m);
+    }
+    qp.inequality_matrix.block(rows_.size(), n_, ns, ns) = Matrix::Identity(ns, ns);
+    *solution = SolveQp(qp, QpOptions{});
+    result->qp_iterations += solution->iterations;
+    ++result->elastic_qps;
+    if (solution->status != QpStatus::kOptimal) return false;
+    *linearized_violation = solution->x.tail(ns).cwiseMax(0.0).sum();
+    return true;
+  }
+
+  // Working set from the active rows of the (plain or elastic) QP. In elastic mode a
+  // constraint row whose slack t_i is positive is not binding and is left out.
+  // With `near_active`, constraints and bounds within options_.activity_tolerance of zero at
+  // z_ are added: a constraint that an SQP step pushed onto zero belongs to the working set
+  // at the solution although the last QP, at a feasible point, had no reason to hold it.
+  // During the iterations only the QP's rows count (a guess may touch a constraint by chance).
+  SqpWorkingSet WorkingSet(const std::vector<int>& active_rows, const Vector& slacks,
+                           bool near_active) const {
+    const int m = rows_.num_constraints;
+    const int num_lower = static_cast<int>(rows_.lower.size());
+    std::vector<bool> constraint(static_cast<std::size_t>(m), false);
+    std::vector<bool> lower(static_cast<std::size_t>(n_), false);
+    std::vector<bool> upper(static_cast<std::size_t>(n_), false);
+    for (int row : active_rows) {
+      if (row < m) {
+        if (slacks.size() > 0 && slacks[EqualitySlacks() + row] > 0.0) continue;
+        constraint[static_cast<std::size_t>(row)] = true;
+      } else if (row < m + num_lower) {
+        lower[static_cast<std::size_t>(rows_.lower[static_cast<std::size_t>(row - m)])] = true;
+      } else if (row < rows_.size()) {
+        upper[static_cast<std::size_t>(
+            rows_.upper[static_cast<std::size_t>(row - m - num_lower)])] = true;
+      }
+    }
+    const double tolerance = near_active ? options_.activity_tolerance : -kInfinity;
+    for (int i = 0; i < m; ++i) {
+      if (eval_.inequalities[i] >= -tolerance) constraint[static_cast<std::size_t>(i)] = true;
+    }
+    for (int j : rows_.lower) {
+      const double bound = problem_.lower[j];
+      if (z_[j] - bound <= tolerance * std::max(1.0, std::fabs(bound))) {
+        lower[static_cast<std::size_t>(j)] = true;
+      }
+    }
+    for (int j : rows_.upper) {
+      const double bound = problem_.upper[j];
+      if (bound - z_[j] <= tolerance * std::max(1.0, std::fabs(bound))) {
+        upper[static_cast<std::size_t>(j)] = true;
+      }
+    }
+    SqpWorkingSet set;
+    for (int i = 0; i < m; ++i) {
+      if (constraint[static_cast<std::size_t>(i)]) set.inequalities.push_back(i);
+    }
+    for (int j = 0; j < n_; ++j) {
+      if (lower[static_cast<std::size_t>(j)]) set.lower_bounds.push_back(j);
+      if (upper[static_cast<std::size_t>(j)]) set.upper_bounds.push_back(j);
+    }
+    return set;
+  }
+
+  void StoreMultipliers(const QpSolution& qp, SqpResult* result) const {
+    const int m = rows_.num_constraints;
+    result->equality_multipliers = qp.equality_multipliers;
+    result->inequality_multipliers = qp.inequality_multipliers.head(m);
+    result->bound_multipliers = Vector::Zero(n_);
+    int row = m;
+    for (int j : rows_.lower) result->bound_multipliers[j] += qp.inequality_multipliers[row++];
+    for (int j : rows_.upper) result->bound_multipliers[j] -= qp.inequality_multipliers[row++];
+  }
+
+  // max(||grad J - J_E^T y + J_I^T lambda - lambda_bounds||_inf, max_i lambda_i |slack_i|) at
+  // z_ with the QP's multipliers: stationarity and complementarity of the NLP.
+  double KktResidual(const SqpResult& result) const {
+    Vector r = Gradient() - result.bound_multipliers;
+    if (m_eq_ > 0) r -= eval_.equality_jacobian.transpose() * result.equality_multipliers;
+    const int m = rows_.num_constraints;
+    double complementarity = 0.0;
+    if (m > 0) {
+      r += eval_.inequality_jacobian.transpose() * result.inequality_multipliers;
+      for (int i = 0; i < m; ++i) {
+        complementarity = std::max(
+            complementarity, result.inequality_multipliers[i] * std::fabs(eval_.inequalities[i]));
+      }
+    }
+    for (int j = 0; j < n_; ++j) {
+      const double lambda = result.bound_multipliers[j];
+      const double gap = lambda > 0.0 ? z_[j] - problem_.lower[j] : problem_.upper[j] - z_[j];
+      if (lambda != 0.0) complementarity = std::max(complementarity, std::fabs(lambda) * gap);
+    }
+    return std::max(r.lpNorm<Eigen::Infinity>(), complementarity);
+  }
+
+  const SqpProblem& problem_;
+  SqpOptions options_;
+  int n_;
+  int m_eq_ = 0;
+  RowMap rows_;
+  Vector z_;
+  SqpEvaluation eval_;
+  bool soft_equalities_ = false;  // layout of the elastic QP (see SolveElastic)
+  int stalled_ = 0;               // elastic iterations without progress (see Solve)
+  double previous_violation_ = std::numeric_limits<double>::infinity();
+};
+
+}  // namespace
+
+SqpResult SolveSqp(const SqpProblem& problem, const Vector& initial_guess,
+                   const SqpOptions& options) {
+  return Sqp(problem, options).Solve(initial_guess);
+}
+
+}  // namespace moreau::internal
