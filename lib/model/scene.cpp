@@ -222,22 +222,23 @@ void ValidateScene(const Scene& scene) {
   names.clear();
   for (const InputSpec& input : scene.inputs) {
     names.push_back(input.name);
-    if (input.kind == InputSpec::Kind::kControl) {
-      const auto& sig = input.signal;
-      RequireArgument(sig.values.size() == sig.breakpoints.size() + 1, s, ": control '", input.name,
-                      "' needs one value more than breakpoints, got ", sig.values.size(),
-                      " values and ", sig.breakpoints.size(), " breakpoints");
-      for (std::size_t k = 0; k < sig.breakpoints.size(); ++k) {
-        RequireArgument(std::isfinite(sig.breakpoints[k]), s, ": control '", input.name,
-                        "' has a non-finite breakpoint");
-        RequireArgument(k == 0 || sig.breakpoints[k] > sig.breakpoints[k - 1], s, ": control '",
-                        input.name, "' breakpoints must increase strictly");
-      }
-      for (double v : sig.values) {
-        RequireArgument(std::isfinite(v), s, ": control '", input.name,
-                        "' has a non-finite value (got ", v, ")");
-      }
-    } else {
+    // The signal is the control's value, or an algebraic input's reference w(t).
+    const char* kind = input.kind == InputSpec::Kind::kControl ? "control" : "algebraic input";
+    const auto& sig = input.signal;
+    RequireArgument(sig.values.size() == sig.breakpoints.size() + 1, s, ": ", kind, " '",
+                    input.name, "' needs one value more than breakpoints, got ", sig.values.size(),
+                    " values and ", sig.breakpoints.size(), " breakpoints");
+    for (std::size_t k = 0; k < sig.breakpoints.size(); ++k) {
+      RequireArgument(std::isfinite(sig.breakpoints[k]), s, ": ", kind, " '", input.name,
+                      "' has a non-finite breakpoint");
+      RequireArgument(k == 0 || sig.breakpoints[k] > sig.breakpoints[k - 1], s, ": ", kind, " '",
+                      input.name, "' breakpoints must increase strictly");
+    }
+    for (double v : sig.values) {
+      RequireArgument(std::isfinite(v), s, ": ", kind, " '", input.name,
+                      "' has a non-finite value (got ", v, ")");
+    }
+    if (input.kind == InputSpec::Kind::kAlgebraic) {
       RequireArgument(
           !std::isnan(input.lower) && !std::isnan(input.upper) && input.lower <= input.upper, s,
           ": algebraic input '", input.name, "' has invalid bounds [", input.lower, ", ",

@@ -54,7 +54,9 @@ struct InputSpec {
   enum class Kind { kControl, kAlgebraic };
   std::string name;
   Kind kind = Kind::kControl;
-  PiecewiseConstantSignal signal;                           ///< used when kind == kControl
+  /// kControl: the input's value. kAlgebraic: the user input function w(t) that the variable
+  /// follows where no active constraint needs it (alpha stepper, AlphaDaiObjective::kReference).
+  PiecewiseConstantSignal signal;
   double lower = -std::numeric_limits<double>::infinity();  ///< bound (algebraic inputs)
   double upper = std::numeric_limits<double>::infinity();   ///< bound (algebraic inputs)
   double initial_guess = 0.0;                               ///< algebraic inputs at t0

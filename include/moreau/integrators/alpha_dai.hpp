@@ -1,0 +1,234 @@
+#pragma once
+/// @file
+/// alpha-method stepper for differential-algebraic inequalities (DAI), with an active-set
+/// SQP per step and regularization by the parameter rho.
+///
+/// Problem (Peter, Parida & Raha, "The alpha method for solving differential algebraic
+/// inequality (DAI) systems", IJNAM 2011; docs/alpha-method.md):
+///   x' = f(x, u, t, p),   phi(x, u, t, p) <= 0,   bounds on x and on the algebraic u,
+/// where u holds the scene's algebraic inputs (InputSpec::Kind::kAlgebraic, unknowns with
+/// bounds) and the user's input functions w(t) enter f through t or as piecewise-constant
+/// control inputs. Constraints and state bounds come from the scene's PathConstraints effects.
+///
+/// Discretization (paper eqs. 2a-2d, 3a-3b), with gamma = 2/(rho+1) - 1/2,
+/// beta = 1/(rho+1)^2 and rho in [0, 1):
+///   x_{n+1} = x_n + (1 - beta/gamma) h f_n + (beta/gamma) h f_{n+1} + (1/2 - beta/gamma) h^2 a_n
+///   a_{n+1} = (f_{n+1} - f_n) / (h gamma) + (1 - 1/gamma) a_n
+///   phi(x_{n+1}, u_{n+1}, t_{n+1}) <= 0,   bounds at t_{n+1},
+/// with a_0 = df/dt(t_0) = f_x f + f_t from exact derivatives (algebraic inputs are taken as
+/// stationary at t_0, du/dt = 0; a is restarted the same way after a control breakpoint).
+/// Order: 2 in x (Lemma 1, Theorem 1); algebraic variables of active constraints of index
+/// > 1 are first order (Lemma 3). Stability: A-stable; rho is the spectral radius of the
+/// amplification matrix (eq. 12) at infinity (rho = 0: asymptotic annihilation).
+///
+/// Per step, a dense SQP (Gauss-Newton Hessian, exact Jacobians by automatic
+/// differentiation, l1 merit function with backtracking, elastic mode when the linearized
+/// constraints are inconsistent) solves the paper's local problem: J = 0 (feasibility) or the
+/// least change ||u - u_n||^2, subject to (2a)-(2d). Its QP subproblems are solved by the
+/// Goldfarb-Idnani dual active-set method. The working set of every QP (active path
+/// constraints and state bounds) defines the basis matrix B of eq. (14), whose basic
+/// algebraic columns are chosen by column pivoting for the least condition number; when the
+/// scaled B (Sec. 6.1.1) has a singular value <= rank_tolerance (numerical rank deficiency,
+/// typical of active constraints of index 3 at small steps), the step is retried with rho
+/// lowered by 0.1 (Theorems 2-3: the smallest singular values grow), and with h = h_max once
+/// rho = 0 (Sec. 7, Step 2b). Other failures retry from new initial guesses (Step 2c) until
+/// max_retries is used up.
+///
+/// Step size (Sec. 7, Step 2): h_i = sqrt(min{h_max^2, h_{i-1}^2,
+/// ERRTOL / (2.25 max_{j <= i} ||a_j||_inf)}); ERRTOL = infinity gives fixed steps h_max.
+/// Steps are shortened to end exactly on control breakpoints and on t_f (equal steps within
+/// each segment).
+///
+/// Assumptions: scaled units (states and algebraic inputs of order one; the rank test
+/// compares singular values of the scaled basis matrix with an absolute tolerance);
+/// x_0 within the state bounds; a DAI solution is in general not unique, and the one found
+/// depends on the objective, rho and h. Scenes with other effects (moving sets, switching
+/// surfaces, hysteresis relays) are refused.
+
+#include <complex>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "moreau/integrators/simulation.hpp"
+#include "moreau/model/events.hpp"
+#include "moreau/model/scene.hpp"
+
+namespace moreau {
+
+/// The method's coefficients for a given rho (paper eqs. 3a-3b).
+struct AlphaCoefficients {
+  double rho = 0.0;
+  double gamma = 1.5;  ///< 2/(rho+1) - 1/2
+  double beta = 1.0;   ///< 1/(rho+1)^2
+  /// Throws std::invalid_argument unless rho is in [0, 1).
+  static AlphaCoefficients FromRho(double rho);
+};
+
+/// Amplification matrix of (2a-2b) on y' = lambda y for Omega = lambda h:
+/// (y_{n+1}, h^2 a_{n+1}) = A(Omega) (y_n, h^2 a_n) (paper eq. 12), computed from the
+/// coefficients in a form without cancellation for large |Omega|.
+Eigen::Matrix2cd AlphaAmplificationMatrix(double rho, std::complex<double> omega);
+
+/// The basis matrix B of paper eq. (14) for the unknowns (x_{n+1}, a_{n+1}, u_b) of one step:
+///   [ I - (beta/gamma) h A      0   -(beta/gamma) h D ]
+///   [ -A / (gamma h)            I   -D / (gamma h)    ]
+///   [ C                         0    G                ]
+/// with A = df/dx, D = df/du_b (basic algebraic columns), C = dg/dx and G = dg/du_b for the
+/// active constraints g. Sizes: A m x m, D m x r, C r x m, G r x r (r may be 0).
+Matrix AlphaBasisMatrix(const Matrix& a, const Matrix& d, const Matrix& c, const Matrix& g,
+                        double h, double rho);
+/// dB/drho of AlphaBasisMatrix (Theorem 3's B-dot up to sign), from the exact derivatives
+/// d(beta/gamma)/drho = -4 (1 - rho) / ((rho+1)^2 (3-rho)^2) and d(1/gamma)/drho = 8/(3-rho)^2.
+Matrix AlphaBasisMatrixRhoDerivative(const Matrix& a, const Matrix& d, const Matrix& c,
+                                     const Matrix& g, double h, double rho);
+/// The scaled basis matrix used for the rank test (Sec. 6.1.1): B with rows (13b) multiplied
+/// by h^2, columns a divided by h^2 (unknown h^2 a) and u_b by h (unknown h u_b), and every
+/// constraint row scaled to unit 2-norm. Its singular values are O(1), independent of h, for
+/// active constraints of index <= 2, and O(h) for index 3.
+Matrix AlphaScaledBasisMatrix(const Matrix& a, const Matrix& d, const Matrix& c, const Matrix& g,
+                              double h, double rho);
+
+/// Local objective J of the per-step problem (paper Sec. 7 and Remark 7.1); sums run over
+/// the algebraic inputs.
+enum class AlphaDaiObjective {
+  kFeasibility,  ///< J = 0: the paper's constraint-satisfaction problem (each SQP step is the
+                 ///< minimum-norm correction, so the point found is near the guess)
+  kLeastChange,  ///< J = 1/2 sum_j (u_j - u_{n,j})^2: the feasible u closest to the previous
+                 ///< one (a KKT point of this objective)
+  kReference,    ///< J = 1/2 sum_j (u_j - w_j(t_{n+1}))^2 with w_j the input's signal (the
+                 ///< paper's user input functions w(t), Sec. 2): u_j = w_j(t) unless an active
+                 ///< constraint needs u_j
+};
+std::string ToString(AlphaDaiObjective objective);
+/// Parses "feasibility", "least-change" or "reference"; throws std::invalid_argument otherwise.
+AlphaDaiObjective ParseAlphaDaiObjective(const std::string& name);
+
+struct AlphaDaiOptions {
+  /// Regularization parameter rho in [0, 1) (paper eq. 3): spectral radius at infinity;
+  /// lowered by 0.1 per retry when the basis matrix is rank deficient.
+  double rho = 0.5;
+  /// Largest step h_max > 0 (time units); the fixed step when error_tolerance is infinite.
+  double max_step_size = 0.01;
+  /// ERRTOL > 0 of the step-size rule (units of x): h^2 <= ERRTOL / (2.25 max ||a_j||_inf).
+  /// +infinity (default) disables the rule: fixed steps h_max, as in the paper's examples.
+  double error_tolerance = std::numeric_limits<double>::infinity();
+  /// Smallest step the rule may produce, > 0; below it: AlphaDaiStatus::kStepSizeTooSmall.
+  double min_step_size = 1e-12;
+  /// TOL of the paper: the path constraints must satisfy phi <= constraint_tolerance at every
+  /// accepted step (units of phi), > 0. Bounds are enforced exactly.
+  double constraint_tolerance = 1e-8;
+  /// The discretized dynamics (2a) must hold with |residual_i| <= dynamics_tolerance
+  /// (1 + |x_{n+1,i}|), > 0.
+  double dynamics_tolerance = 1e-10;
+  /// Stationarity of the local problem: ||grad J - J_c^T lambda||_inf <= optimality_tolerance
+  /// at the accepted SQP iterate (dimensionless in scaled units), > 0.
+  double optimality_tolerance = 1e-8;
+  /// Cut-off on the singular values of the scaled basis matrix (AlphaScaledBasisMatrix):
+  /// sigma_min <= rank_tolerance counts as numerical rank deficiency, in (0, 1). The default
+  /// flags active index-3 constraints at steps of about 0.1 and below in scaled units.
+  double rank_tolerance = 1e-2;
+  /// MAXIT: SQP (major) iterations per try, >= 1. Each QP is limited to a number of
+  /// active-set changes proportional to its size.
+  int max_sqp_iterations = 50;
+  /// MAXTRY: retries per step after the first try (rho reductions and new initial guesses),
+  /// >= 0.
+  int max_retries = 5;
+  /// Local objective (see AlphaDaiObjective).
+  AlphaDaiObjective objective = AlphaDaiObjective::kFeasibility;
+  /// Accepted steps before the run stops with kMaxStepsReached, >= 1.
+  long max_steps = 10'000'000;
+  /// Record every accepted step in the trajectory and the step certificates (false: only
+  /// the initial and final points in the trajectory, no step records).
+  bool record_trajectory = true;
+
+  /// Throws std::invalid_argument naming the first out-of-range option.
+  void Validate() const;
+};
+
+/// Outcome of an alpha-method run; each value is documented by its criterion.
+enum class AlphaDaiStatus {
+  kSuccess,                ///< reached the final time
+  kInfeasibleConstraints,  ///< at some step every try ended at a stationary point of the l1
+                           ///< violation of (2a), phi <= 0 and the bounds with violation >
+                           ///< the tolerances (elastic SQP: the linearized constraints could
+                           ///< not reduce it), i.e. the constraints are locally infeasible
+  kRegularizationFailed,   ///< the last try of a step had a scaled basis matrix with
+                           ///< sigma_min <= rank_tolerance after rho was lowered as far as
+                           ///< max_retries allowed (or to 0 with h = h_max)
+  kRetriesExhausted,       ///< max_retries retries used and the SQP of the last try did not
+                           ///< converge within max_sqp_iterations (or its line search failed)
+  kStepSizeTooSmall,       ///< the step-size rule gave h < min_step_size
+  kMaxStepsReached,        ///< max_steps accepted steps before the final time
+  kNonFinite,              ///< NaN or infinity in f or a at an accepted point
+};
+std::string ToString(AlphaDaiStatus status);
+
+/// Certificates of one accepted step.
+struct AlphaDaiStep {
+  double t = 0.0;                     ///< t_{n+1}
+  double h = 0.0;                     ///< step length
+  double rho = 0.0;                   ///< rho used (after reductions)
+  int tries = 1;                      ///< SQP solves for this step (1: first try succeeded)
+  int sqp_iterations = 0;             ///< of the accepted try
+  double constraint_violation = 0.0;  ///< max(0, max_i phi_i, bound violations)
+  double dynamics_residual = 0.0;     ///< max_i |(2a)_i| / (1 + |x_{n+1,i}|)
+  double kkt_residual = 0.0;          ///< stationarity and complementarity of the local problem
+  int num_active = 0;                 ///< r_a: active path constraints and state bounds
+  int num_active_input_bounds = 0;    ///< algebraic inputs at a bound (non-basic)
+  double basis_sigma_min = 0.0;       ///< smallest singular value of the scaled basis matrix
+  double basis_condition = 0.0;       ///< its condition number sigma_max / sigma_min
+  std::vector<int> active;            ///< indices into AlphaDaiResult::constraint_names
+};
+
+struct AlphaDaiStats {
+  long num_steps = 0;           ///< accepted steps
+  long num_tries = 0;           ///< SQP solves (first tries and retries)
+  long num_rho_reductions = 0;  ///< retries with rho lowered (Step 2b)
+  long num_guess_retries = 0;   ///< retries from new initial guesses (Step 2c)
+  long num_rank_deficient = 0;  ///< tries stopped by a rank-deficient basis matrix
+  long num_infeasible = 0;      ///< tries that ended locally infeasible
+  long num_sqp_iterations = 0;
+  long num_qp_iterations = 0;             ///< active-set changes in all QPs
+  long num_elastic_qps = 0;               ///< QPs re-solved in elastic mode
+  long num_jacobian_evaluations = 0;      ///< evaluations of f and phi with Jacobians
+  long num_function_evaluations = 0;      ///< evaluations without Jacobians (line search)
+  long num_basis_factorizations = 0;      ///< SVDs of basis matrices
+  double max_constraint_violation = 0.0;  ///< over accepted steps
+  double max_dynamics_residual = 0.0;     ///< over accepted steps
+  double max_kkt_residual = 0.0;          ///< over accepted steps
+  double min_basis_sigma = std::numeric_limits<double>::infinity();  ///< over accepted steps
+  double min_rho = std::numeric_limits<double>::infinity();          ///< smallest rho used
+  double min_step = std::numeric_limits<double>::infinity();         ///< smallest step taken
+  double cpu_seconds = 0.0;
+
+  /// Sums counters and times; takes the max/min of the extreme values.
+  AlphaDaiStats& operator+=(const AlphaDaiStats& other);
+  std::string Summary() const;
+};
+
+struct AlphaDaiResult {
+  AlphaDaiStatus status = AlphaDaiStatus::kSuccess;
+  std::string message;      ///< time and reason when status != kSuccess
+  double final_time = 0.0;  ///< time reached
+  Vector final_state;       ///< x at final_time
+  Vector final_inputs;      ///< algebraic inputs u at final_time (scene order of algebraic inputs)
+  Vector final_acceleration;  ///< the algorithmic variable a at final_time
+  /// Accepted steps; `algebraic` holds the algebraic inputs (names: the inputs' names).
+  Trajectory trajectory;
+  /// Path constraints ("<effect>.<name>"), then state bounds ("<state>.lower"/".upper"),
+  /// then input bounds ("<input>.lower"/".upper"); AlphaDaiStep::active indexes this list.
+  std::vector<std::string> constraint_names;
+  std::vector<AlphaDaiStep> steps;  ///< one per accepted step (with record_trajectory)
+  std::vector<Event> events;        ///< kEnter/kLeave when constraints join/leave the working set
+  AlphaDaiStats stats;
+};
+
+/// Simulates `scene` over [t0, tf]. Throws std::invalid_argument for invalid options, an
+/// invalid scene, an unsupported effect (naming it), an initial state outside the state
+/// bounds, or path constraints that no algebraic input satisfies at t0 (inconsistent
+/// initial values, with the violation found).
+AlphaDaiResult SimulateAlphaDai(const Scene& scene, const AlphaDaiOptions& options,
+                                const ProgressCallback& progress = {});
+
+}  // namespace moreau

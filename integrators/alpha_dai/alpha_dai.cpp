@@ -1,0 +1,939 @@
+#include "moreau/integrators/alpha_dai.hpp"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <sstream>
+
+#include "moreau/core/error.hpp"
+#include "sqp.hpp"
+
+namespace moreau {
+
+// ---------------------------------------------------------------------------------------------
+// Coefficients, amplification matrix, basis matrices.
+
+AlphaCoefficients AlphaCoefficients::FromRho(double rho) {
+  RequireArgument(std::isfinite(rho) && rho >= 0.0 && rho < 1.0,
+                  "alpha method: rho must be in [0, 1), got ", rho);
+  AlphaCoefficients c;
+  c.rho = rho;
+  c.gamma = 2.0 / (rho + 1.0) - 0.5;           // (3a)
+  c.beta = 1.0 / ((rho + 1.0) * (rho + 1.0));  // (3b)
+  return c;
+}
+
+Eigen::Matrix2cd AlphaAmplificationMatrix(double rho, std::complex<double> omega) {
+  const AlphaCoefficients co = AlphaCoefficients::FromRho(rho);
+  const double c = co.beta / co.gamma;
+  // (2a) on y' = lambda y:  (1 - c Omega) y1 = (1 + (1 - c) Omega) y0 + (1/2 - c) h^2 a0;
+  // (2b):                   h^2 a1 = (Omega / gamma) (y1 - y0) + (1 - 1/gamma) h^2 a0.
+  // y1 - y0 = Omega / (1 - c Omega) y0 + ... is formed directly (no cancellation at large Omega).
+  const std::complex<double> denominator = 1.0 - c * omega;
+  Eigen::Matrix2cd a;
+  a(0, 0) = (1.0 + (1.0 - c) * omega) / denominator;
+  a(0, 1) = (0.5 - c) / denominator;
+  a(1, 0) = omega * omega / (co.gamma * denominator);
+  a(1, 1) = omega * (0.5 - c) / (co.gamma * denominator) + (1.0 - 1.0 / co.gamma);
+  return a;
+}
+
+namespace {
+
+void CheckBasisSizes(const Matrix& a, const Matrix& d, const Matrix& c, const Matrix& g, double h) {
+  const Eigen::Index m = a.rows(), r = d.cols();
+  RequireArgument(a.cols() == m && d.rows() == m && c.rows() == r && c.cols() == m &&
+                      g.rows() == r && g.cols() == r,
+                  "basis matrix: expected A m x m, D m x r, C r x m, G r x r, got A ", a.rows(),
+                  " x ", a.cols(), ", D ", d.rows(), " x ", d.cols(), ", C ", c.rows(), " x ",
+                  c.cols(), ", G ", g.rows(), " x ", g.cols());
+  RequireArgument(std::isfinite(h) && h > 0.0, "basis matrix: step h must be positive, got ", h);
+}
+
+// The blocks of (14) with the coefficients (row1_x, row1_u) = -(c1 h) (A, D) and
+// (row2_x, row2_u) = -(c2 / h) (A, D) added to the identity pattern when `identity`.
+Matrix AssembleBasis(const Matrix& a, const Matrix& d, const Matrix& c, const Matrix& g, double c1h,
+                     double c2_over_h, bool identity) {
+  const Eigen::Index m = a.rows(), r = d.cols();
+  Matrix b = Matrix::Zero(2 * m + r, 2 * m + r);
+  b.block(0, 0, m, m) = -c1h * a;
+  b.block(0, 2 * m, m, r) = -c1h * d;
+  b.block(m, 0, m, m) = -c2_over_h * a;
+  b.block(m, 2 * m, m, r) = -c2_over_h * d;
+  if (identity) {
+    b.block(0, 0, m, m).diagonal().array() += 1.0;
+    b.block(m, m, m, m).diagonal().array() += 1.0;
+    b.block(2 * m, 0, r, m) = c;
+    b.block(2 * m, 2 * m, r, r) = g;
+  }
+  return b;
+}
+
+}  // namespace
+
+Matrix AlphaBasisMatrix(const Matrix& a, const Matrix& d, const Matrix& c, const Matrix& g,
+                        double h, double rho) {
+  CheckBasisSizes(a, d, c, g, h);
+  const AlphaCoefficients co = AlphaCoefficients::FromRho(rho);
+  return AssembleBasis(a, d, c, g, co.beta / co.gamma * h, 1.0 / (co.gamma * h), true);
+}
+
+Matrix AlphaBasisMatrixRhoDerivative(const Matrix& a, const Matrix& d, const Matrix& c,
+                                     const Matrix& g, double h, double rho) {
+  CheckBasisSizes(a, d, c, g, h);
+  AlphaCoefficients::FromRho(rho);  // validates rho
+  // beta/gamma = 2 / ((rho+1)(3-rho)), 1/gamma = 2 (rho+1) / (3-rho).
+  const double d_beta_over_gamma =
+      -4.0 * (1.0 - rho) / ((rho + 1.0) * (rho + 1.0) * (3.0 - rho) * (3.0 - rho));
+  const double d_inverse_gamma = 8.0 / ((3.0 - rho) * (3.0 - rho));
+  return AssembleBasis(a, d, c, g, d_beta_over_gamma * h, d_inverse_gamma / h, false);
+}
+
+Matrix AlphaScaledBasisMatrix(const Matrix& a, const Matrix& d, const Matrix& c, const Matrix& g,
+                              double h, double rho) {
+  CheckBasisSizes(a, d, c, g, h);
+  const AlphaCoefficients co = AlphaCoefficients::FromRho(rho);
+  const Eigen::Index m = a.rows(), r = d.cols();
+  const double c1 = co.beta / co.gamma, c2 = 1.0 / co.gamma;
+  // Rows (13b) times h^2, unknowns (x, h^2 a, h u_b): Sec. 6.1.1's scaling (x/h, h a, u) up
+  // to the common factor h.
+  Matrix b = Matrix::Zero(2 * m + r, 2 * m + r);
+  b.block(0, 0, m, m) = Matrix::Identity(m, m) - c1 * h * a;
+  b.block(0, 2 * m, m, r) = -c1 * d;
+  b.block(m, 0, m, m) = -c2 * h * a;
+  b.block(m, m, m, m) = Matrix::Identity(m, m);
+  b.block(m, 2 * m, m, r) = -c2 * d;
+  for (Eigen::Index i = 0; i < r; ++i) {
+    b.block(2 * m + i, 0, 1, m) = c.row(i);
+    b.block(2 * m + i, 2 * m, 1, r) = g.row(i) / h;
+    const double norm = b.row(2 * m + i).norm();
+    if (norm > 0.0) b.row(2 * m + i) /= norm;
+  }
+  return b;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Options, statuses, statistics.
+
+std::string ToString(AlphaDaiObjective objective) {
+  switch (objective) {
+    case AlphaDaiObjective::kFeasibility:
+      return "feasibility";
+    case AlphaDaiObjective::kLeastChange:
+      return "least-change";
+    case AlphaDaiObjective::kReference:
+      return "reference";
+  }
+  return "?";
+}
+
+AlphaDaiObjective ParseAlphaDaiObjective(const std::string& name) {
+  if (name == "feasibility") return AlphaDaiObjective::kFeasibility;
+  if (name == "least-change") return AlphaDaiObjective::kLeastChange;
+  if (name == "reference") return AlphaDaiObjective::kReference;
+  ThrowInvalidArgument("unknown alpha-method objective '", name,
+                       "'; expected feasibility, least-change or reference");
+}
+
+void AlphaDaiOptions::Validate() const {
+  RequireArgument(std::isfinite(rho) && rho >= 0.0 && rho < 1.0,
+                  "alpha option rho must be in [0, 1), got ", rho);
+  RequireArgument(std::isfinite(max_step_size) && max_step_size > 0.0,
+                  "alpha option max_step_size (h_max) must be positive and finite, got ",
+                  max_step_size);
+  RequireArgument(error_tolerance > 0.0,
+                  "alpha option error_tolerance (ERRTOL) must be positive "
+                  "(infinity for fixed steps), got ",
+                  error_tolerance);
+  RequireArgument(
+      std::isfinite(min_step_size) && min_step_size > 0.0 && min_step_size <= max_step_size,
+      "alpha option min_step_size must be in (0, max_step_size], got ", min_step_size);
+  RequireArgument(std::isfinite(constraint_tolerance) && constraint_tolerance > 0.0,
+                  "alpha option constraint_tolerance (TOL) must be positive, got ",
+                  constraint_tolerance);
+  RequireArgument(std::isfinite(dynamics_tolerance) && dynamics_tolerance > 0.0,
+                  "alpha option dynamics_tolerance must be positive, got ", dynamics_tolerance);
+  RequireArgument(std::isfinite(optimality_tolerance) && optimality_tolerance > 0.0,
+                  "alpha option optimality_tolerance must be positive, got ", optimality_tolerance);
+  RequireArgument(std::isfinite(rank_tolerance) && rank_tolerance > 0.0 && rank_tolerance < 1.0,
+                  "alpha option rank_tolerance must be in (0, 1), got ", rank_tolerance);
+  RequireArgument(max_sqp_iterations >= 1,
+                  "alpha option max_sqp_iterations (MAXIT) must be >= 1, got ", max_sqp_iterations);
+  RequireArgument(max_retries >= 0, "alpha option max_retries (MAXTRY) must be >= 0, got ",
+                  max_retries);
+  RequireArgument(max_steps >= 1, "alpha option max_steps must be >= 1, got ", max_steps);
+}
+
+std::string ToString(AlphaDaiStatus status) {
+  switch (status) {
+    case AlphaDaiStatus::kSuccess:
+      return "success";
+    case AlphaDaiStatus::kInfeasibleConstraints:
+      return "infeasible_constraints";
+    case AlphaDaiStatus::kRegularizationFailed:
+      return "regularization_failed";
+    case AlphaDaiStatus::kRetriesExhausted:
+      return "retries_exhausted";
+    case AlphaDaiStatus::kStepSizeTooSmall:
+      return "step_size_too_small";
+    case AlphaDaiStatus::kMaxStepsReached:
+      return "max_steps_reached";
+    case AlphaDaiStatus::kNonFinite:
+      return "non_finite";
+  }
+  return "?";
+}
+
+AlphaDaiStats& AlphaDaiStats::operator+=(const AlphaDaiStats& other) {
+  num_steps += other.num_steps;
+  num_tries += other.num_tries;
+  num_rho_reductions += other.num_rho_reductions;
+  num_guess_retries += other.num_guess_retries;
+  num_rank_deficient += other.num_rank_deficient;
+  num_infeasible += other.num_infeasible;
+  num_sqp_iterations += other.num_sqp_iterations;
+  num_qp_iterations += other.num_qp_iterations;
+  num_elastic_qps += other.num_elastic_qps;
+  num_jacobian_evaluations += other.num_jacobian_evaluations;
+  num_function_evaluations += other.num_function_evaluations;
+  num_basis_factorizations += other.num_basis_factorizations;
+  max_constraint_violation = std::max(max_constraint_violation, other.max_constraint_violation);
+  max_dynamics_residual = std::max(max_dynamics_residual, other.max_dynamics_residual);
+  max_kkt_residual = std::max(max_kkt_residual, other.max_kkt_residual);
+  min_basis_sigma = std::min(min_basis_sigma, other.min_basis_sigma);
+  min_rho = std::min(min_rho, other.min_rho);
+  min_step = std::min(min_step, other.min_step);
+  cpu_seconds += other.cpu_seconds;
+  return *this;
+}
+
+std::string AlphaDaiStats::Summary() const {
+  std::ostringstream s;
+  s << num_steps << " steps, " << num_tries << " SQP solves (" << num_rho_reductions
+    << " rho reductions, " << num_guess_retries << " new guesses, " << num_rank_deficient
+    << " rank deficient, " << num_infeasible << " infeasible), " << num_sqp_iterations
+    << " SQP iterations, " << num_qp_iterations << " QP iterations, max phi+ "
+    << max_constraint_violation << ", min sigma(B) " << min_basis_sigma << ", min rho " << min_rho
+    << ", " << cpu_seconds << " s";
+  return s.str();
+}
+
+namespace {
+
+// rho is lowered by this amount per regularization retry (paper Sec. 7, Step 2b).
+constexpr double kRhoDecrement = 0.1;
+// Below this many candidate column sets the basis with the least condition number is found
+// by enumeration; above, column-pivoted QR of the constraints' sensitivity picks the columns.
+constexpr long kMaxEnumeratedBases = 64;
+// Weight of x in the QP Hessian relative to u (see Try): small enough that the drift of u it
+// causes (about this weight times |x correction| |du/dx|) stays below the tolerances, large
+// enough for the Cholesky factor of the dual active-set method (condition 1e8).
+constexpr double kStateProximalWeight = 1e-8;
+// A segment end closer than this fraction of the step counts as reached (round-off in t).
+constexpr double kLandingFraction = 1e-9;
+
+long Binomial(long n, long k) {
+  if (k < 0 || k > n) return 0;
+  long value = 1;
+  for (long i = 1; i <= k; ++i) {
+    value = value * (n - k + i) / i;
+    if (value > kMaxEnumeratedBases) return value;
+  }
+  return value;
+}
+
+// Why one SQP try failed.
+enum class TryFailure { kNone, kRankDeficient, kInfeasible, kNotConverged };
+
+// What the working-set check learned about the basis matrix of the last QP.
+struct BasisInfo {
+  int num_active = 0;
+  int num_input_bounds = 0;
+  double sigma_min = 0.0;
+  double condition = 0.0;
+  std::vector<int> basic;  // basic algebraic inputs (indices among the algebraic inputs)
+};
+
+class AlphaDaiRun {
+ public:
+  AlphaDaiRun(const Scene& scene, const AlphaDaiOptions& options, const ProgressCallback& progress)
+      : scene_(scene), options_(options), progress_(progress) {
+    nx_ = scene.num_states();
+    dynamics_ = scene.dynamics;
+    parameters_ = scene.ParameterValues();
+    for (int i = 0; i < scene.num_inputs(); ++i) {
+      if (scene.inputs[static_cast<std::size_t>(i)].kind == InputSpec::Kind::kAlgebraic) {
+        algebraic_.push_back(i);
+      }
+    }
+    nq_ = static_cast<int>(algebraic_.size());
+    x_lower_ = Vector::Constant(nx_, -std::numeric_limits<double>::infinity());
+    x_upper_ = Vector::Constant(nx_, std::numeric_limits<double>::infinity());
+    for (const Effect& effect : scene.effects) {
+      const auto& dai = std::get<PathConstraints>(effect);
+      if (!dai.constraint_names.empty()) {
+        constraints_.push_back(dai.constraints);
+        for (const std::string& name : dai.constraint_names) {
+          constraint_names_.push_back(dai.name + "." + name);
+        }
+      }
+      if (dai.state_lower.size() > 0) x_lower_ = x_lower_.cwiseMax(dai.state_lower);
+      if (dai.state_upper.size() > 0) x_upper_ = x_upper_.cwiseMin(dai.state_upper);
+    }
+    nphi_ = static_cast<int>(constraint_names_.size());
+    for (const std::string& state : scene.state_names) {
+      constraint_names_.push_back(state + ".lower");
+      constraint_names_.push_back(state + ".upper");
+    }
+    u_lower_.resize(nq_);
+    u_upper_.resize(nq_);
+    for (int j = 0; j < nq_; ++j) {
+      const InputSpec& input = scene.inputs[static_cast<std::size_t>(algebraic_[j])];
+      u_lower_[j] = input.lower;
+      u_upper_[j] = input.upper;
+      constraint_names_.push_back(input.name + ".lower");
+      constraint_names_.push_back(input.name + ".upper");
+    }
+  }
+
+  AlphaDaiResult Run() {
+    const auto start = std::chrono::steady_clock::now();
+    AlphaDaiResult result;
+    result.constraint_names = constraint_names_;
+    result.trajectory.state_names = scene_.state_names;
+    for (int j : algebraic_) {
+      result.trajectory.algebraic_names.push_back(scene_.inputs[static_cast<std::size_t>(j)].name);
+    }
+    const std::vector<double> ends =
+        SegmentEnds(scene_.initial_time, scene_.final_time, scene_.ControlBreakpoints());
+    t_ = scene_.initial_time;
+    x_ = scene_.initial_state;
+    inputs_ = scene_.InputValues(t_);
+    InitializeAlgebraic();  // Step 1: consistent u_0 (throws if none)
+    result.trajectory.Append(t_, x_, u_, 0.0);
+    h_previous_ = options_.max_step_size;
+    bool ok = true;
+    for (std::size_t segment = 0; ok && segment + 1 < ends.size(); ++segment) {
+      inputs_ = scene_.InputValues(ends[segment]);
+      // a_0 = df/dt at the segment start (t_0 or a control breakpoint, where f jumps).
+      if (!RestartAcceleration()) {
+        ok = Fail(&result, AlphaDaiStatus::kNonFinite, "f or df/dt is not finite");
+        break;
+      }
+      ok = RunSegment(ends[segment + 1], &result);
+    }
+    result.final_time = t_;
+    result.final_state = x_;
+    result.final_inputs = u_;
+    result.final_acceleration = a_;
+    if (!options_.record_trajectory && result.trajectory.t.back() != t_) {
+      result.trajectory.Append(t_, x_, u_, last_step_);
+    }
+    stats_.cpu_seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    result.stats = stats_;
+    return result;
+  }
+
+ private:
+  // ------------------------------------------------------------------------- model evaluation
+  Vector FullInputs(const Eigen::Ref<const Vector>& u) const {
+    Vector full = inputs_;
+    for (int j = 0; j < nq_; ++j) full[algebraic_[j]] = u[j];
+    return full;
+  }
+
+  Vector EvaluateF(const Vector& x, const Vector& u, double t) const {
+    Vector f;
+    if (dynamics_.empty()) return Vector::Zero(nx_);
+    dynamics_.Evaluate(x, FullInputs(u), t, parameters_, &f);
+    return f;
+  }
+
+  // f and its Jacobians A = df/dx and D = df/du (algebraic columns).
+  void JacobianF(const Vector& x, const Vector& u, double t, Vector* f, Matrix* a,
+                 Matrix* d) const {
+    if (dynamics_.empty()) {
+      *f = Vector::Zero(nx_);
+      *a = Matrix::Zero(nx_, nx_);
+      *d = Matrix::Zero(nx_, nq_);
+      return;
+    }
+    Matrix jac;
+    dynamics_.Jacobian(x, FullInputs(u), t, parameters_, Wrt{true, true, false, false}, f, &jac);
+    *a = jac.leftCols(nx_);
+    d->resize(nx_, nq_);
+    for (int j = 0; j < nq_; ++j) d->col(j) = jac.col(nx_ + algebraic_[j]);
+  }
+
+  // phi and, with jacobians, dphi/dx and dphi/du (algebraic columns).
+  void EvaluatePhi(const Vector& x, const Vector& u, double t, Vector* phi, Matrix* phi_x,
+                   Matrix* phi_u) const {
+    phi->resize(nphi_);
+    if (phi_x != nullptr) {
+      phi_x->resize(nphi_, nx_);
+      phi_u->resize(nphi_, nq_);
+    }
+    const Vector full = FullInputs(u);
+    int row = 0;
+    for (const SmoothFunction& g : constraints_) {
+      const int k = g.num_outputs();
+      Vector value;
+      if (phi_x == nullptr) {
+        g.Evaluate(x, full, t, parameters_, &value);
+      } else {
+        Matrix jac;
+        g.Jacobian(x, full, t, parameters_, Wrt{true, true, false, false}, &value, &jac);
+        phi_x->middleRows(row, k) = jac.leftCols(nx_);
+        for (int j = 0; j < nq_; ++j)
+          phi_u->block(row, j, k, 1) = jac.block(0, nx_ + algebraic_[j], k, 1);
+      }
+      phi->segment(row, k) = value;
+      row += k;
+    }
+  }
+
+  // a = df/dt = f_x f + f_t (du/dt = 0 for the algebraic inputs, constant controls).
+  bool RestartAcceleration() {
+    f_ = EvaluateF(x_, u_, t_);
+    if (dynamics_.empty()) {
+      a_ = Vector::Zero(nx_);
+    } else {
+      Vector f;
+      Matrix jac;
+      dynamics_.Jacobian(x_, FullInputs(u_), t_, parameters_, Wrt{true, false, true, false}, &f,
+                         &jac);
+      a_ = jac.leftCols(nx_) * f + jac.col(nx_);
+    }
+    max_acceleration_ = std::max(max_acceleration_, a_.lpNorm<Eigen::Infinity>());
+    return f_.allFinite() && a_.allFinite();
+  }
+
+  // --------------------------------------------------------------------------- initialization
+  // Step 1: x_0 must lie within the state bounds; u_0 is the feasible point closest to the
+  // initial guesses (least change) for the path constraints at t_0.
+  void InitializeAlgebraic() {
+    for (int i = 0; i < nx_; ++i) {
+      RequireArgument(x_[i] >= x_lower_[i] && x_[i] <= x_upper_[i], scene_.name,
+                      ": initial state x0.", scene_.state_names[static_cast<std::size_t>(i)], " = ",
+                      x_[i], " is outside its bounds [", x_lower_[i], ", ", x_upper_[i],
+                      "] (path constraints)");
+    }
+    Vector guess(nq_);
+    for (int j = 0; j < nq_; ++j) {
+      guess[j] = scene_.inputs[static_cast<std::size_t>(algebraic_[j])].initial_guess;
+    }
+    guess = guess.cwiseMax(u_lower_).cwiseMin(u_upper_);
+    u_ = guess;
+    if (nphi_ == 0) return;
+    Vector phi;
+    EvaluatePhi(x_, u_, t_, &phi, nullptr, nullptr);
+    if (phi.maxCoeff() <= options_.constraint_tolerance) return;
+    int worst = 0;
+    phi.maxCoeff(&worst);
+    RequireArgument(nq_ > 0, scene_.name, ": infeasible initial state: path constraint '",
+                    constraint_names_[static_cast<std::size_t>(worst)], "' is phi = ", phi[worst],
+                    " > 0 at t0 = ", t_,
+                    " and the scene has no algebraic inputs (expected phi(x0, t0) <= ",
+                    options_.constraint_tolerance, ")");
+    internal::SqpProblem problem;
+    problem.num_variables = nq_;
+    problem.lower = u_lower_;
+    problem.upper = u_upper_;
+    problem.objective_weights = Vector::Ones(nq_);
+    problem.reference = guess;
+    problem.hessian_diagonal = Vector::Ones(nq_);
+    problem.evaluate = [this](const Vector& z, bool jacobians, internal::SqpEvaluation* out) {
+      out->equalities.resize(0);
+      out->equality_jacobian.resize(0, nq_);
+      Matrix phi_x;
+      EvaluatePhi(x_, z, t_, &out->inequalities, jacobians ? &phi_x : nullptr,
+                  jacobians ? &out->inequality_jacobian : nullptr);
+      return true;
+    };
+    internal::SqpOptions sqp_options;
+    sqp_options.inequality_tolerance = options_.constraint_tolerance;
+    sqp_options.optimality_tolerance = options_.optimality_tolerance;
+    sqp_options.max_iterations = options_.max_sqp_iterations;
+    const internal::SqpResult sqp = internal::SolveSqp(problem, guess, sqp_options);
+    if (sqp.status != internal::SqpStatus::kConverged) {
+      EvaluatePhi(x_, sqp.z, t_, &phi, nullptr, nullptr);
+      phi.maxCoeff(&worst);
+      ThrowInvalidArgument(scene_.name,
+                           ": inconsistent initial values: no algebraic inputs satisfying the path "
+                           "constraints at t0 = ",
+                           t_, " were found from the initial guesses (SQP: ",
+                           internal::ToString(sqp.status), "; largest violation phi = ", phi[worst],
+                           " in constraint '", constraint_names_[static_cast<std::size_t>(worst)],
+                           "'; expected phi(x0, u0, t0) <= ", options_.constraint_tolerance, ")");
+    }
+    u_ = sqp.z;
+  }
+
+  // ------------------------------------------------------------------------------- stepping
+  bool RunSegment(double t_end, AlphaDaiResult* result) {
+    while (t_ < t_end) {
+      if (stats_.num_steps >= options_.max_steps) {
+        return Fail(result, AlphaDaiStatus::kMaxStepsReached, "reached max_steps");
+      }
+      // Step 2: h_i = sqrt(min{h_max^2, h_{i-1}^2, ERRTOL / (2.25 max_j ||a_j||_inf)}).
+      double h2 =
+          std::min(options_.max_step_size * options_.max_step_size, h_previous_ * h_previous_);
+      if (std::isfinite(options_.error_tolerance) && max_acceleration_ > 0.0) {
+        h2 = std::min(h2, options_.error_tolerance / (2.25 * max_acceleration_));
+      }
+      double h_nominal = std::sqrt(h2);
+      if (!(h_nominal >= options_.min_step_size)) {
+        std::ostringstream s;
+        s << "the step-size rule gives h = " << h_nominal
+          << " < min_step_size = " << options_.min_step_size
+          << " (max ||a||_inf = " << max_acceleration_ << ", ERRTOL = " << options_.error_tolerance
+          << ")";
+        return Fail(result, AlphaDaiStatus::kStepSizeTooSmall, s.str());
+      }
+      if (!Step(t_end, &h_nominal, result)) return false;
+      h_previous_ = h_nominal;
+      if (progress_) progress_(t_);
+    }
+    return true;
+  }
+
+  // End of the next step: equal steps of at most h_nominal over the rest of the segment; the
+  // last one lands exactly on t_end.
+  double StepEnd(double t_end, double h_nominal) const {
+    const double remaining = t_end - t_;
+    const double count = std::max(1.0, std::ceil(remaining / h_nominal - kLandingFraction));
+    return count == 1.0 ? t_end : t_ + remaining / count;
+  }
+
+  // One step with the retry logic of Sec. 7 (Steps 2, 2a-2c).
+  bool Step(double t_end, double* h_nominal, AlphaDaiResult* result) {
+    double rho = options_.rho;
+    int retries = 0;
+    int guess_index = 0;
+    std::ostringstream history;
+    TryFailure failure = TryFailure::kNone;
+    while (true) {
+      const double t1 = StepEnd(t_end, *h_nominal);
+      const double h = t1 - t_;
+      const internal::SqpResult sqp = Try(t1, rho, guess_index, &failure);
+      ++stats_.num_tries;
+      if (failure == TryFailure::kNone) {
+        return Accept(t1, rho, retries + 1, sqp, result);
+      }
+      history << (retries == 0 ? "" : "; ") << "try " << retries + 1 << " (rho = " << rho
+              << ", h = " << h << ", guess " << guess_index << "): " << Describe(failure, sqp);
+      bool regularize = false;
+      if (failure == TryFailure::kRankDeficient) {
+        ++stats_.num_rank_deficient;
+        // Step 2b: lower rho by 0.1 (h = h_max once rho = 0) unless that is exhausted.
+        regularize =
+            retries < options_.max_retries && !(rho == 0.0 && *h_nominal == options_.max_step_size);
+      } else if (failure == TryFailure::kInfeasible) {
+        ++stats_.num_infeasible;
+      }
+      if (regularize) {
+        rho = rho > kRhoDecrement ? rho - kRhoDecrement : 0.0;
+        if (rho == 0.0) *h_nominal = options_.max_step_size;
+        ++stats_.num_rho_reductions;
+        ++retries;
+        continue;
+      }
+      // Step 2c: new initial guesses while retries remain.
+      if (retries < options_.max_retries) {
+        ++guess_index;
+        ++stats_.num_guess_retries;
+        ++retries;
+        continue;
+      }
+      const AlphaDaiStatus status =
+          failure == TryFailure::kInfeasible      ? AlphaDaiStatus::kInfeasibleConstraints
+          : failure == TryFailure::kRankDeficient ? AlphaDaiStatus::kRegularizationFailed
+                                                  : AlphaDaiStatus::kRetriesExhausted;
+      return Fail(result, status,
+                  "no acceptable step after " + std::to_string(retries + 1) + " tries (" +
+                      std::to_string(options_.max_retries) + " retries allowed): " + history.str());
+    }
+  }
+
+  std::string Describe(TryFailure failure, const internal::SqpResult& sqp) const {
+    std::ostringstream s;
+    s.precision(6);
+    switch (failure) {
+      case TryFailure::kRankDeficient:
+        s << "basis matrix rank deficient (sigma_min = " << basis_.sigma_min
+          << " <= rank_tolerance = " << options_.rank_tolerance
+          << ", active: " << ActiveNames(sqp.working_set) << ")";
+        break;
+      case TryFailure::kInfeasible: {
+        s << "constraints locally infeasible (l1-stationary point with max phi = "
+          << sqp.inequality_violation << ", dynamics residual " << sqp.equality_residual << ")";
+        break;
+      }
+      case TryFailure::kNotConverged:
+        s << "SQP " << internal::ToString(sqp.status) << " after " << sqp.iterations
+          << " iterations (max phi = " << sqp.inequality_violation << ", dynamics residual "
+          << sqp.equality_residual << ", KKT residual " << sqp.kkt_residual << ")";
+        break;
+      case TryFailure::kNone:
+        s << "accepted";
+        break;
+    }
+    return s.str();
+  }
+
+  std::string ActiveNames(const internal::SqpWorkingSet& set) const {
+    const std::vector<int> active = ActiveIndices(set);
+    std::string names;
+    for (int k : active)
+      names += (names.empty() ? "" : ", ") + constraint_names_[static_cast<std::size_t>(k)];
+    return names.empty() ? "none" : names;
+  }
+
+  std::vector<int> ActiveIndices(const internal::SqpWorkingSet& set) const {
+    std::vector<int> active(set.inequalities.begin(), set.inequalities.end());
+    for (int j : set.lower_bounds) active.push_back(BoundIndex(j, false));
+    for (int j : set.upper_bounds) active.push_back(BoundIndex(j, true));
+    std::sort(active.begin(), active.end());
+    return active;
+  }
+
+  int BoundIndex(int variable, bool upper) const {
+    return nphi_ + 2 * variable + (upper ? 1 : 0);  // states, then algebraic inputs
+  }
+
+  // Initial guesses (Step 2c): k = 0 is the paper's (x_n, u_n); then the explicit predictor
+  // x_n + h f_n with u_n, then u_n shifted by +-0.1, +-0.5, +-1 times the input's scale (half
+  // its bound range, or max(1, |u_n|)), clamped to the bounds.
+  Vector Guess(int k, double h) const {
+    Vector z(nx_ + nq_);
+    z.head(nx_) = k == 0 ? x_ : Vector(x_ + h * f_);
+    z.tail(nq_) = u_;
+    if (k >= 2) {
+      static constexpr double kShifts[] = {0.1, 0.5, 1.0};
+      const double shift = kShifts[std::min((k - 2) / 2, 2)] * (k % 2 == 0 ? 1.0 : -1.0);
+      for (int j = 0; j < nq_; ++j) {
+        const double range = u_upper_[j] - u_lower_[j];
+        const double scale = std::isfinite(range) ? 0.5 * range : std::max(1.0, std::fabs(u_[j]));
+        z[nx_ + j] += shift * scale;
+      }
+    }
+    Vector lower(nx_ + nq_), upper(nx_ + nq_);
+    lower << x_lower_, u_lower_;
+    upper << x_upper_, u_upper_;
+    return z.cwiseMax(lower).cwiseMin(upper);
+  }
+
+  // One SQP solve of (2a)-(2d) for the step from t_n to t1.
+  internal::SqpResult Try(double t1, double rho, int guess_index, TryFailure* failure) {
+    const AlphaCoefficients co = AlphaCoefficients::FromRho(rho);
+    const double c = co.beta / co.gamma;
+    const double h = t1 - t_;
+    // Known part of (2a): x_n + (1 - beta/gamma) h f_n + (1/2 - beta/gamma) h^2 a_n.
+    const Vector known = x_ + (1.0 - c) * h * f_ + (0.5 - c) * h * h * a_;
+    internal::SqpProblem problem;
+    problem.num_variables = nx_ + nq_;
+    problem.lower.resize(nx_ + nq_);
+    problem.upper.resize(nx_ + nq_);
+    problem.lower << x_lower_, u_lower_;
+    problem.upper << x_upper_, u_upper_;
+    problem.objective_weights = Vector::Zero(nx_ + nq_);
+    problem.reference.resize(nx_ + nq_);
+    problem.reference << x_, u_;
+    if (options_.objective != AlphaDaiObjective::kFeasibility) {
+      problem.objective_weights.tail(nq_).setOnes();
+    }
+    if (options_.objective == AlphaDaiObjective::kReference) {
+      for (int j = 0; j < nq_; ++j) {
+        problem.reference[nx_ + j] =
+            scene_.inputs[static_cast<std::size_t>(algebraic_[j])].signal.ValueAt(t1);
+      }
+    }
+    // QP Hessian: the objective's (unit weights on u; a unit proximal term for J = 0) and a
+    // tiny proximal term on x, which the dynamics (2a) determine: the QP step is then the
+    // smallest change of u (a unit weight on x would trade u for the size of the Newton
+    // correction of x and let u drift while no constraint is active).
+    problem.hessian_diagonal = Vector::Ones(nx_ + nq_);
+    problem.hessian_diagonal.head(nx_).setConstant(kStateProximalWeight);
+    problem.equality_scales = (1.0 + x_.array().abs()).matrix();
+    problem.evaluate = [&](const Vector& z, bool jacobians, internal::SqpEvaluation* out) {
+      const Vector x = z.head(nx_), u = z.tail(nq_);
+      Vector f;
+      if (jacobians) {
+        ++stats_.num_jacobian_evaluations;
+        JacobianF(x, u, t1, &f, &a_matrix_, &d_matrix_);
+        out->equality_jacobian.resize(nx_, nx_ + nq_);
+        out->equality_jacobian.leftCols(nx_) = Matrix::Identity(nx_, nx_) - c * h * a_matrix_;
+        out->equality_jacobian.rightCols(nq_) = -c * h * d_matrix_;
+        EvaluatePhi(x, u, t1, &out->inequalities, &phi_x_, &phi_u_);
+        out->inequality_jacobian.resize(nphi_, nx_ + nq_);
+        out->inequality_jacobian << phi_x_, phi_u_;
+      } else {
+        ++stats_.num_function_evaluations;
+        f = EvaluateF(x, u, t1);
+        EvaluatePhi(x, u, t1, &out->inequalities, nullptr, nullptr);
+      }
+      out->equalities = x - known - c * h * f;  // (2a) with a_{n+1} eliminated by (2b)
+      return f.allFinite();
+    };
+    problem.check_working_set = [&](const Vector&, const internal::SqpWorkingSet& set) {
+      return CheckBasis(set, h, rho);
+    };
+    internal::SqpOptions sqp_options;
+    sqp_options.equality_tolerance = options_.dynamics_tolerance;
+    sqp_options.inequality_tolerance = options_.constraint_tolerance;
+    sqp_options.activity_tolerance = options_.constraint_tolerance;
+    sqp_options.optimality_tolerance = options_.optimality_tolerance;
+    sqp_options.max_iterations = options_.max_sqp_iterations;
+    const internal::SqpResult sqp = internal::SolveSqp(problem, Guess(guess_index, h), sqp_options);
+    stats_.num_sqp_iterations += sqp.iterations;
+    stats_.num_qp_iterations += sqp.qp_iterations;
+    stats_.num_elastic_qps += sqp.elastic_qps;
+    switch (sqp.status) {
+      case internal::SqpStatus::kConverged:
+        *failure = TryFailure::kNone;
+        break;
+      case internal::SqpStatus::kRejectedWorkingSet:
+        *failure = TryFailure::kRankDeficient;
+        break;
+      case internal::SqpStatus::kInfeasible:
+        *failure = TryFailure::kInfeasible;
+        break;
+      default:
+        *failure = TryFailure::kNotConverged;
+        break;
+    }
+    return sqp;
+  }
+
+  // The basis matrix of the working set (Sec. 3.1, eq. 14): rows of the active path
+  // constraints and state bounds; algebraic inputs at a bound are non-basic; r_a basic
+  // columns among the others are chosen for the least condition number of the scaled B.
+  // Returns false when its smallest singular value is <= rank_tolerance.
+  bool CheckBasis(const internal::SqpWorkingSet& set, double h, double rho) {
+    std::vector<bool> at_bound(static_cast<std::size_t>(nq_), false);
+    std::vector<int> state_rows;
+    for (const std::vector<int>* bounds : {&set.lower_bounds, &set.upper_bounds}) {
+      for (int j : *bounds) {
+        if (j >= nx_) {
+          at_bound[static_cast<std::size_t>(j - nx_)] = true;
+        } else {
+          state_rows.push_back(j);
+        }
+      }
+    }
+    std::vector<int> candidates;
+    for (int j = 0; j < nq_; ++j) {
+      if (!at_bound[static_cast<std::size_t>(j)]) candidates.push_back(j);
+    }
+    const int r = static_cast<int>(set.inequalities.size() + state_rows.size());
+    basis_ = BasisInfo{};
+    basis_.num_active = r;
+    basis_.num_input_bounds = nq_ - static_cast<int>(candidates.size());
+    if (r > static_cast<int>(candidates.size())) {
+      basis_.sigma_min = 0.0;  // more active constraints than free algebraic variables
+      basis_.condition = std::numeric_limits<double>::infinity();
+      return false;
+    }
+    Matrix c(r, nx_), g_all(r, nq_);
+    int row = 0;
+    for (int i : set.inequalities) {
+      c.row(row) = phi_x_.row(i);
+      g_all.row(row++) = phi_u_.row(i);
+    }
+    for (int i : state_rows) {
+      c.row(row).setZero();
+      c(row, i) = 1.0;
+      g_all.row(row++).setZero();
+    }
+    const AlphaCoefficients co = AlphaCoefficients::FromRho(rho);
+    auto evaluate = [&](const std::vector<int>& basic, Eigen::VectorXd* sigma) {
+      Matrix d(nx_, r), g(r, r);
+      for (int k = 0; k < r; ++k) {
+        d.col(k) = d_matrix_.col(basic[static_cast<std::size_t>(k)]);
+        g.col(k) = g_all.col(basic[static_cast<std::size_t>(k)]);
+      }
+      const Eigen::JacobiSVD<Matrix> svd(AlphaScaledBasisMatrix(a_matrix_, d, c, g, h, rho));
+      ++stats_.num_basis_factorizations;
+      *sigma = svd.singularValues();
+    };
+    const long count = Binomial(static_cast<long>(candidates.size()), r);
+    std::vector<int> best;
+    Eigen::VectorXd best_sigma;
+    double best_condition = std::numeric_limits<double>::infinity();
+    if (count <= kMaxEnumeratedBases) {
+      // All r-subsets of the candidates in lexicographic order.
+      std::vector<int> pick(static_cast<std::size_t>(r));
+      for (int k = 0; k < r; ++k) pick[static_cast<std::size_t>(k)] = k;
+      while (true) {
+        std::vector<int> basic;
+        for (int k : pick) basic.push_back(candidates[static_cast<std::size_t>(k)]);
+        Eigen::VectorXd sigma;
+        evaluate(basic, &sigma);
+        const double condition = sigma[0] / sigma[sigma.size() - 1];
+        if (best_sigma.size() == 0 || condition < best_condition) {
+          best = basic;
+          best_sigma = sigma;
+          best_condition = condition;
+        }
+        int k = r - 1;
+        while (k >= 0 &&
+               pick[static_cast<std::size_t>(k)] == static_cast<int>(candidates.size()) - r + k) {
+          --k;
+        }
+        if (k < 0) break;
+        ++pick[static_cast<std::size_t>(k)];
+        for (int l = k + 1; l < r; ++l) {
+          pick[static_cast<std::size_t>(l)] = pick[static_cast<std::size_t>(l - 1)] + 1;
+        }
+      }
+    } else {
+      // Column pivoting on the active constraints' sensitivity to the candidates through
+      // (2a): dg/du = C (I - c1 h A)^{-1} c1 h D + G.
+      const double c1 = co.beta / co.gamma;
+      Matrix d(nx_, static_cast<Eigen::Index>(candidates.size()));
+      Matrix g(r, static_cast<Eigen::Index>(candidates.size()));
+      for (std::size_t k = 0; k < candidates.size(); ++k) {
+        d.col(static_cast<Eigen::Index>(k)) = d_matrix_.col(candidates[k]);
+        g.col(static_cast<Eigen::Index>(k)) = g_all.col(candidates[k]);
+      }
+      const Matrix m = Matrix::Identity(nx_, nx_) - c1 * h * a_matrix_;
+      const Matrix sensitivity = c * m.partialPivLu().solve(c1 * h * d) + g;
+      const Eigen::ColPivHouseholderQR<Matrix> qr(sensitivity);
+      for (int k = 0; k < r; ++k) {
+        best.push_back(candidates[static_cast<std::size_t>(qr.colsPermutation().indices()[k])]);
+      }
+      evaluate(best, &best_sigma);
+      best_condition = best_sigma[0] / best_sigma[best_sigma.size() - 1];
+    }
+    basis_.basic = best;
+    basis_.sigma_min = best_sigma[best_sigma.size() - 1];
+    basis_.condition = best_condition;
+    return basis_.sigma_min > options_.rank_tolerance;
+  }
+
+  bool Accept(double t1, double rho, int tries, const internal::SqpResult& sqp,
+              AlphaDaiResult* result) {
+    const AlphaCoefficients co = AlphaCoefficients::FromRho(rho);
+    const Vector x1 = sqp.z.head(nx_), u1 = sqp.z.tail(nq_);
+    const double h = t1 - t_;
+    const Vector f1 = EvaluateF(x1, u1, t1);
+    // (2b)
+    const Vector a1 = (f1 - f_) / (h * co.gamma) + (1.0 - 1.0 / co.gamma) * a_;
+    if (!f1.allFinite() || !a1.allFinite() || !x1.allFinite()) {
+      return Fail(result, AlphaDaiStatus::kNonFinite, "f or a is not finite at the new point");
+    }
+    const double c = co.beta / co.gamma;
+    const Vector residual = x1 - x_ - (1.0 - c) * h * f_ - c * h * f1 - (0.5 - c) * h * h * a_;
+    AlphaDaiStep step;
+    step.t = t1;
+    step.h = h;
+    step.rho = rho;
+    step.tries = tries;
+    step.sqp_iterations = sqp.iterations;
+    step.dynamics_residual = (residual.array().abs() / (1.0 + x1.array().abs())).maxCoeff();
+    Vector phi;
+    EvaluatePhi(x1, u1, t1, &phi, nullptr, nullptr);
+    double violation = nphi_ > 0 ? std::max(0.0, phi.maxCoeff()) : 0.0;
+    violation = std::max(violation, (x_lower_ - x1).maxCoeff());
+    violation = std::max(violation, (x1 - x_upper_).maxCoeff());
+    if (nq_ > 0) {
+      violation = std::max(violation, (u_lower_ - u1).maxCoeff());
+      violation = std::max(violation, (u1 - u_upper_).maxCoeff());
+    }
+    step.constraint_violation = violation;
+    step.kkt_residual = sqp.kkt_residual;
+    step.num_active = basis_.num_active;
+    step.num_active_input_bounds = basis_.num_input_bounds;
+    step.basis_sigma_min = basis_.sigma_min;
+    step.basis_condition = basis_.condition;
+    step.active = ActiveIndices(sqp.working_set);
+    for (int k : step.active) {
+      if (!std::binary_search(active_.begin(), active_.end(), k)) {
+        result->events.push_back(
+            {t1, EventKind::kEnter, constraint_names_[static_cast<std::size_t>(k)], "active"});
+      }
+    }
+    for (int k : active_) {
+      if (!std::binary_search(step.active.begin(), step.active.end(), k)) {
+        result->events.push_back(
+            {t1, EventKind::kLeave, constraint_names_[static_cast<std::size_t>(k)], "inactive"});
+      }
+    }
+    active_ = step.active;
+
+    ++stats_.num_steps;
+    stats_.max_constraint_violation = std::max(stats_.max_constraint_violation, violation);
+    stats_.max_dynamics_residual = std::max(stats_.max_dynamics_residual, step.dynamics_residual);
+    stats_.max_kkt_residual = std::max(stats_.max_kkt_residual, step.kkt_residual);
+    stats_.min_basis_sigma = std::min(stats_.min_basis_sigma, step.basis_sigma_min);
+    stats_.min_rho = std::min(stats_.min_rho, rho);
+    stats_.min_step = std::min(stats_.min_step, h);
+
+    t_ = t1;
+    x_ = x1;
+    u_ = u1;
+    f_ = f1;
+    a_ = a1;
+    max_acceleration_ = std::max(max_acceleration_, a_.lpNorm<Eigen::Infinity>());
+    last_step_ = h;
+    if (options_.record_trajectory) {
+      result->trajectory.Append(t_, x_, u_, h);
+      result->steps.push_back(std::move(step));
+    }
+    return true;
+  }
+
+  bool Fail(AlphaDaiResult* result, AlphaDaiStatus status, const std::string& reason) {
+    result->status = status;
+    std::ostringstream s;
+    s.precision(17);
+    s << ToString(status) << " at t = " << t_ << ": " << reason;
+    result->message = s.str();
+    return false;
+  }
+
+  const Scene& scene_;
+  AlphaDaiOptions options_;
+  ProgressCallback progress_;
+  int nx_ = 0, nq_ = 0, nphi_ = 0;
+  SmoothFunction dynamics_;
+  std::vector<SmoothFunction> constraints_;
+  std::vector<std::string> constraint_names_;
+  std::vector<int> algebraic_;  // indices of the algebraic inputs among the scene's inputs
+  Vector parameters_;
+  Vector x_lower_, x_upper_, u_lower_, u_upper_;
+  Vector inputs_;  // all inputs: controls of the current segment (algebraic entries unused)
+
+  double t_ = 0.0;
+  Vector x_, u_, f_, a_;
+  double max_acceleration_ = 0.0;
+  double h_previous_ = 0.0;
+  double last_step_ = 0.0;
+  std::vector<int> active_;
+
+  // Jacobians at the SQP's last linearization point (for the basis matrix).
+  Matrix a_matrix_, d_matrix_, phi_x_, phi_u_;
+  BasisInfo basis_;
+  AlphaDaiStats stats_;
+};
+
+}  // namespace
+
+AlphaDaiResult SimulateAlphaDai(const Scene& scene, const AlphaDaiOptions& options,
+                                const ProgressCallback& progress) {
+  options.Validate();
+  ValidateScene(scene);
+  for (const Effect& effect : scene.effects) {
+    if (std::holds_alternative<PathConstraints>(effect)) continue;
+    ThrowInvalidArgument("the alpha-method DAI stepper does not support the ", EffectKind(effect),
+                         " '", EffectName(effect), "' of scene '", scene.name,
+                         "'; it handles path constraints (use the timestepping or fesd "
+                         "integrators for moving sets and switching surfaces)");
+  }
+  AlphaDaiRun run(scene, options, progress);
+  return run.Run();
+}
+
+}  // namespace moreau
