@@ -31,6 +31,12 @@ const std::vector<SceneDefinition>& SceneCatalog() {
        scenes::MakeH2},
       {"H3", "two rooms with their own thermostats: interleaved relay switches",
        scenes::MakeTwoThermostats},
+      {"D2", "robot among obstacles pushed by a traveling wave (DAI, index-3 constraints)",
+       scenes::MakeD2},
+      {"D3", "re-entry with heat-flux, dynamic-pressure and load-factor limits (DAI)",
+       scenes::MakeD3},
+      {"dai_index2", "index-2 DAI x2 >= sin(x1) with a known solution (alpha-method test)",
+       scenes::MakeDaiIndex2},
   };
   return catalog;
 }

@@ -34,4 +34,9 @@ Scene MakeH1();
 Scene MakeH2();
 Scene MakeTwoThermostats();
 
+// Differential-algebraic inequalities (dai.cpp).
+Scene MakeDaiIndex2();
+Scene MakeD2();
+Scene MakeD3();
+
 }  // namespace moreau::scenes
