@@ -520,7 +520,7 @@ class AlphaDaiRun {
       const internal::SqpResult sqp = Try(t1, rho, guess_index, &failure);
       ++stats_.num_tries;
       if (failure == TryFailure::kNone) {
-        return Accept(t1, rho, retries + 1, sqp, result);
+        return Accept(t1, *h_nominal, rho, retries + 1, sqp, result);
       }
       history << (retries == 0 ? "" : "; ") << "try " << retries + 1 << " (rho = " << rho
               << ", h = " << h << ", guess " << guess_index << "): " << Describe(failure, sqp);
@@ -813,7 +813,7 @@ class AlphaDaiRun {
     return basis_.sigma_min > options_.rank_tolerance;
   }
 
-  bool Accept(double t1, double rho, int tries, const internal::SqpResult& sqp,
+  bool Accept(double t1, double h_rule, double rho, int tries, const internal::SqpResult& sqp,
               AlphaDaiResult* result) {
     const AlphaCoefficients co = AlphaCoefficients::FromRho(rho);
     const Vector x1 = sqp.z.head(nx_), u1 = sqp.z.tail(nq_);
@@ -829,10 +829,12 @@ class AlphaDaiRun {
     AlphaDaiStep step;
     step.t = t1;
     step.h = h;
+    step.h_rule = h_rule;
     step.rho = rho;
     step.tries = tries;
     step.sqp_iterations = sqp.iterations;
-    step.dynamics_residual = (residual.array().abs() / (1.0 + x1.array().abs())).maxCoeff();
+    step.dynamics_residual = (residual.array().abs() / (1.0 + x_.array().abs())).maxCoeff();
+    step.acceleration_norm = a1.lpNorm<Eigen::Infinity>();
     Vector phi;
     EvaluatePhi(x1, u1, t1, &phi, nullptr, nullptr);
     double violation = nphi_ > 0 ? std::max(0.0, phi.maxCoeff()) : 0.0;

@@ -119,7 +119,7 @@ struct AlphaDaiOptions {
   /// accepted step (units of phi), > 0. Bounds are enforced exactly.
   double constraint_tolerance = 1e-8;
   /// The discretized dynamics (2a) must hold with |residual_i| <= dynamics_tolerance
-  /// (1 + |x_{n+1,i}|), > 0.
+  /// (1 + |x_{n,i}|), > 0.
   double dynamics_tolerance = 1e-10;
   /// Stationarity of the local problem: ||grad J - J_c^T lambda||_inf <= optimality_tolerance
   /// at the accepted SQP iterate (dimensionless in scaled units), > 0.
@@ -134,8 +134,10 @@ struct AlphaDaiOptions {
   /// MAXTRY: retries per step after the first try (rho reductions and new initial guesses),
   /// >= 0.
   int max_retries = 5;
-  /// Local objective (see AlphaDaiObjective).
-  AlphaDaiObjective objective = AlphaDaiObjective::kFeasibility;
+  /// Local objective (see AlphaDaiObjective). The reference objective makes the algebraic
+  /// inputs follow the scene's user input functions (zero where none are given) and leave them
+  /// only where an active constraint needs them; kFeasibility is the paper's J = 0.
+  AlphaDaiObjective objective = AlphaDaiObjective::kReference;
   /// Accepted steps before the run stops with kMaxStepsReached, >= 1.
   long max_steps = 10'000'000;
   /// Record every accepted step in the trajectory and the step certificates (false: only
@@ -166,13 +168,17 @@ std::string ToString(AlphaDaiStatus status);
 
 /// Certificates of one accepted step.
 struct AlphaDaiStep {
-  double t = 0.0;                     ///< t_{n+1}
-  double h = 0.0;                     ///< step length
+  double t = 0.0;  ///< t_{n+1}
+  double h = 0.0;  ///< step length
+  /// Step from the step-size rule (Sec. 7, Step 2; h_max after a regularization at rho = 0)
+  /// before it is shortened to end on a control breakpoint or t_f (h <= h_rule).
+  double h_rule = 0.0;
   double rho = 0.0;                   ///< rho used (after reductions)
   int tries = 1;                      ///< SQP solves for this step (1: first try succeeded)
   int sqp_iterations = 0;             ///< of the accepted try
   double constraint_violation = 0.0;  ///< max(0, max_i phi_i, bound violations)
-  double dynamics_residual = 0.0;     ///< max_i |(2a)_i| / (1 + |x_{n+1,i}|)
+  double dynamics_residual = 0.0;     ///< max_i |(2a)_i| / (1 + |x_{n,i}|)
+  double acceleration_norm = 0.0;     ///< ||a_{n+1}||_inf (enters the step-size rule)
   double kkt_residual = 0.0;          ///< stationarity and complementarity of the local problem
   int num_active = 0;                 ///< r_a: active path constraints and state bounds
   int num_active_input_bounds = 0;    ///< algebraic inputs at a bound (non-basic)

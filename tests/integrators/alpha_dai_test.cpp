@@ -1,0 +1,749 @@
+#include "moreau/integrators/alpha_dai.hpp"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <complex>
+#include <functional>
+#include <limits>
+#include <numbers>
+#include <random>
+#include <string>
+
+// The QP solver is private to the stepper; its certificates are tested here directly.
+#include "../../integrators/alpha_dai/active_set_qp.hpp"
+#include "moreau/core/convergence.hpp"
+#include "moreau/scenes/catalog.hpp"
+
+namespace moreau {
+namespace {
+
+using internal::DenseQp;
+using internal::QpSolution;
+using internal::QpStatus;
+using internal::SolveQp;
+
+// ---------------------------------------------------------------------------------------------
+// Tolerances.
+
+// The stepper's requested tolerances (phi <= TOL at every accepted step, (2a) residual, KKT).
+const AlphaDaiOptions kDefaults;
+// KKT residuals of the QP: data of size O(1) to O(10) and Hessians with condition <= 1e3 leave a
+// few hundred ulps times the condition number.
+constexpr double kQpKkt = 1e-10;
+// A closed-form entry of eq. (12) is formed from terms up to |Omega|^2 / |2 Omega| = O(|Omega|)
+// with a handful of roundings: agreement to 1e-13 relative to the largest entry (|Omega| <= 1e6
+// costs at most ~1e-10 absolute on entries of size 1e6).
+constexpr double kEq12Agreement = 1e-13;
+// Eigenvalues of a 2x2 matrix with O(1) spectral radius, computed to a few ulps; the spectral
+// radius reaches exactly 1 only on the imaginary axis near Omega = 0.
+constexpr double kSpectralSlack = 1e-12;
+// At Omega = -1e14 the eigenvalues are within O(|Omega|^-1/2) = 1e-7 of their limits (rho = 0
+// has a double eigenvalue at infinity, whose perturbation grows like the square root).
+constexpr double kInfinitySlack = 1e-5;
+// Observed orders: the acceptance window for second order, and first order for the
+// algebraic variable (Lemma 3: O(h) bound; the O(1) error of a, here from a_0 computed with
+// du/dt = 0, makes it sharp).
+constexpr double kSecondOrderLow = 1.7, kSecondOrderHigh = 2.3;
+constexpr double kFirstOrderLow = 0.8, kFirstOrderHigh = 1.3;
+// Theorem 3 is an inequality between singular values computed by SVD to a few ulps of the
+// largest one (entries up to 1/h = 10).
+constexpr double kSingularValueSlack = 1e-12;
+// Central differences of B(rho) with step 1e-6: round-off 1e-16 |B| / 1e-6 ~ 1e-8 for entries
+// up to |A| / (gamma h) ~ 40 at h = 0.1, truncation 1e-12 |B'''| far below; 1e-7 leaves a factor
+// of ten.
+constexpr double kFiniteDifference = 1e-7;
+
+std::string Scientific(double value) {
+  char buffer[32];
+  std::snprintf(buffer, sizeof buffer, "%.4e", value);
+  return buffer;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Active-set QP (Goldfarb-Idnani with KKT polish): certificates on random and degenerate QPs.
+
+// max of stationarity, primal violation, dual violation and complementarity.
+double QpKktResidual(const DenseQp& qp, const QpSolution& s) {
+  Vector r = qp.hessian * s.x + qp.gradient;
+  if (qp.equality_matrix.rows() > 0) r -= qp.equality_matrix.transpose() * s.equality_multipliers;
+  if (qp.inequality_matrix.rows() > 0) {
+    r -= qp.inequality_matrix.transpose() * s.inequality_multipliers;
+  }
+  double worst = r.lpNorm<Eigen::Infinity>();
+  if (qp.equality_matrix.rows() > 0) {
+    worst = std::max(worst, (qp.equality_matrix * s.x - qp.equality_rhs).lpNorm<Eigen::Infinity>());
+  }
+  for (Eigen::Index i = 0; i < qp.inequality_matrix.rows(); ++i) {
+    const double slack = qp.inequality_matrix.row(i).dot(s.x) - qp.inequality_rhs[i];
+    const double z = s.inequality_multipliers[i];
+    worst = std::max({worst, -slack, -z, std::fabs(z * slack)});
+  }
+  return worst;
+}
+
+TEST(AlphaDaiQpTest, RandomStrictlyConvexQpsSatisfyKkt) {
+  std::mt19937 generator(20260611);
+  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+  auto random = [&](Eigen::Index rows, Eigen::Index cols) {
+    return Matrix(Matrix::NullaryExpr(rows, cols, [&]() { return uniform(generator); }));
+  };
+  int checked = 0;
+  for (int n : {3, 8, 20}) {
+    for (int m_eq : {0, 2}) {
+      for (int m_in : {5, 30}) {
+        for (int trial = 0; trial < 5; ++trial) {
+          DenseQp qp;
+          const Matrix root = random(n, n);
+          qp.hessian = root * root.transpose() + 0.1 * Matrix::Identity(n, n);
+          qp.gradient = 3.0 * random(n, 1);
+          // Feasible by construction: x_feasible satisfies all rows, half of them with equality.
+          const Vector feasible = random(n, 1);
+          qp.equality_matrix = random(m_eq, n);
+          qp.equality_rhs = qp.equality_matrix * feasible;
+          qp.inequality_matrix = random(m_in, n);
+          Vector margin = random(m_in, 1).cwiseAbs();
+          for (int i = 0; i < m_in; i += 2) margin[i] = 0.0;
+          qp.inequality_rhs = qp.inequality_matrix * feasible - margin;
+          const QpSolution s = SolveQp(qp);
+          ASSERT_EQ(s.status, QpStatus::kOptimal)
+              << "n = " << n << ", m_eq = " << m_eq << ", m_in = " << m_in << ", trial " << trial;
+          EXPECT_LE(QpKktResidual(qp, s), kQpKkt)
+              << "n = " << n << ", m_eq = " << m_eq << ", m_in = " << m_in << ", trial " << trial;
+          ++checked;
+        }
+      }
+    }
+  }
+  EXPECT_EQ(checked, 60);
+}
+
+TEST(AlphaDaiQpTest, InfeasibleAndDependentConstraintsAreReported) {
+  DenseQp qp;
+  qp.hessian = Matrix::Identity(2, 2);
+  qp.gradient = Vector::Zero(2);
+  qp.equality_matrix = Matrix(0, 2);
+  qp.equality_rhs = Vector(0);
+  qp.inequality_matrix = Matrix{{1.0, 0.0}, {-1.0, 0.0}};  // x0 >= 1 and x0 <= 0
+  qp.inequality_rhs = Vector{{1.0, 0.0}};
+  EXPECT_EQ(SolveQp(qp).status, QpStatus::kInfeasible);
+
+  // Redundant consistent equalities are accepted; inconsistent ones are reported.
+  qp.inequality_matrix = Matrix(0, 2);
+  qp.inequality_rhs = Vector(0);
+  qp.equality_matrix = Matrix{{1.0, 1.0}, {2.0, 2.0}};
+  qp.equality_rhs = Vector{{1.0, 2.0}};
+  QpSolution s = SolveQp(qp);
+  ASSERT_EQ(s.status, QpStatus::kOptimal);
+  EXPECT_LE(QpKktResidual(qp, s), kQpKkt);
+  EXPECT_NEAR(s.x[0], 0.5, kQpKkt);
+  qp.equality_rhs = Vector{{1.0, 3.0}};
+  EXPECT_EQ(SolveQp(qp).status, QpStatus::kDependentEqualities);
+
+  qp.hessian = Matrix{{1.0, 0.0}, {0.0, -1.0}};
+  EXPECT_EQ(SolveQp(qp).status, QpStatus::kNotConvex);
+}
+
+// The stepper weights x by 1e-8 against u (x follows from the dynamics rows): the dual
+// iterates then lose about 8 digits, which the KKT polish of the final active set restores.
+TEST(AlphaDaiQpTest, BadlyScaledHessianKeepsFullAccuracy) {
+  DenseQp qp;
+  qp.hessian = Matrix::Identity(4, 4);
+  qp.hessian.diagonal().head(3).setConstant(1e-8);
+  qp.gradient = Vector{{0.0, 0.0, 0.0, 0.0579086}};
+  qp.equality_matrix =
+      Matrix{{1.0, 0.0, 0.0, 0.0}, {0.0, 1.0, 0.0, -0.0661793}, {0.0, 0.0, 1.06618, -0.0661793}};
+  qp.equality_rhs = Vector{{2.91434e-16, 6.77211e-09, 0.0}};
+  qp.inequality_matrix = Matrix{{0.575422, 1.0, 0.0, 0.0}};
+  qp.inequality_rhs = Vector{{2.22045e-16}};
+  const QpSolution s = SolveQp(qp);
+  ASSERT_EQ(s.status, QpStatus::kOptimal);
+  // The KKT matrix of the polish has condition ~1e8 (G spans 1e-8..1): residuals up to
+  // eps 1e8 |x| = 2e-8 * 1e-7 = 2e-15. Without the polish they are 8.6e-9, the size of the
+  // right-hand side itself.
+  constexpr double kScaledResidual = 2e-15;
+  EXPECT_LE((qp.equality_matrix * s.x - qp.equality_rhs).lpNorm<Eigen::Infinity>(),
+            kScaledResidual);
+  EXPECT_LE(QpKktResidual(qp, s), kQpKkt);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Method properties: coefficients, eq. (12), A-stability.
+
+// Eq. (12) as printed in the paper.
+Eigen::Matrix2cd PaperEq12(double r, std::complex<double> w) {
+  const std::complex<double> den = 2.0 * w + (r - 3.0) * (r + 1.0);
+  Eigen::Matrix2cd a;
+  a(0, 0) = -2.0 * w * w / den + w + 1.0;
+  a(0, 1) = (r - 1.0) * (r - 1.0) / (2.0 * den);
+  a(1, 0) = -2.0 * w * w * (r + 1.0) * (r + 1.0) / den;
+  a(1, 1) = (-(w - 3.0) * r * r - 2.0 * (w - 1.0) * r + w - 1.0) / den;
+  return a;
+}
+
+double SpectralRadius(const Eigen::Matrix2cd& a) {
+  return Eigen::ComplexEigenSolver<Eigen::Matrix2cd>(a).eigenvalues().cwiseAbs().maxCoeff();
+}
+
+// Omega on a grid of the closed left half plane: |Omega| from 1e-8 to 1e6 (log spaced), angles
+// from pi/2 to 3pi/2 inclusive (the imaginary axis is part of the grid).
+std::vector<std::complex<double>> LeftHalfPlaneGrid() {
+  std::vector<std::complex<double>> grid;
+  for (int k = 0; k <= 140; ++k) {
+    const double radius = std::pow(10.0, -8.0 + 0.1 * k);
+    for (int j = 0; j <= 60; ++j) {
+      grid.push_back(std::polar(radius, std::numbers::pi * (0.5 + j / 60.0)));
+    }
+  }
+  return grid;
+}
+
+constexpr double kRhos[] = {0.0, 0.3, 0.6, 0.9, 0.99};
+
+TEST(AlphaDaiMethodTest, CoefficientsAndAmplificationMatrixAreEq3AndEq12) {
+  for (double rho : kRhos) {
+    const AlphaCoefficients c = AlphaCoefficients::FromRho(rho);
+    EXPECT_DOUBLE_EQ(c.gamma, 2.0 / (rho + 1.0) - 0.5);
+    EXPECT_DOUBLE_EQ(c.beta, 1.0 / ((rho + 1.0) * (rho + 1.0)));
+    double worst = 0.0;
+    for (const std::complex<double>& omega : LeftHalfPlaneGrid()) {
+      const Eigen::Matrix2cd paper = PaperEq12(rho, omega);
+      const Eigen::Matrix2cd ours = AlphaAmplificationMatrix(rho, omega);
+      worst = std::max(worst,
+                       (paper - ours).cwiseAbs().maxCoeff() / (1.0 + paper.cwiseAbs().maxCoeff()));
+    }
+    EXPECT_LE(worst, kEq12Agreement) << "rho = " << rho;
+  }
+  EXPECT_THROW(AlphaCoefficients::FromRho(1.0), std::invalid_argument);
+  EXPECT_THROW(AlphaCoefficients::FromRho(-0.1), std::invalid_argument);
+}
+
+// Acceptance: spectral radius <= 1 on the closed left half plane for rho in {0, .3, .6, .9,
+// .99}; rho is the spectral radius at infinity.
+TEST(AlphaDaiMethodTest, AmplificationMatrixIsAStable) {
+  for (double rho : kRhos) {
+    double largest = 0.0;
+    std::complex<double> where;
+    for (const std::complex<double>& omega : LeftHalfPlaneGrid()) {
+      const double radius = SpectralRadius(AlphaAmplificationMatrix(rho, omega));
+      if (radius > largest) {
+        largest = radius;
+        where = omega;
+      }
+    }
+    EXPECT_LE(largest, 1.0 + kSpectralSlack) << "rho = " << rho << " at Omega = " << where;
+    EXPECT_NEAR(SpectralRadius(AlphaAmplificationMatrix(rho, {-1e14, 0.0})), rho, kInfinitySlack)
+        << "rho = " << rho;
+  }
+}
+
+// y' = A y with eigenvalues -1e6 and -1e6 +- 1e6 i, h = 1e-3 (|Omega| up to 1414), 1e4 steps.
+// The consistent a_0 = A^2 y_0 makes the first step overshoot by about |1/2 - beta/gamma| /
+// (beta/gamma) |Omega| (at most 0.25 |Omega| for rho = 0); afterwards the contractive
+// amplification matrix damps everything.
+TEST(AlphaDaiMethodTest, StiffLinearSystemStaysBounded) {
+  Scene scene;
+  scene.name = "stiff";
+  scene.state_names = {"y", "z1", "z2"};
+  scene.initial_state = Vector{{1.0, 1.0, 1.0}};
+  scene.final_time = 10.0;
+  scene.dynamics = MakeSmoothFunction(
+      "stiff.f", 3, [](const auto& x, const auto&, const auto&, const auto&, auto& out) {
+        out[0] = -1e6 * x[0];
+        out[1] = -1e6 * x[1] + 1e6 * x[2];
+        out[2] = -1e6 * x[1] - 1e6 * x[2];
+      });
+  const double largest_omega = 1e6 * std::sqrt(2.0) * 1e-3;
+  // Decay after 1e4 steps: the spectral radius at these Omega is below 0.999.
+  constexpr double kFinalDecay = 1e-10;
+  for (double rho : kRhos) {
+    AlphaDaiOptions options;
+    options.rho = rho;
+    options.max_step_size = 1e-3;
+    const AlphaDaiResult result = SimulateAlphaDai(scene, options);
+    ASSERT_EQ(result.status, AlphaDaiStatus::kSuccess) << result.message;
+    ASSERT_EQ(result.stats.num_steps, 10000);
+    double largest = 0.0;
+    for (const Vector& x : result.trajectory.x) {
+      ASSERT_TRUE(x.allFinite());
+      largest = std::max(largest, x.lpNorm<Eigen::Infinity>());
+    }
+    EXPECT_LE(largest, largest_omega) << "rho = " << rho;
+    // The stepper is the recursion of eq. (12) on the real mode: (y_n, h^2 a_n) = A^n (y_0,
+    // Omega^2 y_0). Both accumulate round-off of a few ulps of the O(|Omega|) transient per step.
+    constexpr double kRecursionAgreement = 1e-10;
+    constexpr int kCompared = 50;
+    const std::complex<double> omega = -1e6 * options.max_step_size;
+    const Eigen::Matrix2cd amplification = AlphaAmplificationMatrix(rho, omega);
+    Eigen::Vector2cd state(1.0, omega * omega);
+    for (int n = 1; n <= kCompared; ++n) {
+      state = amplification * state;
+      EXPECT_NEAR(result.trajectory.x[static_cast<std::size_t>(n)][0], state[0].real(),
+                  kRecursionAgreement * std::max(1.0, std::abs(state[0])))
+          << "rho = " << rho << ", step " << n;
+    }
+    EXPECT_LE(result.final_state.lpNorm<Eigen::Infinity>(), kFinalDecay) << "rho = " << rho;
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Orders.
+
+// Exact solution of the Hopf normal form scene (see its description).
+Vector HopfExact(const Scene& scene, double t) {
+  const double mu = scene.parameters[static_cast<std::size_t>(scene.FindParameter("mu"))].value;
+  const double omega =
+      scene.parameters[static_cast<std::size_t>(scene.FindParameter("omega"))].value;
+  const double r0 = scene.initial_state.norm();
+  const double r = std::sqrt(mu / (1.0 + (mu / (r0 * r0) - 1.0) * std::exp(-2.0 * mu * t)));
+  return Vector{{r * std::cos(omega * t), r * std::sin(omega * t)}};
+}
+
+TEST(AlphaDaiOrderTest, UnconstrainedSmoothProblemIsSecondOrder) {
+  const Scene scene = MakeScene("hopf");
+  const std::vector<double> steps = {0.02, 0.01, 0.005, 0.0025};
+  for (double rho : {0.0, 0.5, 0.99}) {
+    std::vector<double> errors;
+    std::string table;
+    for (double h : steps) {
+      AlphaDaiOptions options;
+      options.rho = rho;
+      options.max_step_size = h;
+      const AlphaDaiResult result = SimulateAlphaDai(scene, options);
+      ASSERT_EQ(result.status, AlphaDaiStatus::kSuccess) << result.message;
+      EXPECT_LE(result.stats.max_dynamics_residual, kDefaults.dynamics_tolerance);
+      errors.push_back(
+          (result.final_state - HopfExact(scene, scene.final_time)).lpNorm<Eigen::Infinity>());
+      table += "h = " + Scientific(h) + " error = " + Scientific(errors.back()) + "\n";
+    }
+    const OrderFit fit = FitOrder(steps, errors, 0.0);
+    EXPECT_GE(fit.order, kSecondOrderLow) << "rho = " << rho << "\n" << table;
+    EXPECT_LE(fit.order, kSecondOrderHigh) << "rho = " << rho << "\n" << table;
+  }
+}
+
+// dai_index2: x1' = 1, x2' = u, x3' = -x3 + u, x2 >= sin(x1) active throughout, least change.
+TEST(AlphaDaiOrderTest, Index2ActiveConstraintStateSecondAlgebraicFirstOrder) {
+  const Scene scene = MakeScene("dai_index2");
+  const double x10 = scene.initial_state[0];
+  const double x30 = scene.initial_state[2];
+  auto exact = [&](double t) {
+    const double s = x10 + t;
+    const double c0 = x30 - 0.5 * (std::cos(x10) + std::sin(x10));
+    return Vector{{s, std::sin(s), 0.5 * (std::cos(s) + std::sin(s)) + c0 * std::exp(-t)}};
+  };
+  const std::vector<double> steps = {0.1, 0.05, 0.025, 0.0125};
+  for (double rho : {0.0, 0.5, 0.99}) {
+    std::vector<double> state_errors, input_errors;
+    std::string table;
+    for (double h : steps) {
+      AlphaDaiOptions options;
+      options.rho = rho;
+      options.max_step_size = h;
+      options.objective = AlphaDaiObjective::kLeastChange;
+      const AlphaDaiResult result = SimulateAlphaDai(scene, options);
+      ASSERT_EQ(result.status, AlphaDaiStatus::kSuccess) << result.message;
+      // Certificates first: the constraint is active and satisfied to TOL at every step.
+      ASSERT_EQ(result.steps.size(), result.trajectory.size() - 1);
+      for (const AlphaDaiStep& step : result.steps) {
+        EXPECT_LE(step.constraint_violation, kDefaults.constraint_tolerance) << "t = " << step.t;
+        EXPECT_LE(step.dynamics_residual, kDefaults.dynamics_tolerance) << "t = " << step.t;
+        EXPECT_LE(step.kkt_residual, kDefaults.optimality_tolerance) << "t = " << step.t;
+        EXPECT_EQ(step.num_active, 1) << "t = " << step.t;
+        EXPECT_GT(step.basis_sigma_min, kDefaults.rank_tolerance) << "index 2: well conditioned";
+      }
+      double state_error = 0.0, input_error = 0.0;
+      for (std::size_t k = 0; k < result.trajectory.size(); ++k) {
+        const double t = result.trajectory.t[k];
+        const Vector& x = result.trajectory.x[k];
+        EXPECT_GE(x[1] - std::sin(x[0]), -kDefaults.constraint_tolerance) << "t = " << t;
+        state_error = std::max(state_error, (x - exact(t)).lpNorm<Eigen::Infinity>());
+        input_error =
+            std::max(input_error, std::fabs(result.trajectory.algebraic[k][0] - std::cos(x10 + t)));
+      }
+      state_errors.push_back(state_error);
+      input_errors.push_back(input_error);
+      table += "h = " + Scientific(h) + " x error = " + Scientific(state_error) +
+               " u error = " + Scientific(input_error) + "\n";
+    }
+    const OrderFit state = FitOrder(steps, state_errors, 0.0);
+    const OrderFit input = FitOrder(steps, input_errors, 0.0);
+    EXPECT_GE(state.order, kSecondOrderLow) << "rho = " << rho << "\n" << table;
+    EXPECT_LE(state.order, kSecondOrderHigh) << "rho = " << rho << "\n" << table;
+    EXPECT_GE(input.order, kFirstOrderLow) << "rho = " << rho << "\n" << table;
+    // With rho -> 1 the a-term of (2a) vanishes (1/2 - beta/gamma -> 0) and u converges faster
+    // than the bound; for rho = 0 and 0.5 the first-order bound is attained.
+    if (rho < 0.9) {
+      EXPECT_LE(input.order, kFirstOrderHigh) << "rho = " << rho << "\n" << table;
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Regularization on an index-3 obstacle constraint (D2, the paper's Sec. 8.2 findings).
+
+AlphaDaiResult RunScene(const std::string& name, double rho, double h, int max_retries = 5) {
+  AlphaDaiOptions options;
+  options.rho = rho;
+  options.max_step_size = h;
+  options.max_retries = max_retries;
+  return SimulateAlphaDai(MakeScene(name), options);
+}
+
+int ConstraintIndex(const AlphaDaiResult& result, const std::string& name) {
+  for (std::size_t k = 0; k < result.constraint_names.size(); ++k) {
+    if (result.constraint_names[k] == name) return static_cast<int>(k);
+  }
+  return -1;
+}
+
+bool IsActive(const AlphaDaiStep& step, int index) {
+  return std::find(step.active.begin(), step.active.end(), index) != step.active.end();
+}
+
+TEST(AlphaDaiRegularizationTest, Index3ObstacleRecoversByLoweringRho) {
+  // rho = 0.99, h = 0.1: at the first contact with obs1 the scaled basis matrix is numerically
+  // rank deficient; lowering rho by 0.1 per retry raises sigma_min above rank_tolerance.
+  const AlphaDaiResult recovered = RunScene("D2", 0.99, 0.1, 10);
+  ASSERT_EQ(recovered.status, AlphaDaiStatus::kSuccess) << recovered.message;
+  EXPECT_GT(recovered.stats.num_rank_deficient, 0);
+  EXPECT_GT(recovered.stats.num_rho_reductions, 0);
+  const int obstacle = ConstraintIndex(recovered, "D2.obs1");
+  ASSERT_GE(obstacle, 0);
+  bool regularized_contact = false;
+  for (const AlphaDaiStep& step : recovered.steps) {
+    // Every accepted step has a numerically regular basis and satisfies the constraints.
+    EXPECT_GT(step.basis_sigma_min, kDefaults.rank_tolerance) << "t = " << step.t;
+    EXPECT_LE(step.constraint_violation, kDefaults.constraint_tolerance) << "t = " << step.t;
+    if (step.rho < 0.99 && step.tries > 1 && IsActive(step, obstacle)) regularized_contact = true;
+  }
+  EXPECT_TRUE(regularized_contact) << recovered.stats.Summary();
+  EXPECT_LT(recovered.stats.min_rho, 0.99);
+
+  // With the default 5 retries rho only reaches 0.49: regularization fails at that contact.
+  const AlphaDaiResult failed = RunScene("D2", 0.99, 0.1);
+  EXPECT_EQ(failed.status, AlphaDaiStatus::kRegularizationFailed);
+  EXPECT_NE(failed.message.find("rank deficient"), std::string::npos) << failed.message;
+  EXPECT_NE(failed.message.find("D2.obs1"), std::string::npos) << failed.message;
+  EXPECT_GT(failed.final_time, 2.0) << failed.message;
+  EXPECT_LT(failed.final_time, 3.5) << failed.message;
+
+  // rho = 0 regularizes at h = 0.1, and a larger step (h = 0.5) regularizes at rho = 0.99.
+  for (const auto& [rho, h] : {std::pair{0.0, 0.1}, std::pair{0.99, 0.5}}) {
+    const AlphaDaiResult result = RunScene("D2", rho, h);
+    EXPECT_EQ(result.status, AlphaDaiStatus::kSuccess)
+        << "rho = " << rho << ", h = " << h << ": " << result.message;
+    EXPECT_EQ(result.stats.num_rho_reductions, 0) << "rho = " << rho << ", h = " << h;
+  }
+}
+
+// Theorem 3 at the contact state of the rho = 0 run: sigma_p(dB/drho) >= h 4 (1 - rho) /
+// ((rho+1)^2 (3-rho)^2) sigma_p^{1/2}(A A^T + D D^T), p = rank(A A^T + D D^T); dB/drho is
+// checked against central differences of B(rho).
+TEST(AlphaDaiRegularizationTest, Theorem3LowerBoundHolds) {
+  const Scene scene = MakeScene("D2");
+  constexpr double kStep = 0.1;
+  const AlphaDaiResult run = RunScene("D2", 0.0, kStep);
+  ASSERT_EQ(run.status, AlphaDaiStatus::kSuccess) << run.message;
+  const int obstacle = ConstraintIndex(run, "D2.obs1");
+  std::size_t contact = 0;
+  while (contact < run.steps.size() && !IsActive(run.steps[contact], obstacle)) ++contact;
+  ASSERT_LT(contact, run.steps.size()) << "obs1 never active";
+  const Vector& x = run.trajectory.x[contact + 1];
+  const Vector& u = run.trajectory.algebraic[contact + 1];
+  const double t = run.trajectory.t[contact + 1];
+  const Vector p = scene.ParameterValues();
+  Vector f, phi;
+  Matrix jf, jphi;
+  scene.dynamics.Jacobian(x, u, t, p, Wrt{true, true, false, false}, &f, &jf);
+  const auto& dai = std::get<PathConstraints>(scene.effects[0]);
+  dai.constraints.Jacobian(x, u, t, p, Wrt{true, true, false, false}, &phi, &jphi);
+  const int m = scene.num_states();
+  const Matrix a = jf.leftCols(m);
+  const Matrix d = jf.col(m);               // steering alpha: the basic variable of the obstacle
+  const Matrix c = jphi.block(0, 0, 1, m);  // obs1 row
+  const Matrix g = jphi.block(0, m, 1, 1);
+  EXPECT_NEAR(phi[0], 0.0, kDefaults.constraint_tolerance) << "obs1 is active at the contact";
+
+  const Eigen::JacobiSVD<Matrix> y_svd(a * a.transpose() + d * d.transpose());
+  const Eigen::VectorXd y_sigma = y_svd.singularValues();
+  const double rank_cutoff = 1e-12 * y_sigma[0];  // numerical rank of the symmetric PSD matrix
+  int rank = 0;
+  while (rank < y_sigma.size() && y_sigma[rank] > rank_cutoff) ++rank;
+  ASSERT_GE(rank, 1);
+  for (double rho : kRhos) {
+    const Matrix derivative = AlphaBasisMatrixRhoDerivative(a, d, c, g, kStep, rho);
+    if (rho > 0.0) {
+      constexpr double kDelta = 1e-6;
+      const Matrix central = (AlphaBasisMatrix(a, d, c, g, kStep, std::min(rho + kDelta, 0.999)) -
+                              AlphaBasisMatrix(a, d, c, g, kStep, rho - kDelta)) /
+                             (std::min(rho + kDelta, 0.999) - (rho - kDelta));
+      EXPECT_LE((derivative - central).cwiseAbs().maxCoeff(), kFiniteDifference) << "rho = " << rho;
+    }
+    const Eigen::VectorXd sigma = Eigen::JacobiSVD<Matrix>(derivative).singularValues();
+    const double bound = kStep * 4.0 * (1.0 - rho) /
+                         ((rho + 1.0) * (rho + 1.0) * (3.0 - rho) * (3.0 - rho)) *
+                         std::sqrt(y_sigma[rank - 1]);
+    EXPECT_GE(sigma[rank - 1], bound * (1.0 - kSingularValueSlack))
+        << "rho = " << rho << ", p = " << rank;
+  }
+  // Theorem 2 / Corollary 1 at this state: lowering rho raises the smallest singular value of
+  // the (scaled) basis matrix from below rank_tolerance to above it.
+  const auto sigma_min = [&](double rho) {
+    const Eigen::VectorXd s =
+        Eigen::JacobiSVD<Matrix>(AlphaScaledBasisMatrix(a, d, c, g, kStep, rho)).singularValues();
+    return s[s.size() - 1];
+  };
+  EXPECT_LT(sigma_min(0.99), kDefaults.rank_tolerance);
+  EXPECT_GT(sigma_min(0.0), kDefaults.rank_tolerance);
+  EXPECT_GT(sigma_min(0.0), sigma_min(0.5));
+  EXPECT_GT(sigma_min(0.5), sigma_min(0.99));
+}
+
+// ---------------------------------------------------------------------------------------------
+// D2 and D3: constraints at every accepted step, recomputed from the trajectory.
+
+double MaxPathConstraint(const Scene& scene, const AlphaDaiResult& result) {
+  const auto& dai = std::get<PathConstraints>(scene.effects[0]);
+  const Vector p = scene.ParameterValues();
+  double worst = -std::numeric_limits<double>::infinity();
+  for (std::size_t k = 0; k < result.trajectory.size(); ++k) {
+    Vector phi;
+    dai.constraints.Evaluate(result.trajectory.x[k], result.trajectory.algebraic[k],
+                             result.trajectory.t[k], p, &phi);
+    worst = std::max(worst, phi.maxCoeff());
+  }
+  return worst;
+}
+
+TEST(AlphaDaiSceneTest, D2AndD3SatisfyThePathConstraintsAtEveryStep) {
+  struct Case {
+    const char* scene;
+    double rho, h;
+    const char* activated;  // a constraint that must become active
+  };
+  for (const Case& c :
+       {Case{"D2", 0.0, 0.1, "D2.obs1"}, Case{"D2", 0.99, 0.5, "D2.obs2"},
+        Case{"D3", 0.0, 0.25, "D3.heat_flux"}, Case{"D3", 0.5, 0.25, "D3.heat_flux"},
+        Case{"D3", 0.99, 1.0, "D3.heat_flux"}}) {
+    const std::string label =
+        std::string(c.scene) + " rho = " + std::to_string(c.rho) + " h = " + std::to_string(c.h);
+    const Scene scene = MakeScene(c.scene);
+    const AlphaDaiResult result = RunScene(c.scene, c.rho, c.h);
+    ASSERT_EQ(result.status, AlphaDaiStatus::kSuccess) << label << ": " << result.message;
+    EXPECT_DOUBLE_EQ(result.final_time, scene.final_time) << label;
+    EXPECT_LE(result.stats.max_constraint_violation, kDefaults.constraint_tolerance) << label;
+    EXPECT_LE(result.stats.max_dynamics_residual, kDefaults.dynamics_tolerance) << label;
+    EXPECT_LE(result.stats.max_kkt_residual, kDefaults.optimality_tolerance) << label;
+    EXPECT_LE(MaxPathConstraint(scene, result), kDefaults.constraint_tolerance) << label;
+    bool entered = false;
+    for (const Event& event : result.events) {
+      if (event.kind == EventKind::kEnter && event.what == c.activated) entered = true;
+    }
+    EXPECT_TRUE(entered) << label << ": " << c.activated << " never active";
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Statuses: each failure has its own status, with the time and reason.
+
+// x' = u with |u| <= 1 cannot keep up with the wall x >= 2 t.
+Scene RunawayWall() {
+  Scene scene;
+  scene.name = "runaway";
+  scene.state_names = {"x"};
+  scene.initial_state = Vector{{0.0}};
+  InputSpec u;
+  u.name = "u";
+  u.kind = InputSpec::Kind::kAlgebraic;
+  u.lower = -1.0;
+  u.upper = 1.0;
+  scene.inputs.push_back(u);
+  scene.dynamics = MakeSmoothFunction(
+      "runaway.f", 1,
+      [](const auto&, const auto& v, const auto&, const auto&, auto& out) { out[0] = v[0]; });
+  PathConstraints wall;
+  wall.name = "wall";
+  wall.constraint_names = {"c"};
+  wall.constraints = MakeSmoothFunction(
+      "runaway.phi", 1, [](const auto& x, const auto&, const auto& t, const auto&, auto& out) {
+        out[0] = 2.0 * t - x[0];
+      });
+  scene.effects.push_back(wall);
+  return scene;
+}
+
+TEST(AlphaDaiStatusTest, FailuresGiveTheirDocumentedStatuses) {
+  AlphaDaiOptions options;
+  options.max_step_size = 0.1;
+  AlphaDaiResult result = SimulateAlphaDai(RunawayWall(), options);
+  EXPECT_EQ(result.status, AlphaDaiStatus::kInfeasibleConstraints);
+  EXPECT_EQ(result.final_time, 0.0);
+  EXPECT_NE(result.message.find("infeasible_constraints at t = 0:"), std::string::npos)
+      << result.message;
+  EXPECT_NE(result.message.find("locally infeasible"), std::string::npos) << result.message;
+  EXPECT_EQ(result.stats.num_infeasible, options.max_retries + 1);
+
+  // One SQP iteration cannot converge from x_n: every try fails, then the retries run out.
+  options = {};
+  options.max_step_size = 0.25;
+  options.max_sqp_iterations = 1;
+  result = SimulateAlphaDai(MakeScene("D3"), options);
+  EXPECT_EQ(result.status, AlphaDaiStatus::kRetriesExhausted);
+  EXPECT_NE(result.message.find("retries_exhausted at t = 0:"), std::string::npos)
+      << result.message;
+  EXPECT_NE(result.message.find("iteration limit"), std::string::npos) << result.message;
+
+  options = {};
+  options.error_tolerance = 1e-30;
+  result = SimulateAlphaDai(MakeScene("hopf"), options);
+  EXPECT_EQ(result.status, AlphaDaiStatus::kStepSizeTooSmall);
+  EXPECT_NE(result.message.find("step_size_too_small at t = 0:"), std::string::npos)
+      << result.message;
+
+  options = {};
+  options.max_steps = 3;
+  result = SimulateAlphaDai(MakeScene("hopf"), options);
+  EXPECT_EQ(result.status, AlphaDaiStatus::kMaxStepsReached);
+  EXPECT_EQ(result.stats.num_steps, 3);
+}
+
+// Sec. 7, Step 2: h_i = sqrt(min{h_max^2, h_{i-1}^2, ERRTOL / (2.25 max_{j<=i} ||a_j||_inf)}).
+TEST(AlphaDaiStepSizeTest, FollowsTheErrtolRule) {
+  const Scene scene = MakeScene("hopf");
+  AlphaDaiOptions options;
+  options.max_step_size = 0.05;
+  options.error_tolerance = 1e-4;
+  const AlphaDaiResult result = SimulateAlphaDai(scene, options);
+  ASSERT_EQ(result.status, AlphaDaiStatus::kSuccess) << result.message;
+  // a_0 = f_x f (autonomous scene, no inputs).
+  Vector f;
+  Matrix jac;
+  scene.dynamics.Jacobian(scene.initial_state, Vector(), 0.0, scene.ParameterValues(), Wrt::X(), &f,
+                          &jac);
+  double largest = (jac * f).lpNorm<Eigen::Infinity>();
+  double previous = options.max_step_size;
+  bool limited = false;
+  for (const AlphaDaiStep& step : result.steps) {
+    const double rule =
+        std::sqrt(std::min({options.max_step_size * options.max_step_size, previous * previous,
+                            options.error_tolerance / (2.25 * largest)}));
+    // The same floating-point expression up to the order of the min: a few ulps.
+    EXPECT_NEAR(step.h_rule, rule, 1e-15) << "t = " << step.t;
+    EXPECT_LE(step.h, step.h_rule * (1.0 + 1e-12)) << "t = " << step.t;
+    if (rule < options.max_step_size) limited = true;
+    previous = step.h_rule;
+    largest = std::max(largest, step.acceleration_norm);
+  }
+  EXPECT_TRUE(limited) << "ERRTOL never limited the step";
+}
+
+// The reference objective: an unconstrained algebraic input equals its user input function;
+// least change keeps its previous value. Steps end on control breakpoints.
+TEST(AlphaDaiObjectiveTest, ReferenceFollowsTheUserInputFunction) {
+  Scene scene;
+  scene.name = "follow";
+  scene.state_names = {"x"};
+  scene.initial_state = Vector{{0.0}};
+  scene.final_time = 2.0;
+  InputSpec u;
+  u.name = "u";
+  u.kind = InputSpec::Kind::kAlgebraic;
+  u.signal.breakpoints = {1.0};
+  u.signal.values = {1.0, 2.0};
+  scene.inputs.push_back(u);
+  InputSpec w;
+  w.name = "w";
+  w.signal.breakpoints = {0.95};
+  w.signal.values = {0.0, 1.0};
+  scene.inputs.push_back(w);
+  scene.dynamics = MakeSmoothFunction(
+      "follow.f", 1, [](const auto&, const auto& v, const auto&, const auto&, auto& out) {
+        out[0] = v[0] + v[1];
+      });
+  AlphaDaiOptions options;
+  options.max_step_size = 0.1;
+  // u - w is the objective's gradient; the SQP stops once the KKT residual, which it bounds up
+  // to the multipliers of the dynamics rows (of the size of the 1e-8 proximal weight on x), is
+  // below the optimality tolerance.
+  const double kReferenceAgreement = options.optimality_tolerance;
+  AlphaDaiResult result = SimulateAlphaDai(scene, options);
+  ASSERT_EQ(result.status, AlphaDaiStatus::kSuccess) << result.message;
+  bool breakpoint = false;
+  for (std::size_t k = 1; k < result.trajectory.size(); ++k) {
+    const double t = result.trajectory.t[k];
+    EXPECT_NEAR(result.trajectory.algebraic[k][0], t < 1.0 ? 1.0 : 2.0, kReferenceAgreement)
+        << "t = " << t;
+    if (t == 0.95) breakpoint = true;
+  }
+  EXPECT_TRUE(breakpoint) << "no step ends on the control breakpoint 0.95";
+  options.objective = AlphaDaiObjective::kLeastChange;
+  result = SimulateAlphaDai(scene, options);
+  ASSERT_EQ(result.status, AlphaDaiStatus::kSuccess) << result.message;
+  // The initial guess (0), never needed elsewhere.
+  EXPECT_NEAR(result.final_inputs[0], 0.0, kReferenceAgreement);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Bad input: std::invalid_argument naming what is wrong.
+
+void ExpectInvalid(const std::function<void()>& call, const std::string& fragment) {
+  try {
+    call();
+    ADD_FAILURE() << "expected std::invalid_argument containing '" << fragment << "'";
+  } catch (const std::invalid_argument& error) {
+    EXPECT_NE(std::string(error.what()).find(fragment), std::string::npos) << error.what();
+  }
+}
+
+TEST(AlphaDaiInputTest, BadOptionsAndScenesAreRejected) {
+  const Scene hopf = MakeScene("hopf");
+  auto with = [&](const std::function<void(AlphaDaiOptions*)>& change) {
+    return [&hopf, change] {
+      AlphaDaiOptions options;
+      change(&options);
+      SimulateAlphaDai(hopf, options);
+    };
+  };
+  ExpectInvalid(with([](AlphaDaiOptions* o) { o->rho = 1.0; }), "rho must be in [0, 1)");
+  ExpectInvalid(with([](AlphaDaiOptions* o) { o->max_step_size = 0.0; }), "max_step_size");
+  ExpectInvalid(with([](AlphaDaiOptions* o) { o->error_tolerance = 0.0; }), "error_tolerance");
+  ExpectInvalid(with([](AlphaDaiOptions* o) { o->min_step_size = 1.0; }), "min_step_size");
+  ExpectInvalid(with([](AlphaDaiOptions* o) { o->constraint_tolerance = 0.0; }),
+                "constraint_tolerance");
+  ExpectInvalid(with([](AlphaDaiOptions* o) { o->dynamics_tolerance = -1.0; }),
+                "dynamics_tolerance");
+  ExpectInvalid(with([](AlphaDaiOptions* o) { o->optimality_tolerance = 0.0; }),
+                "optimality_tolerance");
+  ExpectInvalid(with([](AlphaDaiOptions* o) { o->rank_tolerance = 1.0; }), "rank_tolerance");
+  ExpectInvalid(with([](AlphaDaiOptions* o) { o->max_sqp_iterations = 0; }), "max_sqp_iterations");
+  ExpectInvalid(with([](AlphaDaiOptions* o) { o->max_retries = -1; }), "max_retries");
+  ExpectInvalid(with([](AlphaDaiOptions* o) { o->max_steps = 0; }), "max_steps");
+  ExpectInvalid([] { ParseAlphaDaiObjective("nope"); }, "unknown alpha-method objective 'nope'");
+
+  ExpectInvalid([] { SimulateAlphaDai(MakeScene("S3"), {}); },
+                "does not support the moving set 'floor'");
+
+  Scene bounded = MakeScene("dai_index2");
+  std::get<PathConstraints>(bounded.effects[0]).state_upper = Vector{{10.0, -1.0, 10.0}};
+  ExpectInvalid([&] { SimulateAlphaDai(bounded, {}); }, "initial state x0.x2");
+
+  // Index-2 constraint violated at t0: no algebraic input can repair a state constraint.
+  Scene violated = MakeScene("dai_index2");
+  SetSceneValue(&violated, "x0.x2", -2.0);
+  ExpectInvalid([&] { SimulateAlphaDai(violated, {}); }, "inconsistent initial values");
+
+  Scene no_inputs = RunawayWall();
+  no_inputs.inputs.clear();
+  no_inputs.dynamics = MakeSmoothFunction(
+      "still.f", 1,
+      [](const auto&, const auto&, const auto&, const auto&, auto& out) { out[0] = 0.0; });
+  no_inputs.initial_time = 1.0;
+  no_inputs.final_time = 2.0;
+  ExpectInvalid([&] { SimulateAlphaDai(no_inputs, {}); }, "infeasible initial state");
+}
+
+}  // namespace
+}  // namespace moreau
