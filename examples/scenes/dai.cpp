@@ -153,7 +153,7 @@ Scene MakeD3() {
   const int radius = scene.AddParameter("r_e", 6371.0, "Earth radius (km)");
   const int g0 = scene.AddParameter("g0", 9.80665, "surface gravity (m/s^2)");
   const int mass = scene.AddParameter("mass", 1750.0, "vehicle mass (kg)");
-  const int area = scene.AddParameter("S", 5.5, "reference area (m^2)");
+  const int area = scene.AddParameter("S", 6.4, "reference area (m^2)");
   const int cl_alpha = scene.AddParameter("CL_alpha", 1.2, "lift slope (1/rad)");
   const int cd0 = scene.AddParameter("CD0", 0.05, "zero-lift drag coefficient");
   const int induced = scene.AddParameter("K", 1.0, "induced drag factor");

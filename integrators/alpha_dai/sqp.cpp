@@ -103,8 +103,11 @@ class Sqp {
       bool elastic = false;
       double linearized_violation = 0.0;
       Vector step;
+      Vector slacks;  // elastic slacks (empty for the plain QP)
+      std::vector<int> active_rows;
       if (qp.status == QpStatus::kOptimal) {
         step = qp.x;
+        active_rows = qp.active_inequalities;
         stalled_ = 0;
         previous_violation_ = std::numeric_limits<double>::infinity();
         result.working_set = WorkingSet(qp.active_inequalities, Vector(), false);
@@ -138,13 +141,19 @@ class Sqp {
         }
         mu = std::max(mu, penalty);
         step = elastic_qp.x.head(n_);
-        result.working_set =
-            WorkingSet(elastic_qp.active_inequalities, elastic_qp.x.tail(SlackCount()), false);
+        slacks = elastic_qp.x.tail(SlackCount());
+        active_rows = elastic_qp.active_inequalities;
+        // The elastic QP's rows start with those of the plain QP: same multiplier layout.
+        StoreMultipliers(elastic_qp, &result);
+        result.working_set = WorkingSet(active_rows, slacks, false);
         // Local infeasibility: no predicted decrease of the violation even without the
         // objective (z is a stationary point of the linearized l1 violation), or elastic
         // iterations that stopped reducing it (see kStallIterations).
+        // A point feasible within the tolerances whose linearization is inconsistent (a
+        // degenerate vertex, violations of round-off size) is not declared infeasible: it
+        // converges below if its KKT residual is small.
         bool stationary = false;
-        if (linearized_violation >= violation * (1.0 - kStationaryDecrease)) {
+        if (!Feasible(result) && linearized_violation >= violation * (1.0 - kStationaryDecrease)) {
           QpSolution pure;
           double pure_violation = 0.0;
           stationary = SolveElastic(Vector::Zero(n_), kStationarityPenalty, &pure, &pure_violation,
@@ -156,7 +165,7 @@ class Sqp {
             previous_violation_ - violation > kStallDecrease * previous_violation_;
         stalled_ = progress ? 0 : stalled_ + 1;
         previous_violation_ = violation;
-        if (stationary || stalled_ >= kStallIterations) {
+        if (!Feasible(result) && (stationary || stalled_ >= kStallIterations)) {
           result.status = SqpStatus::kInfeasible;
           return result;
         }
@@ -164,15 +173,11 @@ class Sqp {
         result.status = SqpStatus::kQpFailure;
         return result;
       }
-      bool converged = false;
-      if (!elastic) {
-        result.kkt_residual = KktResidual(result);
-        converged = result.equality_residual <= options_.equality_tolerance &&
-                    result.inequality_violation <= options_.inequality_tolerance &&
-                    result.kkt_residual <= options_.optimality_tolerance;
-        // At the solution the working set also holds the constraints that sit on zero.
-        if (converged) result.working_set = WorkingSet(qp.active_inequalities, Vector(), true);
-      }
+      result.kkt_residual = KktResidual(result);
+      const bool converged =
+          Feasible(result) && result.kkt_residual <= options_.optimality_tolerance;
+      // At the solution the working set also holds the constraints that sit on zero.
+      if (converged) result.working_set = WorkingSet(active_rows, slacks, true);
       if (problem_.check_working_set && !problem_.check_working_set(z_, result.working_set)) {
         result.status = SqpStatus::kRejectedWorkingSet;
         return result;
@@ -260,6 +265,11 @@ class Sqp {
   // l1 violation V = ||c_E||_1 + ||max(c_I, 0)||_1 (the bounds always hold).
   static double Violation(const SqpEvaluation& e) {
     return e.equalities.lpNorm<1>() + e.inequalities.cwiseMax(0.0).sum();
+  }
+
+  bool Feasible(const SqpResult& result) const {
+    return result.equality_residual <= options_.equality_tolerance &&
+           result.inequality_violation <= options_.inequality_tolerance;
   }
 
   // Residual and violation of the current point.
