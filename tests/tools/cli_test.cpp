@@ -196,6 +196,45 @@ TEST(CliTest, HysteresisScenesReportPhysicalTimeAndRelaySignals) {
   ExpectUsageError("run H1 --integrator timestepping", "hysteresis relay 'thermostat'");
 }
 
+// Acceptance (issue 6): D2 and D3 run with the alpha-method stepper from the command line (auto
+// picks it for path constraints); the path constraints hold to TOL at every step and the
+// per-step certificates are written to elements.csv.
+TEST(CliTest, DaiScenesRunWithAlpha) {
+  const std::filesystem::path directory =
+      std::filesystem::temp_directory_path() / "moreau_cli_test_alpha";
+  constexpr double kTol = 1e-8;  // AlphaDaiOptions::constraint_tolerance (TOL)
+  for (const char* arguments : {"D2 --integrator alpha", "D3 --integrator alpha --rho 0.99",
+                                "D2 --rho 0 --objective least-change"}) {
+    std::filesystem::remove_all(directory);
+    const Outcome outcome =
+        RunCli(std::string("run ") + arguments + " --quiet --no-plot --out " + directory.string());
+    EXPECT_EQ(outcome.exit_code, 0) << arguments << "\n" << outcome.output;
+    std::ifstream json_file(directory / "summary.json");
+    const nlohmann::json summary = nlohmann::json::parse(json_file);
+    EXPECT_EQ(summary["integrator"], "alpha") << arguments;
+    EXPECT_EQ(summary["status"], "success") << arguments;
+    EXPECT_LE(summary["stats"]["max_constraint_violation"].get<double>(), kTol) << arguments;
+    EXPECT_FALSE(summary["events"].empty()) << arguments << ": no constraint became active";
+    std::ifstream elements(directory / "elements.csv");
+    std::string header;
+    std::getline(elements, header);
+    EXPECT_EQ(header.rfind("t,h,h_rule,rho,tries,sqp_iterations,constraint_violation", 0), 0u)
+        << header;
+  }
+  // A failure is a numerical status with time and reason (exit code 1), not a crash.
+  const Outcome failed = RunCli("run D2 --rho 0.99 --quiet --no-plot --out " + directory.string());
+  EXPECT_EQ(failed.exit_code, 1) << failed.output;
+  EXPECT_NE(failed.output.find("regularization_failed at t = "), std::string::npos)
+      << failed.output;
+  ExpectUsageError("run D2 --integrator alpha --stages 3",
+                   "option --stages does not apply to integrator 'alpha'");
+  ExpectUsageError("run S3 --integrator fesd --rho 0.5",
+                   "option --rho does not apply to integrator 'fesd'");
+  ExpectUsageError("run D2 --objective nope", "unknown alpha-method objective 'nope'");
+  ExpectUsageError("run D2 --rho 1", "rho must be in [0, 1)");
+  ExpectUsageError("run S3 --integrator alpha", "does not support the moving set 'floor'");
+}
+
 TEST(CliTest, ListAndShowDescribeScenes) {
   const Outcome list = RunCli("list");
   EXPECT_EQ(list.exit_code, 0);

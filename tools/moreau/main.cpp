@@ -244,8 +244,8 @@ int main(int argc, char** argv) {
   bool no_plot = false, quiet = false;
   run->add_option("scene", run_scene, "scene name (default: " + run_scene + ")");
   run->add_option("--integrator", settings.integrator,
-                  "integrator (see `moreau list`; default auto: radau without effects, fesd "
-                  "otherwise)");
+                  "integrator (see `moreau list`; default auto: radau without effects, alpha "
+                  "for path constraints, fesd otherwise)");
   auto* stages = run->add_option("--stages", settings.stages, "Radau IIA stages s (order 2s-1)");
   auto* h = run->add_option("--h", settings.step_size, "step size (initial step if adaptive)");
   auto* tf_option = run->add_option("--tf", tf, "final time (overrides the scene's horizon)");
@@ -265,6 +265,18 @@ int main(int argc, char** argv) {
       "--numerical-time", settings.numerical_time,
       "hysteresis scenes (fesd): trajectory.csv in numerical time tau, with the relay "
       "memories and the clock (default: physical time)");
+  auto* rho = run->add_option("--rho", settings.rho,
+                              "alpha-method regularization parameter rho in [0, 1) (alpha)");
+  auto* errtol = run->add_option("--errtol", settings.error_tolerance,
+                                 "ERRTOL of the alpha-method step-size rule (alpha; default: "
+                                 "fixed steps --h)");
+  auto* rank_tol = run->add_option("--rank-tol", settings.rank_tolerance,
+                                   "singular-value cut-off of the scaled basis matrix (alpha)");
+  auto* max_retries = run->add_option("--max-retries", settings.max_retries,
+                                      "MAXTRY: retries per step, rho reductions included (alpha)");
+  auto* objective = run->add_option(
+      "--objective", settings.objective,
+      "local objective of the alpha-method SQP: reference, least-change or feasibility");
   run->add_flag("--no-plot", no_plot, "do not write trajectory.png");
   run->add_flag("--quiet", quiet, "no progress output");
 
@@ -284,9 +296,20 @@ int main(int argc, char** argv) {
       return 0;
     }
     const std::vector<std::pair<CLI::Option*, std::string>> tracked = {
-        {stages, "stages"},       {h, "h"},       {adaptive, "adaptive"},
-        {rtol, "rtol"},           {atol, "atol"}, {linear, "linear-solver"},
-        {switching, "switching"}, {fe, "fe"},     {numerical_time, "numerical-time"}};
+        {stages, "stages"},
+        {h, "h"},
+        {adaptive, "adaptive"},
+        {rtol, "rtol"},
+        {atol, "atol"},
+        {linear, "linear-solver"},
+        {switching, "switching"},
+        {fe, "fe"},
+        {numerical_time, "numerical-time"},
+        {rho, "rho"},
+        {errtol, "errtol"},
+        {rank_tol, "rank-tol"},
+        {max_retries, "max-retries"},
+        {objective, "objective"}};
     for (const auto& [option, name] : tracked) {
       if (option->count() > 0) settings.given.insert(name);
     }

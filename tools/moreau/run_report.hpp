@@ -2,6 +2,7 @@
 // The command-line tool's integrator-independent view of a run, and the adapters that fill
 // it from each integrator's own Options/Result types.
 
+#include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <set>
@@ -28,6 +29,12 @@ struct RunSettings {
   std::string switching_form = "stewart";
   std::string linear_solver = "auto";
   bool numerical_time = false;  // time-freezing scenes: trajectory in numerical time
+  // alpha-method DAI stepper (--rho, --errtol, --rank-tol, --max-retries, --objective).
+  double rho = 0.5;
+  double error_tolerance = std::numeric_limits<double>::infinity();
+  double rank_tolerance = 1e-2;
+  int max_retries = 5;
+  std::string objective = "reference";
   std::set<std::string> given;
 };
 

@@ -109,7 +109,9 @@ struct AlphaDaiOptions {
   /// lowered by 0.1 per retry when the basis matrix is rank deficient.
   double rho = 0.5;
   /// Largest step h_max > 0 (time units); the fixed step when error_tolerance is infinite.
-  double max_step_size = 0.01;
+  /// The paper's examples use 0.1 to 0.5; with the default rank_tolerance, active index-3
+  /// constraints are numerically rank deficient for every rho at much smaller steps.
+  double max_step_size = 0.1;
   /// ERRTOL > 0 of the step-size rule (units of x): h^2 <= ERRTOL / (2.25 max ||a_j||_inf).
   /// +infinity (default) disables the rule: fixed steps h_max, as in the paper's examples.
   double error_tolerance = std::numeric_limits<double>::infinity();
