@@ -8,8 +8,8 @@ namespace moreau {
 
 /// What happened at an event.
 enum class EventKind {
-  kEnter,        ///< a constraint of a moving set became active (contact)
-  kLeave,        ///< a constraint of a moving set became inactive
+  kEnter,        ///< a constraint of a moving set (or a path constraint) became active
+  kLeave,        ///< a constraint of a moving set (or a path constraint) became inactive
   kModeSwitch,   ///< the Filippov mode changed by crossing a switching surface
   kSlideStart,   ///< a sliding mode started on a switching surface
   kSlideEnd,     ///< a sliding mode ended
