@@ -223,6 +223,7 @@ namespace {
 
 // rho is lowered by this amount per regularization retry (paper Sec. 7, Step 2b).
 constexpr double kRhoDecrement = 0.1;
+constexpr double kRhoRoundOff = 1e-12;
 // Below this many candidate column sets the basis with the least condition number is found
 // by enumeration; above, column-pivoted QR of the constraints' sensitivity picks the columns.
 constexpr long kMaxEnumeratedBases = 64;
@@ -534,7 +535,8 @@ class AlphaDaiRun {
         ++stats_.num_infeasible;
       }
       if (regularize) {
-        rho = rho > kRhoDecrement ? rho - kRhoDecrement : 0.0;
+        // Repeated decrements leave round-off (0.5 - 5 x 0.1 = 2.8e-17): such values are 0.
+        rho = rho - kRhoDecrement > kRhoRoundOff ? rho - kRhoDecrement : 0.0;
         if (rho == 0.0) *h_nominal = options_.max_step_size;
         ++stats_.num_rho_reductions;
         ++retries;

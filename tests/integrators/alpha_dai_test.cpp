@@ -418,6 +418,9 @@ TEST(AlphaDaiRegularizationTest, Index3ObstacleRecoversByLoweringRho) {
     EXPECT_GT(step.basis_sigma_min, kDefaults.rank_tolerance) << "t = " << step.t;
     EXPECT_LE(step.constraint_violation, kDefaults.constraint_tolerance) << "t = " << step.t;
     if (step.rho < 0.99 && step.tries > 1 && IsActive(step, obstacle)) regularized_contact = true;
+    // rho is the user's value lowered by whole multiples of 0.1, or exactly 0 (Step 2b).
+    EXPECT_TRUE(step.rho == 0.0 || std::fabs(std::remainder(0.99 - step.rho, 0.1)) < 1e-12)
+        << "t = " << step.t << ", rho = " << step.rho;
   }
   EXPECT_TRUE(regularized_contact) << recovered.stats.Summary();
   EXPECT_LT(recovered.stats.min_rho, 0.99);

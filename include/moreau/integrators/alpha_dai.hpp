@@ -7,8 +7,10 @@
 /// inequality (DAI) systems", IJNAM 2011; docs/alpha-method.md):
 ///   x' = f(x, u, t, p),   phi(x, u, t, p) <= 0,   bounds on x and on the algebraic u,
 /// where u holds the scene's algebraic inputs (InputSpec::Kind::kAlgebraic, unknowns with
-/// bounds) and the user's input functions w(t) enter f through t or as piecewise-constant
-/// control inputs. Constraints and state bounds come from the scene's PathConstraints effects.
+/// bounds); known functions of time enter f through t or as piecewise-constant control inputs,
+/// and an algebraic input's signal is its user input function w(t) (paper Sec. 2), which the
+/// reference objective follows wherever no active constraint needs the input. Constraints and
+/// state bounds come from the scene's PathConstraints effects.
 ///
 /// Discretization (paper eqs. 2a-2d, 3a-3b), with gamma = 2/(rho+1) - 1/2,
 /// beta = 1/(rho+1)^2 and rho in [0, 1):
@@ -23,8 +25,9 @@
 ///
 /// Per step, a dense SQP (Gauss-Newton Hessian, exact Jacobians by automatic
 /// differentiation, l1 merit function with backtracking, elastic mode when the linearized
-/// constraints are inconsistent) solves the paper's local problem: J = 0 (feasibility) or the
-/// least change ||u - u_n||^2, subject to (2a)-(2d). Its QP subproblems are solved by the
+/// constraints are inconsistent) solves the paper's local problem subject to (2a)-(2d), with J
+/// = 0 (the paper's feasibility problem), the least change ||u - u_n||^2 or the distance
+/// ||u - w(t_{n+1})||^2 to the user inputs (default). Its QP subproblems are solved by the
 /// Goldfarb-Idnani dual active-set method. The working set of every QP (active path
 /// constraints and state bounds) defines the basis matrix B of eq. (14), whose basic
 /// algebraic columns are chosen by column pivoting for the least condition number; when the
