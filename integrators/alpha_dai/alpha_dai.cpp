@@ -928,6 +928,9 @@ class AlphaDaiRun {
 AlphaDaiResult SimulateAlphaDai(const Scene& scene, const AlphaDaiOptions& options,
                                 const ProgressCallback& progress) {
   options.Validate();
+  RequireArgument(scene.time_scale_input < 0,
+                  "the alpha-method DAI stepper does not support the speed of time of scene '",
+                  scene.name, "' (time_scale_input); use the fesd integrator");
   ValidateScene(scene);
   for (const Effect& effect : scene.effects) {
     if (std::holds_alternative<PathConstraints>(effect)) continue;

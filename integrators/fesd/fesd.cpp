@@ -137,6 +137,14 @@ class FesdRun {
     const auto start = std::chrono::steady_clock::now();
     const Scene& scene = system_.scene();
     y_ = system_.InitialState();
+    if (options_.initial_state.size() > 0) {
+      RequireArgument(options_.initial_state.size() == ny_, "FESD initial lowered state needs ",
+                      ny_, " entries (", nx_, " scene states, ", ny_ - nx_ - 1,
+                      " relay memories, the clock), got ", options_.initial_state.size());
+      RequireArgument(options_.initial_state.allFinite(),
+                      "FESD initial lowered state must be finite");
+      y_ = options_.initial_state;
+    }
     tau_ = scene.initial_time;
     for (Trajectory* t : {&result_.trajectory, &result_.stage_trajectory}) {
       t->state_names = scene.state_names;
@@ -165,8 +173,9 @@ class FesdRun {
       boundary_a_ = initial.A;
       boundary_b_ = initial.B;
       result_.trajectory.Append(scene.initial_time, y_.head(nx_), Vector(), 0.0);
-      if (system_.time_freezing()) {
-        result_.numerical_trajectory.Append(tau_, y_, z_guess_, 0.0);
+      if (system_.time_freezing()) result_.numerical_trajectory.Append(tau_, y_, z_guess_, 0.0);
+      // With a speed of time the horizon is in numerical time: the fixed-grid loop.
+      if (system_.time_freezing() && scene.time_scale_input < 0) {
         IntegrateTimeFreezing();
       } else {
         Integrate();
@@ -265,6 +274,7 @@ class FesdRun {
   FesdResult Finish(std::chrono::steady_clock::time_point start) {
     result_.final_time = y_[system_.clock_index()];
     result_.final_state = y_.head(nx_);
+    result_.final_lowered_state = y_;
     result_.final_algebraic = z_last_;
     if (result_.trajectory.t.empty() || result_.trajectory.t.back() != result_.final_time) {
       result_.trajectory.Append(result_.final_time, result_.final_state, z_last_, 0.0);
@@ -272,9 +282,10 @@ class FesdRun {
     if (options_.sensitivities) {
       const int np = system_.num_parameters();
       result_.sensitivities.initial_state = sensitivity_.topLeftCorner(nx_, nx_);
-      result_.sensitivities.parameters = sensitivity_.block(0, nx_, nx_, np);
+      result_.sensitivities.parameters = sensitivity_.block(0, ny_, nx_, np);
       result_.sensitivities.inputs =
-          sensitivity_.topRightCorner(nx_, sensitivity_.cols() - nx_ - np);
+          sensitivity_.topRightCorner(nx_, sensitivity_.cols() - ny_ - np);
+      result_.sensitivities.lowered = sensitivity_.topRows(ny_);
       result_.sensitivities.segment_starts.assign(segment_ends_.begin(), segment_ends_.end() - 1);
     }
     if (result_.elements.empty()) result_.stats.min_element_length = 0.0;
@@ -305,7 +316,7 @@ class FesdRun {
     }
     const std::vector<Event> events = previous != nullptr
                                           ? system_.StatusEvents(t, *previous, decision.a_zero)
-                                          : system_.InitialEvents(t, decision.a_zero);
+                                          : system_.InitialEvents(t, y_, decision.a_zero);
     result_.events.insert(result_.events.end(), events.begin(), events.end());
     if (system_.time_freezing()) {
       // A relay jumps (in physical time) when it starts travelling between 0 and 1.
@@ -606,8 +617,8 @@ class FesdRun {
     // A grazing switch (zero rate) has no derivative; leave the transfers as they are.
     if (std::fabs(rate) <= 1e-12 * (1.0 + g_y.norm() * before_switch.F.norm())) return;
     Eigen::RowVectorXd d_iota = g_y * sensitivity_.topRows(ny_);
-    d_iota.segment(nx_, np) += g_p;
-    d_iota.segment(nx_ + np + nu * segment_, nu) += g_u;
+    d_iota.segment(ny_, np) += g_p;
+    d_iota.segment(ny_ + np + nu * segment_, nu) += g_u;
     sensitivity_.topRows(ny_) -= (before_switch.F - after_switch.F) * (d_iota / rate);
   }
 
@@ -860,9 +871,9 @@ class FesdRun {
     const int np = system_.num_parameters();
     const int nu = system_.num_inputs();
     const int segments = static_cast<int>(segment_ends_.size()) - 1;
-    // Rows: y (n_y) and tau; columns: x0, p, u of every segment.
-    sensitivity_.setZero(ny_ + 1, nx_ + np + nu * segments);
-    sensitivity_.topLeftCorner(nx_, nx_).setIdentity();
+    // Rows: y (n_y) and tau; columns: y0 (the lowered initial state), p, u of every segment.
+    sensitivity_.setZero(ny_ + 1, ny_ + np + nu * segments);
+    sensitivity_.topLeftCorner(ny_, ny_).setIdentity();
   }
 
   // Implicit function theorem on the converged system R(w; y_start, tau_start, p, u) = 0:
@@ -914,8 +925,8 @@ class FesdRun {
   void ApplyTransfer(const Transfer& transfer) {
     const int np = system_.num_parameters(), nu = system_.num_inputs();
     sensitivity_ = transfer.state * sensitivity_;
-    sensitivity_.middleCols(nx_, np) += transfer.parameters;
-    sensitivity_.middleCols(nx_ + np + nu * segment_, nu) += transfer.inputs;
+    sensitivity_.middleCols(ny_, np) += transfer.parameters;
+    sensitivity_.middleCols(ny_ + np + nu * segment_, nu) += transfer.inputs;
   }
 
   FesdOptions options_;

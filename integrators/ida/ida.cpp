@@ -718,6 +718,9 @@ class IdaRun {
 IdaResult SimulateIda(const Scene& scene, const IdaOptions& options,
                       const ProgressCallback& progress) {
   options.Validate();
+  RequireArgument(scene.time_scale_input < 0,
+                  "the IDA integrator does not support the speed of time of scene '", scene.name,
+                  "' (time_scale_input); use the fesd integrator");
   for (const Effect& effect : scene.effects) {
     if (!std::holds_alternative<PathConstraints>(effect)) continue;
     ThrowInvalidArgument("the IDA integrator does not support the ", EffectKind(effect), " '",

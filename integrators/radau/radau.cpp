@@ -380,6 +380,9 @@ class RadauRun {
 RadauResult SimulateRadau(const Scene& scene, const RadauOptions& options,
                           const ProgressCallback& progress) {
   options.Validate();
+  RequireArgument(scene.time_scale_input < 0,
+                  "the smooth Radau IIA integrator does not support the speed of time of scene '",
+                  scene.name, "' (time_scale_input); use the fesd integrator");
   for (const Effect& effect : scene.effects) {
     ThrowInvalidArgument("the smooth Radau IIA integrator does not support the ",
                          EffectKind(effect), " '", EffectName(effect), "' of scene '", scene.name,

@@ -138,6 +138,9 @@ std::vector<bool> PairStatuses(const PointEvaluation& e) {
 TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOptions& options,
                                         const ProgressCallback& progress) {
   options.Validate();
+  RequireArgument(scene.time_scale_input < 0,
+                  "the time-stepping integrator does not support the speed of time of scene '",
+                  scene.name, "' (time_scale_input); use the fesd integrator");
   for (const Effect& effect : scene.effects) {
     if (std::holds_alternative<MovingSet>(effect) ||
         std::holds_alternative<SwitchingSurfaces>(effect)) {

@@ -1,5 +1,7 @@
 #include "moreau/core/smooth_function.hpp"
 
+#include <algorithm>
+
 namespace moreau {
 
 namespace internal {
@@ -12,6 +14,177 @@ void ThrowArgumentIndex(const std::string& function, const char* argument, int i
                        argument, " has ", size, " component", size == 1 ? "" : "s");
 }
 }  // namespace internal
+
+namespace internal {
+
+void TypedFunction::Evaluate(const ConstVectorRef& x, const ConstVectorRef& u, double t,
+                             const ConstVectorRef& p, Vector* out) {
+  out->setZero(num_outputs_);
+  Call(x.data(), static_cast<int>(x.size()), u.data(), static_cast<int>(u.size()), t, p.data(),
+       static_cast<int>(p.size()), out->data());
+}
+
+template <class T, class Seed>
+void TypedFunction::SeedInputs(Space<T>* space, const ConstVectorRef& x, const ConstVectorRef& u,
+                               double t, const ConstVectorRef& p, Wrt wrt, Seed&& seed) {
+  space->x.resize(static_cast<std::size_t>(x.size()));
+  space->u.resize(static_cast<std::size_t>(u.size()));
+  space->p.resize(static_cast<std::size_t>(p.size()));
+  space->out.assign(static_cast<std::size_t>(num_outputs_), T(0.0));
+  int column = 0;
+  for (Eigen::Index i = 0; i < x.size(); ++i) {
+    space->x[static_cast<std::size_t>(i)] = wrt.x ? seed(x[i], column++) : T(x[i]);
+  }
+  for (Eigen::Index i = 0; i < u.size(); ++i) {
+    space->u[static_cast<std::size_t>(i)] = wrt.u ? seed(u[i], column++) : T(u[i]);
+  }
+  space->t = wrt.t ? seed(t, column++) : T(t);
+  for (Eigen::Index i = 0; i < p.size(); ++i) {
+    space->p[static_cast<std::size_t>(i)] = wrt.p ? seed(p[i], column++) : T(p[i]);
+  }
+}
+
+void TypedFunction::Jacobian(const ConstVectorRef& x, const ConstVectorRef& u, double t,
+                             const ConstVectorRef& p, Wrt wrt, Vector* out, Matrix* jac) {
+  const int nx = static_cast<int>(x.size()), nu = static_cast<int>(u.size()),
+            np = static_cast<int>(p.size());
+  const int columns = wrt.Columns(nx, nu, np);
+  jac->setZero(num_outputs_, columns);
+  out->resize(num_outputs_);
+  constexpr int kChunk = Dual1::kCapacity;
+  // At least one pass, so that the value is computed even with no selected column.
+  for (int first = 0; first == 0 || first < columns; first += kChunk) {
+    const int chunk = std::min(kChunk, columns - first);
+    auto seed = [&](double value, int column) {
+      if (column >= first && column < first + chunk) {
+        return Dual1::Variable(value, chunk, column - first);
+      }
+      return Dual1(value);
+    };
+    SeedInputs(&space1_, x, u, t, p, wrt, seed);
+    Call(space1_.x.data(), nx, space1_.u.data(), nu, space1_.t, space1_.p.data(), np,
+         space1_.out.data());
+    for (int k = 0; k < num_outputs_; ++k) {
+      const Dual1& value = space1_.out[static_cast<std::size_t>(k)];
+      if (first == 0) (*out)[k] = value.value();
+      for (int i = 0; i < value.size(); ++i) (*jac)(k, first + i) = value.d(i);
+    }
+  }
+}
+
+void TypedFunction::WeightedHessian(const ConstVectorRef& x, const ConstVectorRef& u, double t,
+                                    const ConstVectorRef& p, Wrt wrt,
+                                    const ConstVectorRef& weights, Matrix* hess) {
+  const int nx = static_cast<int>(x.size()), nu = static_cast<int>(u.size()),
+            np = static_cast<int>(p.size());
+  const int columns = wrt.Columns(nx, nu, np);
+  hess->setZero(columns, columns);
+  constexpr int kChunk = Dual1::kCapacity;
+  // Outer level seeds rows [row0, row0 + rows), inner level columns [col0, col0 + cols).
+  for (int row0 = 0; row0 < columns; row0 += kChunk) {
+    const int rows = std::min(kChunk, columns - row0);
+    for (int col0 = 0; col0 < columns; col0 += kChunk) {
+      const int cols = std::min(kChunk, columns - col0);
+      auto seed = [&](double value, int column) {
+        const Dual1 inner = (column >= col0 && column < col0 + cols)
+                                ? Dual1::Variable(value, cols, column - col0)
+                                : Dual1(value);
+        if (column >= row0 && column < row0 + rows) {
+          return Dual2::Variable(inner, rows, column - row0);
+        }
+        return Dual2(inner);
+      };
+      SeedInputs(&space2_, x, u, t, p, wrt, seed);
+      Call(space2_.x.data(), nx, space2_.u.data(), nu, space2_.t, space2_.p.data(), np,
+           space2_.out.data());
+      for (int k = 0; k < num_outputs_; ++k) {
+        const Dual2& value = space2_.out[static_cast<std::size_t>(k)];
+        if (weights[k] == 0.0) continue;
+        for (int i = 0; i < value.size(); ++i) {
+          const Dual1& row = value.d(i);
+          for (int j = 0; j < row.size(); ++j) {
+            (*hess)(row0 + i, col0 + j) += weights[k] * row.d(j);
+          }
+        }
+      }
+    }
+  }
+}
+
+namespace {
+
+// The outputs of several typed functions one after the other.
+class StackedFunction final : public TypedFunction {
+ public:
+  StackedFunction(std::string name, std::vector<SmoothFunction> parts, int num_outputs)
+      : TypedFunction(std::move(name), num_outputs), parts_(std::move(parts)) {}
+  std::unique_ptr<SmoothFunction::Concept> Clone() const override {
+    return std::make_unique<StackedFunction>(name_, parts_, num_outputs_);
+  }
+  void Call(const double* x, int nx, const double* u, int nu, const double& t, const double* p,
+            int np, double* out) override {
+    Invoke(x, nx, u, nu, t, p, np, out);
+  }
+  void Call(const Dual1* x, int nx, const Dual1* u, int nu, const Dual1& t, const Dual1* p, int np,
+            Dual1* out) override {
+    Invoke(x, nx, u, nu, t, p, np, out);
+  }
+  void Call(const Dual2* x, int nx, const Dual2* u, int nu, const Dual2& t, const Dual2* p, int np,
+            Dual2* out) override {
+    Invoke(x, nx, u, nu, t, p, np, out);
+  }
+
+ private:
+  template <class T>
+  void Invoke(const T* x, int nx, const T* u, int nu, const T& t, const T* p, int np, T* out) {
+    for (const SmoothFunction& part : parts_) {
+      part.typed()->Call(x, nx, u, nu, t, p, np, out);
+      out += part.num_outputs();
+    }
+  }
+  std::vector<SmoothFunction> parts_;
+};
+
+// No outputs to write: all zero.
+class ZeroFunction final : public TypedFunction {
+ public:
+  using TypedFunction::TypedFunction;
+  std::unique_ptr<SmoothFunction::Concept> Clone() const override {
+    return std::make_unique<ZeroFunction>(name_, num_outputs_);
+  }
+  void Call(const double*, int, const double*, int, const double&, const double*, int,
+            double*) override {}
+  void Call(const Dual1*, int, const Dual1*, int, const Dual1&, const Dual1*, int,
+            Dual1*) override {}
+  void Call(const Dual2*, int, const Dual2*, int, const Dual2&, const Dual2*, int,
+            Dual2*) override {}
+};
+
+}  // namespace
+
+}  // namespace internal
+
+SmoothFunction MakeStackedFunction(std::string name, const std::vector<SmoothFunction>& parts) {
+  int outputs = 0;
+  for (const SmoothFunction& part : parts) {
+    RequireArgument(part.typed() != nullptr, "stacked function '", name, "': part '", part.name(),
+                    "' is empty or has a hand-written Jacobian; only automatically "
+                    "differentiated functions can be stacked");
+    outputs += part.num_outputs();
+  }
+  return SmoothFunction(
+      std::make_unique<internal::StackedFunction>(std::move(name), parts, outputs));
+}
+
+SmoothFunction MakeZeroFunction(std::string name, int num_outputs) {
+  RequireArgument(num_outputs >= 0, "function '", name,
+                  "': number of outputs must be non-negative, got ", num_outputs);
+  return SmoothFunction(std::make_unique<internal::ZeroFunction>(std::move(name), num_outputs));
+}
+
+internal::TypedFunction* SmoothFunction::typed() const {
+  return impl_ ? impl_->typed() : nullptr;
+}
 
 namespace {
 const std::string kEmptyName = "<none>";

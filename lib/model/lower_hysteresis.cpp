@@ -420,16 +420,24 @@ class HysteresisBlock final : public RelayBlockBase {
     return events;
   }
 
-  std::vector<Event> InitialEvents(double t, const std::vector<bool>& a_zero) const override {
+  std::vector<Event> InitialEvents(double t, const ConstVectorRef& y,
+                                   const std::vector<bool>& a_zero) const override {
     std::vector<Event> events;
     for (int i = 0; i < num_relays_; ++i) {
       if (!RelayFrozen(a_zero, i)) continue;
       const HysteresisRelay& relay = relays_[static_cast<std::size_t>(i)];
       const bool to_b = Active(a_zero, i, kToB);
-      events.push_back({t, EventKind::kRelaySwitch, relay.name,
-                        std::string("initial memory w0 = ") + (relay.initial_memory ? "1" : "0") +
-                            " is inconsistent with the input; re-initialized " +
-                            (to_b ? "A -> B" : "B -> A") + " while time is frozen"});
+      const double w = y[MemoryIndex(i)];
+      const std::string direction = to_b ? "A -> B" : "B -> A";
+      std::string detail;
+      if (w == 0.0 || w == 1.0) {
+        detail = std::string("initial memory w0 = ") + (w == 1.0 ? "1" : "0") +
+                 " is inconsistent with the input; re-initialized " + direction +
+                 " while time is frozen";
+      } else {
+        detail = "starts inside a jump (w0 = " + std::to_string(w) + "), " + direction;
+      }
+      events.push_back({t, EventKind::kRelaySwitch, relay.name, detail});
     }
     return events;
   }
@@ -489,6 +497,8 @@ class DiscreteRelayBlock final : public RelayBlockBase {
   int num_algebraic() const override { return 0; }
   int num_equations() const override { return 0; }
   int num_pairs() const override { return 0; }
+  // The mode fields are physical-time dynamics (the speed of time scales them).
+  bool ScaledByClockRate() const override { return true; }
   std::vector<std::string> AlgebraicNames() const override { return {}; }
   std::vector<PairInfo> Pairs() const override { return {}; }
   std::vector<bool> ContinuousAlgebraic() const override { return {}; }

@@ -83,7 +83,8 @@ class LoweredBlock {
   // Writes the initial values of the internal states into their slots of y.
   virtual void InitialInternalStates(VectorRef /*y*/) const {}
   // True if the block's contribution to F belongs to the physical-time dynamics, which
-  // time-freezing multiplies by the clock rate (mode fields of switching surfaces). False for
+  // time-freezing multiplies by the clock rate and the speed of time by s (mode fields of
+  // switching surfaces, discrete relay fields). False for
   // multipliers (moving sets: lambda adapts, and scaling it would leave it undetermined while
   // time is frozen) and for the time-freezing block itself.
   virtual bool ScaledByClockRate() const { return false; }
@@ -98,7 +99,7 @@ class LoweredBlock {
   virtual std::vector<int> MemoryTargets(const std::vector<bool>& /*a_zero*/) const { return {}; }
   // Events implied by the statuses decided at the initial time (a relay whose memory is
   // inconsistent with its input and is re-initialized while time is frozen).
-  virtual std::vector<Event> InitialEvents(double /*t*/,
+  virtual std::vector<Event> InitialEvents(double /*t*/, const ConstVectorRef& /*y*/,
                                            const std::vector<bool>& /*a_zero*/) const {
     return {};
   }

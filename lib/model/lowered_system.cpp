@@ -161,11 +161,12 @@ bool LoweredSystem::TimeFrozen(const std::vector<bool>& a_zero) const {
   return false;
 }
 
-std::vector<Event> LoweredSystem::InitialEvents(double t, const std::vector<bool>& a_zero) const {
+std::vector<Event> LoweredSystem::InitialEvents(double t, const Vector& y,
+                                                const std::vector<bool>& a_zero) const {
   MOREAU_ASSERT(static_cast<int>(a_zero.size()) == num_pairs_, "wrong number of statuses");
   std::vector<Event> events;
   for (const auto& block : blocks_) {
-    for (Event& event : block->InitialEvents(t, BlockStatuses(a_zero, *block))) {
+    for (Event& event : block->InitialEvents(t, y, BlockStatuses(a_zero, *block))) {
       events.push_back(std::move(event));
     }
   }
@@ -285,29 +286,56 @@ void LoweredSystem::Evaluate(const ConstVectorRef& y, const ConstVectorRef& z,
   }
 
   internal::BlockContext context{nx, clock, &inputs_, &parameters_};
-  if (clock_rate_block_ < 0) {
+  const int speed = scene_.time_scale_input;
+  if (clock_rate_block_ < 0 && speed < 0) {
     for (const auto& block : blocks_) block->Evaluate(context, y, z, derivatives, out);
     return;
   }
-  // Time-freezing: the physical-time dynamics (f, the clock and the switching modes) run at
-  // the clock rate P(z): F = P F_phys, F_z = P F_phys_z + F_phys dP/dz.
+  // Physical-time dynamics: f, the clock and the switching modes (and discrete relay fields).
   for (const auto& block : blocks_) {
     if (block->ScaledByClockRate()) block->Evaluate(context, y, z, derivatives, out);
   }
-  const double rate = blocks_[static_cast<std::size_t>(clock_rate_block_)]->ClockRate(
-      z, with_states ? &rate_gradient_ : nullptr);
-  if (with_states) {
-    out->F_z *= rate;
-    out->F_z.noalias() += out->F * rate_gradient_;
-    out->F_y *= rate;
+  if (clock_rate_block_ >= 0) {
+    // Time-freezing: they run at the clock rate P(z): F = P F_phys, F_z = P F_phys_z +
+    // F_phys dP/dz; then the relays add their own fields and memory rates.
+    const auto& relays = *blocks_[static_cast<std::size_t>(clock_rate_block_)];
+    const double rate = relays.ClockRate(z, with_states ? &rate_gradient_ : nullptr);
+    if (with_states) {
+      out->F_z *= rate;
+      out->F_z.noalias() += out->F * rate_gradient_;
+      out->F_y *= rate;
+    }
+    if (with_all) {
+      out->F_u *= rate;
+      out->F_p *= rate;
+    }
+    out->F *= rate;
+    blocks_[static_cast<std::size_t>(clock_rate_block_)]->Evaluate(context, y, z, derivatives, out);
   }
-  if (with_all) {
-    out->F_u *= rate;
-    out->F_p *= rate;
+  if (speed >= 0) {
+    // Speed of time s = u[speed]: every rate so far is per unit of physical time; in numerical
+    // time it is multiplied by s (dF/ds = F before the scaling).
+    const double s = inputs_[speed];
+    if (with_states) {
+      out->F_z *= s;
+      if (out->has_sparse_F_y) {
+        out->F_y_sparse *= s;
+      } else {
+        out->F_y *= s;
+      }
+    }
+    if (with_all) {
+      out->F_u *= s;
+      out->F_u.col(speed) += out->F;
+      out->F_p *= s;
+    }
+    out->F *= s;
   }
-  out->F *= rate;
+  // Multipliers (moving sets) are not scaled.
   for (const auto& block : blocks_) {
-    if (!block->ScaledByClockRate()) block->Evaluate(context, y, z, derivatives, out);
+    if (!block->ScaledByClockRate() && !block->HasClockRate()) {
+      block->Evaluate(context, y, z, derivatives, out);
+    }
   }
 }
 

@@ -248,6 +248,22 @@ void ValidateScene(const Scene& scene) {
     }
   }
   RequireUniqueNames(names, s + ": inputs");
+  if (scene.time_scale_input >= 0) {
+    RequireArgument(scene.time_scale_input < scene.num_inputs(), s,
+                    ": the speed-of-time input index must be in [0, ", scene.num_inputs(),
+                    "), got ", scene.time_scale_input);
+    const InputSpec& speed = scene.inputs[static_cast<std::size_t>(scene.time_scale_input)];
+    RequireArgument(speed.kind == InputSpec::Kind::kControl, s, ": the speed of time '", speed.name,
+                    "' must be a control input");
+    for (double v : speed.signal.values) {
+      RequireArgument(v > 0.0, s, ": the speed of time '", speed.name, "' must be positive, got ",
+                      v);
+    }
+  } else {
+    RequireArgument(scene.time_scale_input == -1, s,
+                    ": the speed-of-time input index must be -1 (none) or an input, got ",
+                    scene.time_scale_input);
+  }
 
   if (!scene.dynamics.empty()) {
     EvaluateAtStart(scene, scene.dynamics, "dynamics f", scene.num_states());

@@ -117,5 +117,50 @@ TEST(ConvergenceTest, FitOrderRecoversSyntheticOrders) {
   EXPECT_THROW(FitOrder({0.1}, {1.0, 2.0}, 0.0), std::invalid_argument);
 }
 
+TEST(SmoothFunctionTest, StackedFunctionsConcatenateValuesAndDerivatives) {
+  const SmoothFunction g = MakeTestFunction();
+  const SmoothFunction h = MakeSmoothFunction(
+      "test.h", 1, [](const auto& x, const auto& u, const auto& t, const auto& p, auto& out) {
+        using std::cos;
+        out[0] = cos(x[1] * t) * u[0] + p[0] * p[1] * x[0];
+      });
+  const SmoothFunction stacked =
+      MakeStackedFunction("stacked", {g, MakeZeroFunction("zero", 2), h});
+  ASSERT_EQ(stacked.num_outputs(), 5);
+  const Vector x{{1.5, -2.0}}, u{{0.5}}, p{{3.0, 4.0}};
+  const double t = 0.3;
+  Vector value, part;
+  Matrix jac, part_jac;
+  stacked.Jacobian(x, u, t, p, Wrt::All(), &value, &jac);
+  g.Jacobian(x, u, t, p, Wrt::All(), &part, &part_jac);
+  // Stacking only copies: the blocks are bit-identical to the parts'.
+  EXPECT_EQ(value.head(2), part);
+  EXPECT_EQ(jac.topRows(2), part_jac);
+  EXPECT_EQ(value.segment(2, 2), Vector::Zero(2));
+  EXPECT_EQ(jac.middleRows(2, 2), Matrix::Zero(2, jac.cols()));
+  h.Jacobian(x, u, t, p, Wrt::All(), &part, &part_jac);
+  EXPECT_EQ(value.tail(1), part);
+  EXPECT_EQ(jac.bottomRows(1), part_jac);
+  // Weighted Hessians add up part by part.
+  const Vector weights{{0.7, -1.3, 5.0, 6.0, 2.1}};
+  Matrix hess, hess_g, hess_h;
+  stacked.WeightedHessian(x, u, t, p, Wrt::All(), weights, &hess);
+  g.WeightedHessian(x, u, t, p, Wrt::All(), weights.head(2), &hess_g);
+  h.WeightedHessian(x, u, t, p, Wrt::All(), weights.tail(1), &hess_h);
+  EXPECT_LE((hess - hess_g - hess_h).lpNorm<Eigen::Infinity>(), kRoundOff);
+  // A part with a hand-written Jacobian cannot be differentiated twice: refused by name.
+  const SmoothFunction sparse = MakeSparseStateFunction(
+      "sparse", 1, [](const auto&, const auto&, double, const auto&, VectorRef out) { out[0] = 1; },
+      [](const auto& x_, const auto&, double, const auto&, SparseMatrix* jac_x) {
+        jac_x->resize(1, x_.size());
+      });
+  try {
+    MakeStackedFunction("bad", {g, sparse});
+    FAIL() << "expected std::invalid_argument";
+  } catch (const std::invalid_argument& error) {
+    EXPECT_NE(std::string(error.what()).find("part 'sparse'"), std::string::npos) << error.what();
+  }
+}
+
 }  // namespace
 }  // namespace moreau

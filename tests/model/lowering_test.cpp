@@ -95,6 +95,7 @@ TEST_P(LoweringDerivativeTest, AllBlocksMatchCentralDifferences) {
   const auto& [name, form] = GetParam();
   const Scene scene = name == "two_surfaces"       ? testing::TwoSurfaceScene()
                       : name == "mixed_hysteresis" ? testing::MixedHysteresisScene()
+                      : name == "mixed_speed"      ? testing::MixedHysteresisScene(true)
                                                    : MakeScene(name);
   LoweringOptions options;
   options.switching_form = form;
@@ -123,7 +124,8 @@ INSTANTIATE_TEST_SUITE_P(
                       std::pair{std::string("H2"), SwitchingForm::kStewart},
                       std::pair{std::string("H3"), SwitchingForm::kStewart},
                       std::pair{std::string("mixed_hysteresis"), SwitchingForm::kStewart},
-                      std::pair{std::string("mixed_hysteresis"), SwitchingForm::kHeaviside}),
+                      std::pair{std::string("mixed_hysteresis"), SwitchingForm::kHeaviside},
+                      std::pair{std::string("mixed_speed"), SwitchingForm::kStewart}),
     [](const auto& test_info) {
       return test_info.param.first + "_" + ToString(test_info.param.second);
     });
@@ -219,8 +221,9 @@ TEST(LoweringTest, RelayStatusesNameTheJumpAndFreezeTime) {
   EXPECT_EQ(events[0].detail, "A -> B");
   // The end of the frozen interval is not another switch.
   EXPECT_TRUE(system.StatusEvents(3.0, jumping_to_b, sliding_b).empty());
-  EXPECT_EQ(system.InitialEvents(0.0, jumping_to_b).size(), 1u);
-  EXPECT_TRUE(system.InitialEvents(0.0, sliding_a).empty());
+  const Vector y0 = system.InitialState();
+  EXPECT_EQ(system.InitialEvents(0.0, y0, jumping_to_b).size(), 1u);
+  EXPECT_TRUE(system.InitialEvents(0.0, y0, sliding_a).empty());
 }
 
 TEST(LoweringTest, StatusEventsNameTheSwitch) {

@@ -71,7 +71,8 @@ inline Scene TwoSurfaceScene() {
 // p) together with a switching surface and a moving set: the time-freezing lowering scales
 // the smooth dynamics and the switching modes by the product of the relays' clock rates, and
 // leaves the moving-set multiplier unscaled.
-inline Scene MixedHysteresisScene() {
+// With `speed`, a second input is the speed of time (Scene::time_scale_input).
+inline Scene MixedHysteresisScene(bool speed = false) {
   Scene scene;
   scene.name = "mixed_hysteresis";
   scene.state_names = {"a", "b"};
@@ -86,6 +87,13 @@ inline Scene MixedHysteresisScene() {
   input.name = "u";
   input.signal.values = {0.6};
   scene.inputs.push_back(input);
+  if (speed) {
+    InputSpec s;
+    s.name = "speed";
+    s.signal.values = {1.7};
+    scene.inputs.push_back(s);
+    scene.time_scale_input = 1;
+  }
   scene.dynamics = MakeSmoothFunction(
       "f", 2, [k](const auto& x, const auto& u, const auto& t, const auto& p, auto& out) {
         using std::sin;

@@ -23,6 +23,7 @@
 #include <memory>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "moreau/core/dual.hpp"
 #include "moreau/core/types.hpp"
@@ -99,6 +100,10 @@ struct Wrt {
   }
 };
 
+namespace internal {
+class TypedFunction;
+}  // namespace internal
+
 /// Type-erased smooth model function with exact derivatives (see file comment).
 class SmoothFunction {
  public:
@@ -132,8 +137,11 @@ class SmoothFunction {
   /// out = g and jac_x = dg/dx as a sparse matrix (only if has_sparse_state_jacobian()).
   void SparseStateJacobian(const ConstVectorRef& x, const ConstVectorRef& u, double t,
                            const ConstVectorRef& p, Vector* out, SparseMatrix* jac_x) const;
+  /// The automatic-differentiation implementation (MakeSmoothFunction, MakeStackedFunction),
+  /// or nullptr (empty, or a hand-written sparse Jacobian). Used to compose functions.
+  internal::TypedFunction* typed() const;
 
-  /// Concept implemented by MakeSmoothFunction (public only for the factory template).
+  /// Concept implemented by the factories (public only for them).
   class Concept {
    public:
     virtual ~Concept() = default;
@@ -151,6 +159,7 @@ class SmoothFunction {
     virtual void SparseStateJacobian(const ConstVectorRef& /*x*/, const ConstVectorRef& /*u*/,
                                      double /*t*/, const ConstVectorRef& /*p*/, Vector* /*out*/,
                                      SparseMatrix* /*jac_x*/) {}
+    virtual internal::TypedFunction* typed() { return nullptr; }
   };
   explicit SmoothFunction(std::unique_ptr<Concept> impl) : impl_(std::move(impl)) {}
 
@@ -163,140 +172,83 @@ namespace internal {
 using Dual1 = Dual<double>;
 using Dual2 = Dual<Dual<double>>;
 
-// Implementation of SmoothFunction for a generic lambda F.
-template <class F>
-class AutoDiffFunction final : public SmoothFunction::Concept {
+// A function evaluated by one routine templated over the scalar type: values (double),
+// Jacobians (Dual1, forward mode in chunks of Dual1::kCapacity directions) and weighted
+// Hessians (Dual2) come from the three Call overloads. Implemented by generic lambdas
+// (AutoDiffFunction) and by compositions of such functions (stacked functions).
+class TypedFunction : public SmoothFunction::Concept {
  public:
-  AutoDiffFunction(std::string name, int num_outputs, F f)
-      : name_(std::move(name)), num_outputs_(num_outputs), f_(std::move(f)) {}
-  std::unique_ptr<SmoothFunction::Concept> Clone() const override {
-    return std::make_unique<AutoDiffFunction>(name_, num_outputs_, f_);
-  }
+  TypedFunction(std::string name, int num_outputs)
+      : name_(std::move(name)), num_outputs_(num_outputs) {}
   const std::string& name() const override { return name_; }
   int num_outputs() const override { return num_outputs_; }
+  TypedFunction* typed() override { return this; }
 
   void Evaluate(const ConstVectorRef& x, const ConstVectorRef& u, double t, const ConstVectorRef& p,
-                Vector* out) override {
-    out->setZero(num_outputs_);
-    Call<double>(x.data(), static_cast<int>(x.size()), u.data(), static_cast<int>(u.size()), t,
-                 p.data(), static_cast<int>(p.size()), out->data());
-  }
-
+                Vector* out) override;
   void Jacobian(const ConstVectorRef& x, const ConstVectorRef& u, double t, const ConstVectorRef& p,
-                Wrt wrt, Vector* out, Matrix* jac) override {
-    const int nx = static_cast<int>(x.size()), nu = static_cast<int>(u.size()),
-              np = static_cast<int>(p.size());
-    const int columns = wrt.Columns(nx, nu, np);
-    jac->setZero(num_outputs_, columns);
-    out->resize(num_outputs_);
-    constexpr int kChunk = Dual1::kCapacity;
-    // At least one pass, so that the value is computed even with no selected column.
-    for (int first = 0; first == 0 || first < columns; first += kChunk) {
-      const int chunk = std::min(kChunk, columns - first);
-      auto seed = [&](double value, int column) {
-        if (column >= first && column < first + chunk) {
-          return Dual1::Variable(value, chunk, column - first);
-        }
-        return Dual1(value);
-      };
-      SeedInputs<Dual1>(x, u, t, p, wrt, seed);
-      Call<Dual1>(space1_.x.data(), nx, space1_.u.data(), nu, space1_.t, space1_.p.data(), np,
-                  space1_.out.data());
-      for (int k = 0; k < num_outputs_; ++k) {
-        const Dual1& value = space1_.out[k];
-        if (first == 0) (*out)[k] = value.value();
-        for (int i = 0; i < value.size(); ++i) (*jac)(k, first + i) = value.d(i);
-      }
-    }
-  }
-
+                Wrt wrt, Vector* out, Matrix* jac) override;
   void WeightedHessian(const ConstVectorRef& x, const ConstVectorRef& u, double t,
                        const ConstVectorRef& p, Wrt wrt, const ConstVectorRef& weights,
-                       Matrix* hess) override {
-    const int nx = static_cast<int>(x.size()), nu = static_cast<int>(u.size()),
-              np = static_cast<int>(p.size());
-    const int columns = wrt.Columns(nx, nu, np);
-    hess->setZero(columns, columns);
-    constexpr int kChunk = Dual1::kCapacity;
-    // Outer level seeds rows [row0, row0 + rows), inner level columns [col0, col0 + cols).
-    for (int row0 = 0; row0 < columns; row0 += kChunk) {
-      const int rows = std::min(kChunk, columns - row0);
-      for (int col0 = 0; col0 < columns; col0 += kChunk) {
-        const int cols = std::min(kChunk, columns - col0);
-        auto seed = [&](double value, int column) {
-          const Dual1 inner = (column >= col0 && column < col0 + cols)
-                                  ? Dual1::Variable(value, cols, column - col0)
-                                  : Dual1(value);
-          if (column >= row0 && column < row0 + rows) {
-            return Dual2::Variable(inner, rows, column - row0);
-          }
-          return Dual2(inner);
-        };
-        SeedInputs<Dual2>(x, u, t, p, wrt, seed);
-        Call<Dual2>(space2_.x.data(), nx, space2_.u.data(), nu, space2_.t, space2_.p.data(), np,
-                    space2_.out.data());
-        for (int k = 0; k < num_outputs_; ++k) {
-          const Dual2& value = space2_.out[k];
-          if (weights[k] == 0.0) continue;
-          for (int i = 0; i < value.size(); ++i) {
-            const Dual1& row = value.d(i);
-            for (int j = 0; j < row.size(); ++j) {
-              (*hess)(row0 + i, col0 + j) += weights[k] * row.d(j);
-            }
-          }
-        }
-      }
-    }
-  }
+                       Matrix* hess) override;
+
+  // out[0..num_outputs()) = g(x, u, t, p) in the scalar type; `out` is zeroed by the caller.
+  virtual void Call(const double* x, int nx, const double* u, int nu, const double& t,
+                    const double* p, int np, double* out) = 0;
+  virtual void Call(const Dual1* x, int nx, const Dual1* u, int nu, const Dual1& t,
+                    const Dual1* p, int np, Dual1* out) = 0;
+  virtual void Call(const Dual2* x, int nx, const Dual2* u, int nu, const Dual2& t,
+                    const Dual2* p, int np, Dual2* out) = 0;
+
+ protected:
+  std::string name_;
+  int num_outputs_;
 
  private:
-  template <class T>
-  void Call(const T* x, int nx, const T* u, int nu, const T& t, const T* p, int np, T* out) {
-    ArgVector<T> xv(x, nx, "x", &name_), uv(u, nu, "u", &name_), pv(p, np, "p", &name_);
-    for (int k = 0; k < num_outputs_; ++k) out[k] = T(0.0);
-    OutVector<T> ov(out, num_outputs_, &name_);
-    f_(xv, uv, t, pv, ov);
-  }
-
-  // Fills the workspace of scalar type T; seed(value, column) returns the seeded scalar for a
-  // selected input with Jacobian column `column`; unselected inputs become constants.
-  template <class T, class Seed>
-  void SeedInputs(const ConstVectorRef& x, const ConstVectorRef& u, double t,
-                  const ConstVectorRef& p, Wrt wrt, Seed&& seed) {
-    auto& xs = Workspace<T>().x;
-    auto& us = Workspace<T>().u;
-    auto& ps = Workspace<T>().p;
-    auto& os = Workspace<T>().out;
-    xs.resize(x.size());
-    us.resize(u.size());
-    ps.resize(p.size());
-    os.resize(num_outputs_);
-    int column = 0;
-    for (Eigen::Index i = 0; i < x.size(); ++i) xs[i] = wrt.x ? seed(x[i], column++) : T(x[i]);
-    for (Eigen::Index i = 0; i < u.size(); ++i) us[i] = wrt.u ? seed(u[i], column++) : T(u[i]);
-    Workspace<T>().t = wrt.t ? seed(t, column++) : T(t);
-    for (Eigen::Index i = 0; i < p.size(); ++i) ps[i] = wrt.p ? seed(p[i], column++) : T(p[i]);
-  }
-
   template <class T>
   struct Space {
     std::vector<T> x, u, p, out;
     T t;
   };
-  template <class T>
-  Space<T>& Workspace() {
-    if constexpr (std::is_same_v<T, Dual1>) {
-      return space1_;
-    } else {
-      return space2_;
-    }
-  }
-
-  std::string name_;
-  int num_outputs_;
-  F f_;
+  // Fills the workspace of scalar type T; seed(value, column) returns the seeded scalar for a
+  // selected input with derivative column `column`; unselected inputs become constants.
+  template <class T, class Seed>
+  void SeedInputs(Space<T>* space, const ConstVectorRef& x, const ConstVectorRef& u, double t,
+                  const ConstVectorRef& p, Wrt wrt, Seed&& seed);
   Space<Dual1> space1_;
   Space<Dual2> space2_;
+};
+
+// Implementation of SmoothFunction for a generic lambda F.
+template <class F>
+class AutoDiffFunction final : public TypedFunction {
+ public:
+  AutoDiffFunction(std::string name, int num_outputs, F f)
+      : TypedFunction(std::move(name), num_outputs), f_(std::move(f)) {}
+  std::unique_ptr<SmoothFunction::Concept> Clone() const override {
+    return std::make_unique<AutoDiffFunction>(name_, num_outputs_, f_);
+  }
+  void Call(const double* x, int nx, const double* u, int nu, const double& t, const double* p,
+            int np, double* out) override {
+    Invoke(x, nx, u, nu, t, p, np, out);
+  }
+  void Call(const Dual1* x, int nx, const Dual1* u, int nu, const Dual1& t, const Dual1* p, int np,
+            Dual1* out) override {
+    Invoke(x, nx, u, nu, t, p, np, out);
+  }
+  void Call(const Dual2* x, int nx, const Dual2* u, int nu, const Dual2& t, const Dual2* p, int np,
+            Dual2* out) override {
+    Invoke(x, nx, u, nu, t, p, np, out);
+  }
+
+ private:
+  template <class T>
+  void Invoke(const T* x, int nx, const T* u, int nu, const T& t, const T* p, int np, T* out) {
+    ArgVector<T> xv(x, nx, "x", &name_), uv(u, nu, "u", &name_), pv(p, np, "p", &name_);
+    OutVector<T> ov(out, num_outputs_, &name_);
+    f_(xv, uv, t, pv, ov);
+  }
+  F f_;
 };
 
 }  // namespace internal
@@ -310,6 +262,14 @@ SmoothFunction MakeSmoothFunction(std::string name, int num_outputs, F f) {
   return SmoothFunction(
       std::make_unique<internal::AutoDiffFunction<F>>(std::move(name), num_outputs, std::move(f)));
 }
+
+/// The outputs of `parts` one after the other: g = (g_0, g_1, ...), all of the same arguments
+/// (x, u, t, p). Every part must differentiate automatically (MakeSmoothFunction or
+/// MakeStackedFunction); an empty part is an error. Used to extend a scene (e.g. by a
+/// running-cost state) without rewriting its functions.
+SmoothFunction MakeStackedFunction(std::string name, const std::vector<SmoothFunction>& parts);
+/// A function with `num_outputs` outputs that are all zero (differentiable like any other).
+SmoothFunction MakeZeroFunction(std::string name, int num_outputs);
 
 /// Value of a hand-written function: out = g(x, u, t, p) (out is pre-sized).
 using ValueFunction = std::function<void(const ConstVectorRef& x, const ConstVectorRef& u, double t,

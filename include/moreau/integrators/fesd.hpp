@@ -39,6 +39,9 @@
 /// Effects: moving sets, switching surfaces and hysteresis relays; path constraints belong
 /// to the alpha-method stepper.
 ///
+/// Speed of time (Scene::time_scale_input): the scene's time axis is numerical time, every
+/// physical rate and the clock are multiplied by the input s; final_time is the clock.
+///
 /// Hysteresis relays are lowered by time-freezing (docs/lowering.md): the integration
 /// variable becomes numerical time tau, in which a relay's memory w travels continuously
 /// between 0 and 1 while the clock (physical time) stands still. Steps have length H in tau;
@@ -46,7 +49,9 @@
 /// on the next control breakpoint or tf unless a relay switches in it, and after a switch a
 /// new step starts from the clock. The run ends when the clock reaches tf. Results are in
 /// physical time (frozen elements are left out of the trajectories; the memories are
-/// reported as RelaySignal); the numerical-time trajectory is kept for inspection.
+/// reported as RelaySignal); the numerical-time trajectory is kept for inspection. With a
+/// speed of time the horizon stays in numerical time (fixed steps; the clock is free), which
+/// is what a time-optimal control problem needs.
 
 #include <string>
 #include <vector>
@@ -81,6 +86,10 @@ struct FesdOptions {
   int max_event_retries = 6;
   /// Compute dx(T)/dx(0), dx(T)/dp, dx(T)/du (FesdResult::sensitivities).
   bool sensitivities = false;
+  /// Start from this lowered state y0 = (x0, relay memories w0, clock) instead of the scene's
+  /// (empty: the scene's x0, initial memories and t0). A shooting code passes node states this
+  /// way: with time-freezing a node may lie inside a frozen interval (0 < w < 1).
+  Vector initial_state;
   /// Record the stage trajectory (FesdResult::stage_trajectory).
   bool record_stages = false;
   /// Record element ends in the trajectory (false: initial and final points only).
@@ -126,6 +135,10 @@ struct FesdSensitivities {
   /// (segments between the scene's control breakpoints, in order).
   Matrix inputs;
   std::vector<double> segment_starts;  ///< start time of every control segment
+  /// The whole derivative of the final lowered state y(T) = (x, relay memories, clock):
+  /// n_y rows; columns y0 (n_y), then p (n_p), then u per segment (n_u each). The blocks above
+  /// are its scene-state parts.
+  Matrix lowered;
 };
 
 struct FesdStats {
@@ -151,6 +164,7 @@ struct FesdResult {
   std::string message;
   double final_time = 0.0;      ///< physical time reached (the clock)
   Vector final_state;           ///< scene states
+  Vector final_lowered_state;   ///< y(T) = (x, relay memories, clock)
   Vector final_algebraic;       ///< algebraic unknowns at the last stage
   Trajectory trajectory;        ///< element ends in physical time (h column: element lengths)
   Trajectory stage_trajectory;  ///< every stage point (with record_stages), physical time

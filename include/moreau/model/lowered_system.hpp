@@ -162,9 +162,11 @@ class LoweredSystem {
   std::vector<int> MemoryTargets(const std::vector<bool>& a_zero) const;
   /// True if physical time is frozen under the pair statuses a_zero (some relay is jumping).
   bool TimeFrozen(const std::vector<bool>& a_zero) const;
-  /// Events implied by the statuses decided at the initial time: relays whose memory w0 is
-  /// inconsistent with psi(x0) and are re-initialized while time is frozen.
-  std::vector<Event> InitialEvents(double t, const std::vector<bool>& a_zero) const;
+  /// Events implied by the statuses decided at the initial state y: relays whose memory w0 is
+  /// inconsistent with psi(x0) and are re-initialized while time is frozen (or that start
+  /// inside a jump, 0 < w0 < 1).
+  std::vector<Event> InitialEvents(double t, const Vector& y,
+                                   const std::vector<bool>& a_zero) const;
   int clock_index() const { return num_states_ - 1; }
   int num_algebraic() const { return num_algebraic_; }  ///< n_z
   int num_equations() const { return num_equations_; }  ///< n_G

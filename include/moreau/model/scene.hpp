@@ -134,6 +134,13 @@ struct Scene {
   std::vector<InputSpec> inputs;
   SmoothFunction dynamics;  ///< f(x, u, t, p) with n_x outputs; empty means f = 0
   std::vector<Effect> effects;
+  /// Speed of time (time transformation for free final times), -1 for none. Otherwise the
+  /// index of a control input s > 0: the scene's time axis (initial_time, final_time, control
+  /// breakpoints) is then *numerical* time tau, physical time t (the clock, the t argument of
+  /// every model function) advances as dt/dtau = s, and every physical rate is multiplied by s
+  /// (smooth dynamics, switching modes, relay fields; moving-set multipliers adapt). Supported
+  /// by the FESD integrator.
+  int time_scale_input = -1;
 
   int num_states() const { return static_cast<int>(state_names.size()); }
   int num_inputs() const { return static_cast<int>(inputs.size()); }
