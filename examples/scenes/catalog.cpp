@@ -19,6 +19,7 @@ const std::vector<SceneDefinition>& SceneCatalog() {
       {"S3", "rotation projected on a floor: contact, sliding, leaving", scenes::MakeS3},
       {"S4", "wave-rider: a moving boundary pushes an unactuated state (fixed control)",
        scenes::MakeS4},
+      {"S5", "moving doorway: a pusher drives a slider between two moving discs", scenes::MakeS5},
       {"F1", "oscillator switching at the unit circle (FESD order benchmark)", scenes::MakeF1},
       {"F2a", "crossing a switching surface", scenes::MakeF2a},
       {"F2b", "entering a sliding mode", scenes::MakeF2b},

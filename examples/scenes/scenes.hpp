@@ -19,6 +19,7 @@ Scene MakeS1();
 Scene MakeS2();
 Scene MakeS3();
 Scene MakeS4();
+Scene MakeS5();
 
 // Filippov systems (filippov.cpp).
 Scene MakeF1();

@@ -119,4 +119,51 @@ Scene MakeS4() {
   return scene;
 }
 
+Scene MakeS5() {
+  Scene scene;
+  scene.name = "S5";
+  scene.description =
+      "moving doorway: a pusher (x3, x4) with velocity u and a passive slider (x1, x2), discs "
+      "of radius 1, between two discs of radius 8 centred at (cos t +- 8, 0); x' in (0, 0, u) - "
+      "N_C(t)(x) (paper: sweeping processes, Sec. VI-B). With the fixed control u = (0, 1) the "
+      "pusher slides through the moving doorway; `moreau ocp doorway` pushes the slider";
+  scene.state_names = {"x1", "x2", "x3", "x4"};
+  scene.initial_state = Vector{{-1.0, -6.0, 1.0, -5.0}};
+  scene.final_time = 12.0;
+  const int contact = scene.AddParameter("contact", 2.0, "pusher-slider distance at contact");
+  const int radius = scene.AddParameter("radius", 8.0, "radius of the doorway discs");
+  for (const char* name : {"u1", "u2"}) {
+    InputSpec u;
+    u.name = name;
+    u.signal.values = {std::string(name) == "u2" ? 1.0 : 0.0};
+    u.lower = -5.0;
+    u.upper = 5.0;
+    u.description = "pusher velocity";
+    scene.inputs.push_back(u);
+  }
+  scene.dynamics = MakeSmoothFunction(
+      "S5.f", 4, [](const auto&, const auto& u, const auto&, const auto&, auto& out) {
+        out[2] = u[0];
+        out[3] = u[1];
+      });
+  MovingSet set;
+  set.name = "doorway";
+  set.constraint_names = {"pusher_slider", "slider_right", "slider_left", "pusher_right",
+                          "pusher_left"};
+  set.constraints = MakeSmoothFunction(
+      "S5.c", 5,
+      [contact, radius](const auto& x, const auto&, const auto& t, const auto& p, auto& out) {
+        using std::cos;
+        auto square = [](const auto& a) { return a * a; };
+        const auto centre = cos(t);
+        out[0] = square(x[0] - x[2]) + square(x[1] - x[3]) - square(p[contact]);
+        out[1] = square(x[0] - (centre + p[radius])) + square(x[1]) - square(p[radius]);
+        out[2] = square(x[0] - (centre - p[radius])) + square(x[1]) - square(p[radius]);
+        out[3] = square(x[2] - (centre + p[radius])) + square(x[3]) - square(p[radius]);
+        out[4] = square(x[2] - (centre - p[radius])) + square(x[3]) - square(p[radius]);
+      });
+  scene.effects.push_back(set);
+  return scene;
+}
+
 }  // namespace moreau::scenes

@@ -11,6 +11,7 @@
 #include "group_system.hpp"
 #include "moreau/complementarity/ncp_function.hpp"
 #include "moreau/core/error.hpp"
+#include "moreau/model/projection.hpp"
 
 namespace moreau {
 
@@ -163,10 +164,11 @@ class FesdRun {
     result_.stats.min_element_length = std::numeric_limits<double>::infinity();
     segment_ends_ = SegmentEnds(scene.initial_time, scene.final_time, scene.ControlBreakpoints());
     if (options_.sensitivities) InitializeSensitivities();
+    if (options_.initial_state.size() > 0 && !ProjectInitialState()) return Finish(start);
 
     // Statuses at the initial state: the slow solution if x0 lies on a switching surface or
     // on the boundary of a moving set.
-    if (Decide(scene.initial_time, nullptr)) {
+    if (Decide(y_[system_.clock_index()], nullptr)) {
       z_guess_ = ConsistentGuess(y_, v_);
       PointEvaluation initial;
       system_.Evaluate(y_, z_guess_, Derivatives::kNone, &initial);
@@ -194,6 +196,8 @@ class FesdRun {
   static LoweringOptions Lowering(const FesdOptions& options) {
     LoweringOptions lowering;
     lowering.switching_form = options.switching_form;
+    // A given initial state may lie outside the moving sets: it is projected (Run).
+    lowering.require_feasible_initial_state = options.initial_state.size() == 0;
     return lowering;
   }
 
@@ -332,6 +336,52 @@ class FesdRun {
     }
     a_zero_ = decision.a_zero;
     v_ = decision.v;
+    return true;
+  }
+
+  // A given initial state outside the moving sets jumps onto them (the sweeping process's
+  // projection at t0); with sensitivities the transfer of the projection (implicit function
+  // theorem on its complementarity system) starts the chain. Returns false on failure.
+  bool ProjectInitialState() {
+    const Scene& scene = system_.scene();
+    const int clock = system_.clock_index();
+    const Vector x0 = y_.head(nx_);
+    const Vector u = system_.inputs(), p = system_.parameters();
+    const double violation = MinimumMovingSetConstraint(scene, x0, y_[clock], u, p);
+    const double tolerance =
+        kInitialFeasibilityTolerance * std::max(1.0, x0.lpNorm<Eigen::Infinity>());
+    const bool outside = violation < -tolerance;
+    // On the boundary (a shooting node that rides a moving set lies there) the map from the
+    // given state is not differentiable: inward perturbations start free, outward ones are
+    // projected. The derivative of the outward branch (the projection's, an identity on the
+    // state) keeps the chain consistent with nearby infeasible starts (docs/ocp.md).
+    const bool on_boundary =
+        !outside && options_.sensitivities &&
+        violation <= kMovingSetBoundaryTolerance * std::max(1.0, x0.lpNorm<Eigen::Infinity>());
+    if (!outside && !on_boundary) return true;
+    const MovingSetProjection projection =
+        ProjectOntoMovingSets(scene, x0, y_[clock], u, p, options_.sensitivities);
+    if (!projection.converged) {
+      Fail(FesdStatus::kNewtonFailure, y_[clock], projection.message);
+      return false;
+    }
+    if (outside) {
+      std::ostringstream detail;
+      detail << "initial state outside the moving sets (min c = " << violation
+             << "): projected onto C(t0), jump of size " << projection.distance;
+      result_.events.push_back({y_[clock], EventKind::kEnter, scene.name, detail.str()});
+      y_.head(nx_) = projection.x;
+    }
+    if (options_.sensitivities) {
+      // New rows x: dx/dx0 (x columns), dx/dclock (clock column), dx/dp, dx/du (segment 0).
+      const int np = system_.num_parameters(), nu = system_.num_inputs();
+      Matrix rows = Matrix::Zero(nx_, sensitivity_.cols());
+      rows.leftCols(nx_) = projection.d_x0;
+      rows.col(clock) = projection.d_t;
+      rows.middleCols(ny_, np) = projection.d_p;
+      rows.middleCols(ny_ + np, nu) = projection.d_u;
+      sensitivity_.topRows(nx_) = rows;
+    }
     return true;
   }
 

@@ -1,5 +1,6 @@
 #include "moreau/integrators/timestepping.hpp"
 
+#include <Eigen/LU>
 #include <chrono>
 #include <cmath>
 #include <sstream>
@@ -125,6 +126,41 @@ SemismoothNewtonResult SolveBySmoothing(MixedComplementaritySystem* system, cons
   return result;
 }
 
+// Implicit function theorem on a converged step R(w; y0, u, p) = 0: dw = -R_w^{-1} (R_y0 dy0 +
+// R_u du + R_p dp) with R_w the generalized Jacobian (pair rows weighted by the NCP function's
+// derivatives at the solution, as in Newton). Returns d y_end / d(y0, p, u) (n_y rows) with
+// y_end = y0 + Z_s, or false if R_w is singular.
+bool StepTransfer(StepSystem* system, internal::CollocationStages* stages, const Vector& y0,
+                  const Vector& w, double h, NcpFunctionKind ncp, Matrix* transfer) {
+  const int ny = stages->num_states(), s = stages->stages();
+  Vector r, a, b;
+  system->Evaluate(w, true, &r, &a, &b);
+  stages->Evaluate(y0, w, Derivatives::kAll);
+  Vector da(a.size()), db(b.size());
+  for (Eigen::Index k = 0; k < a.size(); ++k) {
+    const NcpValue phi = EvaluateNcp(ncp, a[k], b[k]);
+    da[k] = phi.da;
+    db[k] = phi.db;
+  }
+  const int n = system->num_unknowns();
+  SystemMatrix jacobian;
+  jacobian.Reset(n, false);
+  stages->AddJacobian(h, da, db, 0, stages->equation_rows(), 0, &jacobian);
+  SystemMatrix start;
+  start.Reset(std::max(n, ny), false);
+  stages->AddStartJacobian(h, da, db, 0, stages->equation_rows(), 0, &start);
+  Matrix d_u, d_p;
+  stages->ParameterJacobian(h, da, db, &d_u, &d_p);
+  Matrix rhs(n, ny + d_p.cols() + d_u.cols());
+  rhs << start.dense().topLeftCorner(n, ny), d_p, d_u;
+  const Eigen::PartialPivLU<Matrix> lu(jacobian.dense());
+  const Matrix dw = -lu.solve(rhs);
+  if (!dw.allFinite()) return false;
+  *transfer = dw.middleRows(stages->state_offset(s - 1), ny);
+  transfer->leftCols(ny) += Matrix::Identity(ny, ny);
+  return true;
+}
+
 std::vector<bool> PairStatuses(const PointEvaluation& e) {
   std::vector<bool> status(static_cast<std::size_t>(e.A.size()));
   for (Eigen::Index k = 0; k < e.A.size(); ++k) {
@@ -152,6 +188,7 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
   const auto start = std::chrono::steady_clock::now();
   LoweringOptions lowering;
   lowering.switching_form = options.switching_form;
+  lowering.require_feasible_initial_state = options.initial_state.size() == 0;
   LoweredSystem system(scene, lowering);
   internal::CollocationStages stages(&system, options.stages);
   StepSystem step_system(&stages);
@@ -162,7 +199,18 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
   const int nx = scene.num_states();
   const int s = options.stages;
   Vector y = system.InitialState();
+  if (options.initial_state.size() > 0) {
+    RequireArgument(options.initial_state.size() == y.size(),
+                    "time-stepping initial lowered state needs ", y.size(),
+                    " entries (states, then the clock), got ", options.initial_state.size());
+    RequireArgument(options.initial_state.allFinite(),
+                    "time-stepping initial lowered state has a NaN or infinite entry");
+    y = options.initial_state;
+  }
+  const double clock_offset = y[system.clock_index()] - scene.initial_time;
   Vector z = system.InitialAlgebraicGuess(y);
+  const int ny = static_cast<int>(y.size());
+  const int np = system.num_parameters(), nu = system.num_inputs();
   result.trajectory.state_names = scene.state_names;
   result.trajectory.algebraic_names = system.algebraic_names();
   result.trajectory.Append(scene.initial_time, y.head(nx), Vector(), 0.0);
@@ -175,6 +223,14 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
   const std::vector<double> ends =
       SegmentEnds(scene.initial_time, scene.final_time, scene.ControlBreakpoints());
   bool failed = false;
+  Matrix& sensitivity = result.sensitivities;
+  if (options.sensitivities) {
+    const int segments = static_cast<int>(ends.size()) - 1;
+    sensitivity.setZero(ny, ny + np + nu * segments);
+    sensitivity.leftCols(ny).setIdentity();
+    result.segment_starts.assign(ends.begin(), ends.end() - 1);
+  }
+  Matrix transfer;
   for (std::size_t segment = 0; segment + 1 < ends.size() && !failed; ++segment) {
     system.SetInputs(scene.InputValues(ends[segment]));
     previous_h = 0.0;  // no extrapolation across a control breakpoint
@@ -213,8 +269,28 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
         break;
       }
       const Vector& w = solved.solution;
+      if (options.sensitivities) {
+        if (!StepTransfer(&step_system, &stages, y, w, h, options.newton.ncp_function, &transfer)) {
+          std::ostringstream message;
+          message.precision(17);
+          message << "newton_failure at t = " << grid[k]
+                  << ": singular step Jacobian, no sensitivities";
+          result.status = TimeSteppingStatus::kNewtonFailure;
+          result.message = message.str();
+          failed = true;
+          break;
+        }
+        sensitivity.leftCols(ny + np) = transfer.leftCols(ny) * sensitivity.leftCols(ny + np);
+        sensitivity.middleCols(ny, np) += transfer.middleCols(ny, np);
+        const int column = ny + np + nu * static_cast<int>(segment);
+        sensitivity.rightCols(sensitivity.cols() - ny - np) =
+            transfer.leftCols(ny) * sensitivity.rightCols(sensitivity.cols() - ny - np);
+        sensitivity.middleCols(column, nu) += transfer.rightCols(nu);
+      }
       y = stages.EndState(y, w);
-      y[system.clock_index()] = grid[k + 1];  // exact grid time
+      // The clock on the exact grid (shifted with a given initial clock, which the
+      // sensitivities differentiate).
+      y[system.clock_index()] = grid[k + 1] + clock_offset;
       z = stages.Algebraic(w, s - 1);
       previous_w = w;
       previous_h = h;
@@ -237,6 +313,7 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
   }
   result.final_time = y[system.clock_index()];
   result.final_state = y.head(nx);
+  result.final_lowered_state = y;
   result.final_algebraic = z;
   if (!options.record_trajectory || failed) {
     if (result.trajectory.t.back() != result.final_time) {

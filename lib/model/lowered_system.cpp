@@ -24,7 +24,7 @@ std::unique_ptr<LoweredBlock> LowerEffect(const Scene& scene, const Effect& effe
 
 LoweredSystem::LoweredSystem(const Scene& scene, const LoweringOptions& options)
     : scene_(scene), options_(options) {
-  ValidateScene(scene_);
+  ValidateScene(scene_, options_.require_feasible_initial_state);
   Build();
 }
 

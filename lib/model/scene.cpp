@@ -101,7 +101,7 @@ Vector EvaluateAtStart(const Scene& scene, const SmoothFunction& f, const std::s
   return out;
 }
 
-void ValidateMovingSet(const Scene& scene, const MovingSet& set) {
+void ValidateMovingSet(const Scene& scene, const MovingSet& set, bool check_feasibility) {
   const std::string what = "moving set '" + set.name + "'";
   RequireArgument(!set.constraint_names.empty(), scene.name, ": ", what, " has no constraints");
   RequireUniqueNames(set.constraint_names, scene.name + ": " + what + " constraints");
@@ -109,7 +109,7 @@ void ValidateMovingSet(const Scene& scene, const MovingSet& set) {
                                    static_cast<int>(set.constraint_names.size()));
   const double tolerance =
       kInitialFeasibilityTolerance * std::max(1.0, scene.initial_state.lpNorm<Eigen::Infinity>());
-  for (Eigen::Index k = 0; k < c.size(); ++k) {
+  for (Eigen::Index k = 0; check_feasibility && k < c.size(); ++k) {
     RequireArgument(c[k] >= -tolerance, scene.name, ": infeasible initial state: constraint '",
                     set.constraint_names[static_cast<std::size_t>(k)], "' of ", what,
                     " is c = ", c[k], " < 0 at t0 = ", scene.initial_time,
@@ -193,7 +193,7 @@ void ValidatePathConstraints(const Scene& scene, const PathConstraints& dai) {
 
 }  // namespace
 
-void ValidateScene(const Scene& scene) {
+void ValidateScene(const Scene& scene, bool check_initial_feasibility) {
   RequireArgument(!scene.name.empty(), "scene name must not be empty");
   const std::string& s = scene.name;
   RequireArgument(!scene.state_names.empty(), s, ": a scene needs at least one state");
@@ -274,7 +274,9 @@ void ValidateScene(const Scene& scene) {
     std::visit(
         [&](const auto& e) {
           using E = std::decay_t<decltype(e)>;
-          if constexpr (std::is_same_v<E, MovingSet>) ValidateMovingSet(scene, e);
+          if constexpr (std::is_same_v<E, MovingSet>) {
+            ValidateMovingSet(scene, e, check_initial_feasibility);
+          }
           if constexpr (std::is_same_v<E, SwitchingSurfaces>) ValidateSwitching(scene, e);
           if constexpr (std::is_same_v<E, HysteresisRelay>) ValidateRelay(scene, e);
           if constexpr (std::is_same_v<E, PathConstraints>) ValidatePathConstraints(scene, e);

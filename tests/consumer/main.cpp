@@ -1,8 +1,10 @@
-// Simulates the Hopf scene with the installed library and checks the known answer.
+// Simulates the Hopf scene and solves the Stewart-Anitescu OCP with the installed library, and
+// checks both known answers.
 #include <cmath>
 #include <cstdio>
 
 #include "moreau/integrators/radau.hpp"
+#include "moreau/ocp/catalog.hpp"
 #include "moreau/scenes/catalog.hpp"
 
 int main() {
@@ -16,5 +18,12 @@ int main() {
   const double error = std::fabs(result.final_state[0] - expected_x);
   std::printf("consumer: status %s, x(2) error %.3e\n", moreau::ToString(result.status).c_str(),
               error);
-  return result.status == moreau::RadauStatus::kSuccess && error < 1e-8 ? 0 : 1;
+  // x0* = (9 - sqrt(417)) / 8 (docs/ocp.md).
+  const moreau::OcpResult ocp = moreau::SolveOcp(moreau::MakeOcpProblem("stewart_anitescu"));
+  const double ocp_error = std::fabs(ocp.initial_state[0] - (9.0 - std::sqrt(417.0)) / 8.0);
+  std::printf("consumer: ocp status %s, x0* error %.3e\n", moreau::ToString(ocp.status).c_str(),
+              ocp_error);
+  const bool ok = result.status == moreau::RadauStatus::kSuccess && error < 1e-8 &&
+                  ocp.status == moreau::OcpStatus::kSolved && ocp_error < 1e-6;
+  return ok ? 0 : 1;
 }

@@ -246,4 +246,29 @@ TEST(CliTest, ListAndShowDescribeScenes) {
   EXPECT_NE(show.output.find("x0 = 0.5"), std::string::npos) << show.output;
 }
 
+TEST(CliTest, OcpSolvesWritesItsFilesAndNamesBadInput) {
+  ExpectUsageError("ocp nope", "unknown optimal control problem 'nope'; available:");
+  ExpectUsageError("ocp wave_rider --N 0", "--N must be at least 1");
+  ExpectUsageError("ocp wave_rider --stages 9", "stages must be in [1, ");
+  ExpectUsageError("ocp wave_rider --tol -1", "tolerance must be positive");
+  ExpectUsageError("ocp wave_rider --integrator rk4", "unknown OCP integrator 'rk4'");
+  ExpectUsageError("ocp turbo_car --integrator timestepping", "does not support a free final time");
+  const std::filesystem::path directory =
+      std::filesystem::temp_directory_path() / "moreau_cli_test_ocp";
+  std::filesystem::remove_all(directory);
+  const Outcome outcome =
+      RunCli("ocp stewart_anitescu --quiet --no-plot --out " + directory.string());
+  ASSERT_EQ(outcome.exit_code, 0) << outcome.output;
+  for (const char* file : {"trajectory.csv", "controls.csv", "iterations.csv", "summary.json"}) {
+    EXPECT_TRUE(std::filesystem::exists(directory / file)) << file;
+  }
+  std::ifstream in(directory / "summary.json");
+  const nlohmann::json summary = nlohmann::json::parse(in);
+  EXPECT_EQ(summary["status"], "solved");
+  // x0* = (9 - sqrt 417)/8 (docs/ocp.md), to the tolerance of the OCP tests.
+  EXPECT_NEAR(summary["initial_state"]["x"].get<double>(), -1.4275722320827673, 1e-6);
+  EXPECT_TRUE(summary["verification"]["done"].get<bool>());
+  std::filesystem::remove_all(directory);
+}
+
 }  // namespace

@@ -3,6 +3,7 @@
 //   moreau show <scene>
 //   moreau run [<scene>] [--integrator NAME] [--stages S] [--h H] [--tf T]
 //              [--set name=value ...] [--out DIR] ...
+//   moreau ocp <problem> [--N N] [--stages S] [--fe N_FE] [--single-shooting] ...
 // Exit codes: 0 success; 1 the simulation ended with a non-success status; 2 bad usage or
 // input (unknown scene, option or parameter, bad value).
 
@@ -18,6 +19,7 @@
 
 #include "moreau/core/error.hpp"
 #include "moreau/scenes/catalog.hpp"
+#include "ocp_command.hpp"
 #include "output.hpp"
 #include "run_report.hpp"
 
@@ -101,6 +103,8 @@ void List() {
   for (const auto& [name, description] : tool::IntegratorNames()) {
     std::printf("  %-12s %s\n", name.c_str(), description.c_str());
   }
+  std::printf("\noptimal control problems (moreau ocp PROBLEM):\n");
+  tool::ListOcpProblems();
 }
 
 void Show(const std::string& name) {
@@ -280,6 +284,33 @@ int main(int argc, char** argv) {
   run->add_flag("--no-plot", no_plot, "do not write trajectory.png");
   run->add_flag("--quiet", quiet, "no progress output");
 
+  auto* ocp = app.add_subcommand("ocp", "solve an optimal control problem (see `moreau list`)");
+  tool::OcpCommandSettings ocp_settings;
+  bool single_shooting = false, no_verify = false;
+  ocp->add_option("problem", ocp_settings.problem, "problem name")->required();
+  auto* ocp_intervals =
+      ocp->add_option("--N", ocp_settings.intervals,
+                      "control intervals (default: the problem's; the problem's control guess is "
+                      "then replaced by its constant signal)");
+  ocp->add_option("--stages", ocp_settings.options.stages, "FESD Radau IIA stages s (1..4)");
+  ocp->add_option("--fe", ocp_settings.options.finite_elements,
+                  "FESD finite elements per control interval");
+  std::string ocp_integrator = "fesd";
+  ocp->add_option("--integrator", ocp_integrator,
+                  "discretization of the intervals: fesd (default) or timestepping (fixed "
+                  "steps, for comparisons)");
+  ocp->add_flag("--single-shooting", single_shooting,
+                "single shooting (default: multiple shooting)");
+  ocp->add_option("--tol", ocp_settings.options.tolerance, "IPOPT tolerance (tol)");
+  ocp->add_option("--max-iterations", ocp_settings.options.max_iterations, "IPOPT iteration limit");
+  ocp->add_option("--print-level", ocp_settings.options.print_level,
+                  "IPOPT output level 0..12 (0: silent)");
+  ocp->add_flag("--no-verify", no_verify, "skip the IDA re-simulation of the optimal controls");
+  ocp->add_option("--out", ocp_settings.out_directory,
+                  "output directory (default: out/ocp/<problem>)");
+  ocp->add_flag("--no-plot", no_plot, "do not write solution.png");
+  ocp->add_flag("--quiet", quiet, "no progress output");
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& error) {
@@ -294,6 +325,16 @@ int main(int argc, char** argv) {
     if (app.got_subcommand("show")) {
       Show(show_scene);
       return 0;
+    }
+    if (app.got_subcommand("ocp")) {
+      if (single_shooting)
+        ocp_settings.options.transcription = moreau::OcpTranscription::kSingleShooting;
+      ocp_settings.options.verify = !no_verify;
+      ocp_settings.intervals_given = ocp_intervals->count() > 0;
+      ocp_settings.options.integrator = moreau::ParseOcpIntegrator(ocp_integrator);
+      ocp_settings.plot = !no_plot;
+      ocp_settings.quiet = quiet;
+      return tool::RunOcpCommand(ocp_settings);
     }
     const std::vector<std::pair<CLI::Option*, std::string>> tracked = {
         {stages, "stages"},

@@ -163,16 +163,18 @@ std::string WritePlot(const RunReport& report, const std::string& directory) {
     script << "\nunset multiplot\n";
   }
   script.close();
+  return RunGnuplot(script_path, image) ? image : "";
+}
+
+bool RunGnuplot(const std::string& script_path, const std::string& image) {
   const std::string command = "gnuplot '" + script_path + "' 2>&1";
   FILE* pipe = popen(command.c_str(), "r");
-  std::string output;
-  if (pipe != nullptr) {
-    char buffer[256];
-    while (fgets(buffer, sizeof buffer, pipe) != nullptr) output += buffer;
-    const int code = pclose(pipe);
-    if (code == 0 && fs::exists(image)) return image;
+  if (pipe == nullptr) return false;
+  char buffer[256];
+  while (fgets(buffer, sizeof buffer, pipe) != nullptr) {
   }
-  return "";  // no plot (gnuplot missing or failed); the caller reports it
+  const int code = pclose(pipe);
+  return code == 0 && fs::exists(image);  // false: gnuplot missing or failed; the caller reports it
 }
 
 }  // namespace moreau::tool

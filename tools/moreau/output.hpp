@@ -28,5 +28,7 @@ void WriteSummaryJson(const RunReport& report, const std::string& path);
 // the relay memories from DIR/relays.csv in a second panel when the scene has relays.
 // Returns the image path, or "" if gnuplot is unavailable or failed.
 std::string WritePlot(const RunReport& report, const std::string& directory);
+// Runs gnuplot on a script that writes `image`; true if the image exists afterwards.
+bool RunGnuplot(const std::string& script_path, const std::string& image);
 
 }  // namespace moreau::tool

@@ -41,6 +41,15 @@ struct TimeSteppingOptions {
   SemismoothNewtonOptions newton = DefaultNewtonOptions();
   /// Record every step in the trajectory (false: only the initial and final points).
   bool record_trajectory = true;
+  /// Compute TimeSteppingResult::sensitivities: the implicit function theorem on every
+  /// converged step system (R(w; y_n, u, p) = 0 with the Fischer-Burmeister generalized
+  /// Jacobian Newton uses), chained over the steps. Exact derivatives of the discrete map (the
+  /// map is only piecewise smooth: a pair changing status inside a step is not a switch time,
+  /// so these derivatives carry no switch-time terms; see docs/ocp.md).
+  bool sensitivities = false;
+  /// Start from this lowered state y0 = (x, clock) instead of the scene's x0 (shooting codes;
+  /// empty: the scene's). Need not lie in the moving sets: the first step catches up.
+  Vector initial_state;
 
   static SemismoothNewtonOptions DefaultNewtonOptions();
   /// Throws std::invalid_argument naming the first out-of-range option.
@@ -79,6 +88,11 @@ struct TimeSteppingResult {
   /// Certificate per step: max_{stages, pairs} |min(a, b)| at the accepted solution.
   std::vector<double> step_complementarity_residual;
   TimeSteppingStats stats;
+  Vector final_lowered_state;  ///< y(T) = (x, clock)
+  /// With options.sensitivities: d y(T) / d(y0, p, u per control segment), n_y rows; columns
+  /// y0 (n_y), p (n_p), then u per segment (n_u each), as FesdSensitivities::lowered.
+  Matrix sensitivities;
+  std::vector<double> segment_starts;  ///< start time of every control segment
 };
 
 /// Simulates `scene` over [t0, tf]. Throws std::invalid_argument for invalid options, an

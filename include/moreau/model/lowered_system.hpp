@@ -55,6 +55,9 @@ enum class RelayForm {
 struct LoweringOptions {
   SwitchingForm switching_form = SwitchingForm::kStewart;
   RelayForm relay_form = RelayForm::kTimeFreezing;
+  /// Require the scene's x0 to lie in its moving sets (ValidateScene); false for integrators
+  /// that start from another state and project it (FesdOptions::initial_state).
+  bool require_feasible_initial_state = true;
 };
 
 /// Which derivatives LoweredSystem::Evaluate computes.

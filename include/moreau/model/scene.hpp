@@ -173,8 +173,9 @@ inline constexpr double kInitialFeasibilityTolerance = 1e-12;
 /// dimension mismatches (initial state, function outputs, projection basis, number of
 /// modes), non-finite values, a non-positive horizon, out-of-range function arguments,
 /// non-finite function values at the initial point, and initial states outside the moving
-/// sets (x0 not in C(t0)).
-void ValidateScene(const Scene& scene);
+/// sets (x0 not in C(t0)). `check_initial_feasibility = false` skips the last check, for
+/// integrators that start elsewhere and project (FesdOptions::initial_state).
+void ValidateScene(const Scene& scene, bool check_initial_feasibility = true);
 
 /// Names accepted by SetSceneValue: "tf", "x0.<state>" and every parameter name.
 std::vector<std::string> OverridableNames(const Scene& scene);

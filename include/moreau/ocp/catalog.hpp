@@ -1,0 +1,26 @@
+#pragma once
+/// @file
+/// The catalog of example optimal control problems (examples/ocp), used by `moreau ocp`, the
+/// tests and the benchmarks. Target: moreau::ocp_problems.
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "moreau/ocp/ocp.hpp"
+
+namespace moreau {
+
+struct OcpDefinition {
+  std::string name;     ///< command-line name, e.g. "wave_rider"
+  std::string summary;  ///< one line for `moreau list`
+  std::function<OcpProblem()> make;
+};
+
+/// All problems, in the order `moreau list` shows them.
+const std::vector<OcpDefinition>& OcpCatalog();
+/// The problem with this name. Throws std::invalid_argument naming the unknown problem and
+/// listing the available ones.
+OcpProblem MakeOcpProblem(const std::string& name);
+
+}  // namespace moreau

@@ -1,0 +1,261 @@
+#include "ocp_command.hpp"
+
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+#include <nlohmann/json.hpp>
+
+#include "moreau/core/error.hpp"
+#include "moreau/ocp/catalog.hpp"
+#include "output.hpp"
+
+namespace moreau::tool {
+namespace {
+
+namespace fs = std::filesystem;
+using Json = nlohmann::json;
+
+Json Named(const std::vector<std::string>& names, const Vector& values) {
+  Json object = Json::object();
+  for (std::size_t i = 0; i < names.size() && static_cast<Eigen::Index>(i) < values.size(); ++i) {
+    object[names[i]] = values[static_cast<Eigen::Index>(i)];
+  }
+  return object;
+}
+
+std::vector<std::string> ControlNames(const OcpProblem& problem) {
+  std::vector<std::string> names;
+  for (int index : problem.controls) {
+    names.push_back(problem.scene.inputs[static_cast<std::size_t>(index)].name);
+  }
+  return names;
+}
+
+void WriteControlsCsv(const OcpProblem& problem, const OcpResult& result, const std::string& path) {
+  std::ofstream out(path);
+  RequireArgument(out.good(), "cannot write '", path, "'");
+  out << "t_start,t_end";
+  for (const std::string& name : ControlNames(problem)) out << "," << name;
+  if (result.speeds.size() > 0) out << ",speed";
+  out << "\n" << std::setprecision(17);
+  for (Eigen::Index k = 0; k < result.controls.rows(); ++k) {
+    out << result.grid[static_cast<std::size_t>(k)] << ","
+        << result.grid[static_cast<std::size_t>(k) + 1];
+    for (Eigen::Index j = 0; j < result.controls.cols(); ++j) out << "," << result.controls(k, j);
+    if (result.speeds.size() > 0) out << "," << result.speeds[k];
+    out << "\n";
+  }
+}
+
+void WriteIterationsCsv(const OcpResult& result, const std::string& path) {
+  std::ofstream out(path);
+  RequireArgument(out.good(), "cannot write '", path, "'");
+  out << "iteration,objective,primal_infeasibility,dual_infeasibility\n" << std::setprecision(17);
+  for (const OcpIteration& it : result.log) {
+    out << it.iteration << "," << it.objective << "," << it.primal_infeasibility << ","
+        << it.dual_infeasibility << "\n";
+  }
+}
+
+Json SummaryJson(const OcpProblem& problem, const OcpOptions& options, const OcpResult& result) {
+  const std::vector<std::string>& states = problem.scene.state_names;
+  Json controls = Json::array();
+  for (Eigen::Index k = 0; k < result.controls.rows(); ++k) {
+    Json row = Json::object();
+    row["t_start"] = result.grid[static_cast<std::size_t>(k)];
+    row["t_end"] = result.grid[static_cast<std::size_t>(k) + 1];
+    row["u"] = Named(ControlNames(problem), result.controls.row(k).transpose());
+    if (result.speeds.size() > 0) row["speed"] = result.speeds[k];
+    controls.push_back(row);
+  }
+  Json events = Json::array();
+  for (const Event& e : result.events) {
+    events.push_back(
+        {{"t", e.t}, {"kind", ToString(e.kind)}, {"what", e.what}, {"detail", e.detail}});
+  }
+  Json log = Json::array();
+  for (const OcpIteration& it : result.log) {
+    log.push_back({{"iteration", it.iteration},
+                   {"objective", it.objective},
+                   {"primal_infeasibility", it.primal_infeasibility},
+                   {"dual_infeasibility", it.dual_infeasibility}});
+  }
+  Json summary = {
+      {"problem", problem.name},
+      {"description", problem.description},
+      {"options",
+       {{"transcription", ToString(options.transcription)},
+        {"integrator", ToString(options.integrator)},
+        {"intervals", problem.intervals},
+        {"stages", options.stages},
+        {"finite_elements", options.finite_elements},
+        {"tolerance", options.tolerance},
+        {"max_iterations", options.max_iterations}}},
+      {"status", ToString(result.status)},
+      {"message", result.message},
+      {"objective", result.objective},
+      {"final_time", result.final_time},
+      {"initial_state", Named(states, result.initial_state)},
+      {"final_state", Named(states, result.final_state)},
+      {"running_cost", result.running_cost},
+      {"terminal_equality_error", result.terminal_equality_error},
+      {"controls", controls},
+      {"events", events},
+      {"iterations", log},
+      {"stats",
+       {{"ipopt_iterations", result.stats.iterations},
+        {"simulations", result.stats.simulations},
+        {"fesd_elements", result.stats.fesd_elements},
+        {"cpu_seconds", result.stats.cpu_seconds},
+        {"verification_seconds", result.stats.verification_seconds}}},
+  };
+  summary["verification"] = {{"done", result.verified}, {"message", result.verification_message}};
+  if (result.verified) {
+    summary["verification"]["integrator"] = "ida (rtol 1e-12)";
+    summary["verification"]["final_state"] = Named(states, result.resimulated_final_state);
+    summary["verification"]["terminal_error"] = result.resimulated_terminal_error;
+    summary["verification"]["state_difference"] = result.resimulated_state_difference;
+  }
+  return summary;
+}
+
+// solution.png: the states (upper panel) and the piecewise-constant controls (lower panel)
+// against physical time.
+std::string WriteSolutionPlot(const OcpProblem& problem, const OcpResult& result,
+                              const std::string& directory) {
+  const std::string image = directory + "/solution.png";
+  const std::string script_path = directory + "/solution.gp";
+  std::ofstream script(script_path);
+  RequireArgument(script.good(), "cannot write '", script_path, "'");
+  const auto& names = problem.scene.state_names;
+  const std::size_t shown = std::min<std::size_t>(names.size(), kMaxPlottedStates);
+  const bool with_controls = result.controls.cols() > 0 || result.speeds.size() > 0;
+  script << "set terminal pngcairo size 1000," << (with_controls ? 800 : 600) << " noenhanced\n"
+         << "set output '" << image << "'\n"
+         << "set datafile separator ','\n"
+         << "set key outside right top\nset grid\nset xlabel 't'\n"
+         << "set lmargin at screen 0.08\nset rmargin at screen 0.8\n"
+         << "set xrange [" << result.grid.front() << ":" << result.grid.back() << "]\n";
+  if (with_controls) script << "set multiplot layout 2,1\n";
+  script << "set title '" << problem.name << " (" << ToString(result.status) << ", objective "
+         << std::setprecision(10) << result.objective << ")'\nplot ";
+  for (std::size_t i = 0; i < shown; ++i) {
+    script << (i ? ", " : "") << "'" << directory << "/trajectory.csv' using 1:" << i + 2
+           << " with lines lw 2 title '" << names[i] << "'";
+  }
+  script << "\n";
+  if (with_controls) {
+    // One horizontal segment per interval, from t_start to t_end.
+    script << "unset title\nplot ";
+    const auto controls = ControlNames(problem);
+    std::size_t column = 3;
+    for (std::size_t j = 0; j < controls.size(); ++j, ++column) {
+      script << (j ? ", " : "") << "'" << directory << "/controls.csv' using 1:" << column
+             << ":($2-$1):(0) with vectors nohead lw 2 title '" << controls[j] << "'";
+    }
+    if (result.speeds.size() > 0) {
+      script << (controls.empty() ? "" : ", ") << "'" << directory
+             << "/controls.csv' using 1:" << column
+             << ":($2-$1):(0) with vectors nohead lw 2 dashtype 2 title 'speed of time'";
+    }
+    script << "\nunset multiplot\n";
+  }
+  script.close();
+  return RunGnuplot(script_path, image) ? image : "";
+}
+
+std::string Format(const std::vector<std::string>& names, const Vector& values) {
+  std::ostringstream text;
+  text.precision(12);
+  for (std::size_t i = 0; i < names.size() && static_cast<Eigen::Index>(i) < values.size(); ++i) {
+    text << (i ? ", " : "") << names[i] << " = " << values[static_cast<Eigen::Index>(i)];
+  }
+  return text.str();
+}
+
+}  // namespace
+
+void ListOcpProblems() {
+  for (const OcpDefinition& definition : OcpCatalog()) {
+    std::printf("  %-17s %s\n", definition.name.c_str(), definition.summary.c_str());
+  }
+}
+
+int RunOcpCommand(const OcpCommandSettings& settings) {
+  OcpProblem problem = MakeOcpProblem(settings.problem);
+  if (settings.intervals_given) {
+    RequireArgument(settings.intervals >= 1, "--N must be at least 1 (got ", settings.intervals,
+                    ")");
+    problem.intervals = settings.intervals;
+    problem.initial_controls.resize(0, 0);  // the problem's guess is for its own N
+  }
+  OcpOptions options = settings.options;
+  options.Validate();
+  const std::string directory =
+      settings.out_directory.empty() ? "out/ocp/" + problem.name : settings.out_directory;
+
+  // Progress: one line per IPOPT iteration on a terminal, every 5 s otherwise.
+  const bool tty = isatty(STDERR_FILENO) != 0;
+  const auto start = std::chrono::steady_clock::now();
+  auto last = start;
+  if (!settings.quiet) {
+    options.progress = [&](int iteration, double objective, double infeasibility) {
+      const auto now = std::chrono::steady_clock::now();
+      if (!tty && std::chrono::duration<double>(now - last).count() < 5.0) return;
+      last = now;
+      std::fprintf(
+          stderr, "[moreau ocp] iteration %4d  objective %-14.8g infeasibility %-9.2e %.1f s\n",
+          iteration, objective, infeasibility, std::chrono::duration<double>(now - start).count());
+    };
+  }
+  const OcpResult result = SolveOcp(problem, options);
+
+  fs::create_directories(directory);
+  WriteTrajectoryCsv(result.trajectory, directory + "/trajectory.csv");
+  WriteControlsCsv(problem, result, directory + "/controls.csv");
+  WriteIterationsCsv(result, directory + "/iterations.csv");
+  {
+    std::ofstream out(directory + "/summary.json");
+    RequireArgument(out.good(), "cannot write '", directory, "/summary.json'");
+    out << std::setw(2) << SummaryJson(problem, options, result) << "\n";
+  }
+  const std::string image = settings.plot ? WriteSolutionPlot(problem, result, directory) : "";
+
+  const auto& states = problem.scene.state_names;
+  std::printf("problem      %s (%s, %s, N = %d, s = %d, N_fe = %d)\n", problem.name.c_str(),
+              ToString(options.transcription).c_str(), ToString(options.integrator).c_str(),
+              problem.intervals, options.stages, options.finite_elements);
+  std::printf("status       %s%s%s\n", ToString(result.status).c_str(),
+              result.message.empty() ? "" : ": ", result.message.c_str());
+  std::printf("objective    %.15g\n", result.objective);
+  std::printf("final time   %.15g\n", result.final_time);
+  std::printf("x0           %s\n", Format(states, result.initial_state).c_str());
+  std::printf("x(T)         %s\n", Format(states, result.final_state).c_str());
+  std::printf("switches     %zu\n", result.events.size());
+  if (result.verified) {
+    std::printf(
+        "re-simulated IDA rtol 1e-12: terminal-constraint error %.3g, |x_ida(T) - x(T)| %.3g\n",
+        result.resimulated_terminal_error, result.resimulated_state_difference);
+  } else {
+    std::printf("re-simulated no%s%s\n", result.verification_message.empty() ? "" : ": ",
+                result.verification_message.c_str());
+  }
+  std::printf(
+      "ipopt        %d iterations, %ld interval integrations, %.3g s (verification %.3g s)\n",
+      result.stats.iterations, result.stats.simulations, result.stats.cpu_seconds,
+      result.stats.verification_seconds);
+  std::printf("output       %s/{trajectory,controls,iterations}.csv, %s/summary.json%s%s\n",
+              directory.c_str(), directory.c_str(), image.empty() ? "" : ", ", image.c_str());
+  if (settings.plot && image.empty()) {
+    std::fprintf(stderr, "moreau: warning: no plot written (is gnuplot installed?)\n");
+  }
+  const bool solved =
+      result.status == OcpStatus::kSolved || result.status == OcpStatus::kSolvedToAcceptable;
+  return solved ? 0 : 1;
+}
+
+}  // namespace moreau::tool

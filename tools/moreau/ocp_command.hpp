@@ -1,0 +1,31 @@
+#pragma once
+// `moreau ocp <problem>`: solve an example optimal control problem (examples/ocp) and write
+// its solution (docs/ocp.md).
+
+#include <string>
+
+#include "moreau/ocp/ocp.hpp"
+
+namespace moreau::tool {
+
+struct OcpCommandSettings {
+  std::string problem;
+  bool intervals_given = false;  ///< false: the problem's own N
+  int intervals = 0;
+  OcpOptions options;
+  std::string out_directory;  ///< empty: out/ocp/<problem>
+  bool plot = true;
+  bool quiet = false;
+};
+
+// Solves and writes DIR/trajectory.csv (FESD at the optimum, physical time), controls.csv
+// (one row per interval: t_start, t_end, controls, speed of time), iterations.csv (IPOPT log),
+// summary.json and, with gnuplot, solution.png. Prints a summary. Returns the exit code: 0
+// solved (also to acceptable tolerances), 1 any other status. Throws std::invalid_argument
+// for an unknown problem or invalid options.
+int RunOcpCommand(const OcpCommandSettings& settings);
+
+// The summary lines of `moreau list` for the optimal control problems.
+void ListOcpProblems();
+
+}  // namespace moreau::tool
