@@ -118,6 +118,60 @@ TEST(FesdShootingTest, LoweredStateSensitivitiesIncludeMemoryAndClock) {
   EXPECT_GT(std::fabs(exact(3, 2)), 0.1);
 }
 
+TEST(FesdShootingTest, StartOnAMovingBoundaryTakesTheOutwardDerivative) {
+  // The wave-rider S4 pushed by its boundary: the state at t = 1 (contact from t = 0.094 to
+  // 1.449 with the scene's u = 2) lies on the boundary (a multiple-shooting node of a trajectory
+  // riding the set). The map from there is not differentiable (inward starts are free for a moment,
+  // outward ones are projected); FESD returns the outward one-sided derivative, the limit of the
+  // derivatives of infeasible starts (docs/ocp.md).
+  Scene scene = MakeScene("S4");
+  scene.final_time = 1.0;
+  FesdOptions options;
+  options.stages = 3;
+  options.step_size = 0.25;
+  const FesdResult approach = SimulateFesd(scene, options);
+  ASSERT_EQ(approach.status, FesdStatus::kSuccess) << approach.message;
+  ASSERT_FALSE(approach.events.empty());
+  ASSERT_EQ(approach.events.back().kind, EventKind::kEnter) << "must end in contact";
+  const Vector y0 = approach.final_lowered_state;  // x1, x2, clock
+  EXPECT_NEAR(y0[0] + std::cos(y0[1] - y0[2]), 0.0, 1e-12);
+
+  scene.initial_time = 1.0;
+  scene.final_time = 2.0;
+  options.step_size = 1.0;
+  options.finite_elements = 3;
+  options.sensitivities = true;
+  options.initial_state = y0;
+  const FesdResult on_boundary = SimulateFesd(scene, options);
+  ASSERT_EQ(on_boundary.status, FesdStatus::kSuccess) << on_boundary.message;
+  // Outward: x1 decreases (c = x1 + cos(x2 - t) decreases with it).
+  constexpr double kOffset = 1e-9;
+  options.initial_state[0] -= kOffset;
+  const FesdResult outside = SimulateFesd(scene, options);
+  ASSERT_EQ(outside.status, FesdStatus::kSuccess) << outside.message;
+  const Matrix d_boundary = on_boundary.sensitivities.lowered.leftCols(3);
+  const Matrix d_outside = outside.sensitivities.lowered.leftCols(3);
+  // The derivative is continuous from outside: the offset changes it by O(kOffset).
+  constexpr double kContinuity = 1e-6;
+  EXPECT_LE((d_boundary - d_outside).lpNorm<Eigen::Infinity>(), kContinuity)
+      << "on the boundary\n"
+      << d_boundary << "\nfrom outside\n"
+      << d_outside;
+  // And it is the backward (outward) difference quotient of the map in x1.
+  options.sensitivities = false;
+  options.initial_state = y0;
+  FesdOptions minus = options;
+  constexpr double kStep = 1e-7;
+  minus.initial_state[0] -= kStep;
+  const Vector quotient = (SimulateFesd(scene, options).final_lowered_state -
+                           SimulateFesd(scene, minus).final_lowered_state) /
+                          kStep;
+  // One-sided quotient: truncation O(kStep) times the map's curvature, noise 1e-14 / kStep.
+  constexpr double kQuotientTolerance = 1e-5;
+  EXPECT_LE((quotient - d_boundary.col(0)).lpNorm<Eigen::Infinity>(), kQuotientTolerance)
+      << quotient.transpose() << "\nvs " << d_boundary.col(0).transpose();
+}
+
 TEST(FesdShootingTest, InitialLoweredStateIsValidated) {
   FesdOptions options;
   options.initial_state = Vector{{1.0, 2.0}};  // H1 needs (x, w, clock)
@@ -125,8 +179,7 @@ TEST(FesdShootingTest, InitialLoweredStateIsValidated) {
     SimulateFesd(MakeScene("H1"), options);
     FAIL() << "expected std::invalid_argument";
   } catch (const std::invalid_argument& error) {
-    EXPECT_NE(std::string(error.what()).find("needs 3 entries"), std::string::npos)
-        << error.what();
+    EXPECT_NE(std::string(error.what()).find("needs 3 entries"), std::string::npos) << error.what();
   }
   options.initial_state = Vector{{15.0, std::nan(""), 0.0}};
   EXPECT_THROW(SimulateFesd(MakeScene("H1"), options), std::invalid_argument);
