@@ -1,6 +1,8 @@
 #include "moreau/integrators/simulation.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "moreau/core/error.hpp"
 
@@ -24,6 +26,13 @@ std::vector<double> FixedStepGrid(double t0, double tf, double h) {
   RequireArgument(std::isfinite(h) && h > 0.0, "step size h must be positive and finite, got ", h);
   RequireArgument(tf > t0, "grid needs tf > t0, got t0 = ", t0, ", tf = ", tf);
   const double ratio = (tf - t0) / h;
+  RequireArgument(ratio <= kMaxFixedSteps, "step size h = ", h, " gives ", ratio,
+                  " fixed steps on [", t0, ", ", tf, "], more than the limit of ", kMaxFixedSteps,
+                  " fixed steps per segment (raise h or shorten the horizon)");
+  const double resolution =
+      64.0 * std::numeric_limits<double>::epsilon() * std::max(std::fabs(t0), std::fabs(tf));
+  RequireArgument(h >= resolution, "step size h = ", h, " is below the resolution of t on [", t0,
+                  ", ", tf, "] (64 eps max(|t0|, |tf|) = ", resolution, ")");
   const double rounded = std::max(1.0, std::round(ratio));
   std::vector<double> grid{t0};
   if (std::fabs(ratio - rounded) <= 1e-9 * rounded) {

@@ -44,9 +44,16 @@ struct RelaySignal {
 /// Called by integrators with the current time during long runs (may be empty).
 using ProgressCallback = std::function<void(double t)>;
 
+/// Most steps a fixed-step grid may have on one segment (FixedStepGrid stores every point:
+/// 8e8 bytes at this limit).
+inline constexpr double kMaxFixedSteps = 1e8;
+
 /// Breakpoints of a fixed-step grid on [t0, tf]: uniform steps of (tf - t0)/N when h divides
 /// the interval up to round-off (|(tf - t0)/h - N| <= 1e-9 N), otherwise steps of h and one
-/// shorter last step. Returns the grid points t0 < t1 < ... < tN = tf.
+/// shorter last step. Returns the grid points t0 < t1 < ... < tN = tf. Throws
+/// std::invalid_argument for h not positive and finite, tf <= t0, more than kMaxFixedSteps
+/// steps, or h below the resolution of t on [t0, tf] (h < 64 eps max(|t0|, |tf|), where
+/// consecutive grid points could coincide in floating point).
 std::vector<double> FixedStepGrid(double t0, double tf, double h);
 
 /// Splits [t0, tf] at the given breakpoints (sorted, inside (t0, tf)): returns the segment
