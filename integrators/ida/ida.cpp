@@ -66,6 +66,8 @@ std::string ToString(IdaStatus status) {
       return "too_many_steps";
     case IdaStatus::kTooManyEvents:
       return "too_many_events";
+    case IdaStatus::kNoProgress:
+      return "no_progress";
   }
   return "?";
 }
@@ -324,6 +326,7 @@ class IdaRun {
   void Integrate(double t_end) {
     Check(IDASetStopTime(memory_, t_end), "IDASetStopTime");
     long steps_before = result_.stats.num_steps;
+    int stalled_steps = 0;
     while (!failed()) {
       double t_return = t_;
       const int flag = IDASolve(memory_, t_end, &t_return, Y_->vector, Yp_->vector, IDA_ONE_STEP);
@@ -339,6 +342,16 @@ class IdaRun {
       if (steps_before + steps > options_.max_steps) {
         Fail(IdaStatus::kTooManySteps, t_return,
              std::to_string(options_.max_steps) + " internal steps");
+        return;
+      }
+      // Steps that no longer move t (below its resolution) would otherwise run into
+      // max_steps only after millions of steps: stop them early with their reason.
+      stalled_steps = t_return > t_ ? 0 : stalled_steps + 1;
+      if (stalled_steps >= kMaxStalledIdaSteps) {
+        Fail(IdaStatus::kNoProgress, t_,
+             std::to_string(kMaxStalledIdaSteps) +
+                 " consecutive internal steps did not advance t (step size below the "
+                 "resolution of t; the model may be singular or not finite just beyond t)");
         return;
       }
       RecordOutputTimes(t_return);

@@ -91,7 +91,12 @@ enum class IdaStatus {
   kStatusDecisionFailure,  ///< no consistent continuation at an event
   kTooManySteps,           ///< max_steps internal steps without reaching tf
   kTooManyEvents,          ///< max_events events without reaching tf (Zeno-like)
+  kNoProgress,             ///< kMaxStalledIdaSteps consecutive internal steps did not advance t
+                           ///< (steps below the resolution of t, e.g. at a point beyond which
+                           ///< the model is singular or not finite)
 };
+/// Consecutive internal IDA steps that leave t unchanged before IdaStatus::kNoProgress.
+inline constexpr int kMaxStalledIdaSteps = 100;
 std::string ToString(IdaStatus status);
 
 struct IdaStats {
