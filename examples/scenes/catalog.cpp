@@ -38,6 +38,22 @@ const std::vector<SceneDefinition>& SceneCatalog() {
        scenes::MakeD3},
       {"dai_index2", "index-2 DAI x2 >= sin(x1) with a known solution (alpha-method test)",
        scenes::MakeDaiIndex2},
+      {"hard_grazing", "grazing contact: a circle touches a floor tangentially (c = lambda = 0)",
+       scenes::MakeHardGrazing},
+      {"hard_simultaneous", "two walls reached at the same instant", scenes::MakeHardSimultaneous},
+      {"hard_corner", "corner whose constraint gradients are 1e-6 apart", scenes::MakeHardCorner},
+      {"hard_fast_wall", "a wall moving 1e3 times faster than the free dynamics",
+       scenes::MakeHardFastWall},
+      {"hard_stiff_set", "stiff decay (eigenvalues -1e6) swept by a moving wall",
+       scenes::MakeHardStiffSet},
+      {"hard_zeno", "twisting: switches accumulating at a finite time (Zeno-like)",
+       scenes::MakeHardZeno},
+      {"hard_fast_switching", "a switch every 1e-3, far denser than the default steps",
+       scenes::MakeHardFastSwitching},
+      {"hard_index3", "active index-3 DAI constraint with a closed-form solution (alpha)",
+       scenes::MakeHardIndex3},
+      {"hard_long_orbit", "1e5 elements sliding on a circle: drift in constraint satisfaction",
+       scenes::MakeHardLongOrbit},
   };
   return catalog;
 }

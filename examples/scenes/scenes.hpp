@@ -40,4 +40,15 @@ Scene MakeDaiIndex2();
 Scene MakeD2();
 Scene MakeD3();
 
+// Hard cases: degenerate contacts, separated time scales, Zeno-like switching (hard.cpp).
+Scene MakeHardGrazing();
+Scene MakeHardSimultaneous();
+Scene MakeHardCorner();
+Scene MakeHardFastWall();
+Scene MakeHardStiffSet();
+Scene MakeHardZeno();
+Scene MakeHardFastSwitching();
+Scene MakeHardIndex3();
+Scene MakeHardLongOrbit();
+
 }  // namespace moreau::scenes
