@@ -14,6 +14,7 @@
 
 // The QP solver is private to the stepper; its certificates are tested here directly.
 #include "../../integrators/alpha_dai/active_set_qp.hpp"
+#include "../problems/reference_problems.hpp"
 #include "moreau/core/convergence.hpp"
 #include "moreau/scenes/catalog.hpp"
 
@@ -291,18 +292,9 @@ TEST(AlphaDaiMethodTest, StiffLinearSystemStaysBounded) {
 // ---------------------------------------------------------------------------------------------
 // Orders.
 
-// Exact solution of the Hopf normal form scene (see its description).
-Vector HopfExact(const Scene& scene, double t) {
-  const double mu = scene.parameters[static_cast<std::size_t>(scene.FindParameter("mu"))].value;
-  const double omega =
-      scene.parameters[static_cast<std::size_t>(scene.FindParameter("omega"))].value;
-  const double r0 = scene.initial_state.norm();
-  const double r = std::sqrt(mu / (1.0 + (mu / (r0 * r0) - 1.0) * std::exp(-2.0 * mu * t)));
-  return Vector{{r * std::cos(omega * t), r * std::sin(omega * t)}};
-}
-
 TEST(AlphaDaiOrderTest, UnconstrainedSmoothProblemIsSecondOrder) {
-  const Scene scene = MakeScene("hopf");
+  const testing::ReferenceProblem hopf = testing::Hopf();
+  const Scene scene = hopf.Make();
   const std::vector<double> steps = {0.02, 0.01, 0.005, 0.0025};
   for (double rho : {0.0, 0.5, 0.99}) {
     std::vector<double> errors;
@@ -314,8 +306,7 @@ TEST(AlphaDaiOrderTest, UnconstrainedSmoothProblemIsSecondOrder) {
       const AlphaDaiResult result = SimulateAlphaDai(scene, options);
       ASSERT_EQ(result.status, AlphaDaiStatus::kSuccess) << result.message;
       EXPECT_LE(result.stats.max_dynamics_residual, kDefaults.dynamics_tolerance);
-      errors.push_back(
-          (result.final_state - HopfExact(scene, scene.final_time)).lpNorm<Eigen::Infinity>());
+      errors.push_back((result.final_state - hopf.FinalState()).lpNorm<Eigen::Infinity>());
       table += "h = " + Scientific(h) + " error = " + Scientific(errors.back()) + "\n";
     }
     const OrderFit fit = FitOrder(steps, errors, 0.0);
@@ -326,14 +317,8 @@ TEST(AlphaDaiOrderTest, UnconstrainedSmoothProblemIsSecondOrder) {
 
 // dai_index2: x1' = 1, x2' = u, x3' = -x3 + u, x2 >= sin(x1) active throughout, least change.
 TEST(AlphaDaiOrderTest, Index2ActiveConstraintStateSecondAlgebraicFirstOrder) {
-  const Scene scene = MakeScene("dai_index2");
-  const double x10 = scene.initial_state[0];
-  const double x30 = scene.initial_state[2];
-  auto exact = [&](double t) {
-    const double s = x10 + t;
-    const double c0 = x30 - 0.5 * (std::cos(x10) + std::sin(x10));
-    return Vector{{s, std::sin(s), 0.5 * (std::cos(s) + std::sin(s)) + c0 * std::exp(-t)}};
-  };
+  const testing::ReferenceProblem problem = testing::DaiIndex2();
+  const Scene scene = problem.Make();
   const std::vector<double> steps = {0.1, 0.05, 0.025, 0.0125};
   for (double rho : {0.0, 0.5, 0.99}) {
     std::vector<double> state_errors, input_errors;
@@ -359,9 +344,9 @@ TEST(AlphaDaiOrderTest, Index2ActiveConstraintStateSecondAlgebraicFirstOrder) {
         const double t = result.trajectory.t[k];
         const Vector& x = result.trajectory.x[k];
         EXPECT_GE(x[1] - std::sin(x[0]), -kDefaults.constraint_tolerance) << "t = " << t;
-        state_error = std::max(state_error, (x - exact(t)).lpNorm<Eigen::Infinity>());
-        input_error =
-            std::max(input_error, std::fabs(result.trajectory.algebraic[k][0] - std::cos(x10 + t)));
+        state_error = std::max(state_error, (x - problem.solution(t)).lpNorm<Eigen::Infinity>());
+        input_error = std::max(input_error, std::fabs(result.trajectory.algebraic[k][0] -
+                                                      problem.algebraic_inputs(t)[0]));
       }
       state_errors.push_back(state_error);
       input_errors.push_back(input_error);

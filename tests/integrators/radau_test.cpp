@@ -5,22 +5,12 @@
 #include <cmath>
 #include <numbers>
 
+#include "../problems/reference_problems.hpp"
 #include "moreau/core/convergence.hpp"
 #include "moreau/scenes/catalog.hpp"
 
 namespace moreau {
 namespace {
-
-// Exact solution of the Hopf normal form scene (see its description).
-Vector HopfExact(const Scene& scene, double t) {
-  const double mu = scene.parameters[static_cast<std::size_t>(scene.FindParameter("mu"))].value;
-  const double omega =
-      scene.parameters[static_cast<std::size_t>(scene.FindParameter("omega"))].value;
-  const double r0 = scene.initial_state.norm();
-  const double theta0 = std::atan2(scene.initial_state[1], scene.initial_state[0]);
-  const double r = std::sqrt(mu / (1.0 + (mu / (r0 * r0) - 1.0) * std::exp(-2.0 * mu * t)));
-  return Vector{{r * std::cos(theta0 + omega * t), r * std::sin(theta0 + omega * t)}};
-}
 
 // Errors below this are dominated by round-off accumulated over the steps (a few hundred
 // steps times eps times |x| ~ 1); the observed order is measured above it. The Newton
@@ -46,8 +36,9 @@ class RadauOrderTest : public ::testing::TestWithParam<OrderCase> {};
 
 TEST_P(RadauOrderTest, FixedStepShowsOrderTwoSMinusOne) {
   const OrderCase& c = GetParam();
-  const Scene scene = MakeScene("hopf");
-  const Vector exact = HopfExact(scene, scene.final_time);
+  const testing::ReferenceProblem hopf = testing::Hopf();
+  const Scene scene = hopf.Make();
+  const Vector exact = hopf.FinalState();
   std::vector<double> errors;
   std::string table;
   for (double h : c.step_sizes) {

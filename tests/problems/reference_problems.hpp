@@ -17,9 +17,44 @@ struct ReferenceProblem {
   std::string scene;
   std::vector<double> switch_times;        // every switch in (t0, tf], in order
   std::function<Vector(double)> solution;  // exact x(t)
+  // Exact algebraic inputs u(t) (InputSpec::Kind::kAlgebraic, DAI scenes); empty if none.
+  std::function<Vector(double)> algebraic_inputs = {};
   Scene Make() const { return MakeScene(scene); }
   Vector FinalState() const { return solution(Make().final_time); }
 };
+
+// Hopf normal form (smooth, no switches), default parameters: r^2(t) = mu / (1 + (mu / r0^2 -
+// 1) e^{-2 mu t}), angle theta0 + omega t (the scene's description).
+inline ReferenceProblem Hopf() {
+  const Scene scene = MakeScene("hopf");
+  auto parameter = [&scene](const char* name) {
+    return scene.parameters[static_cast<std::size_t>(scene.FindParameter(name))].value;
+  };
+  const double mu = parameter("mu"), omega = parameter("omega");
+  const double r0 = scene.initial_state.norm();
+  const double theta0 = std::atan2(scene.initial_state[1], scene.initial_state[0]);
+  return {"hopf", {}, [mu, omega, r0, theta0](double t) {
+            const double r =
+                std::sqrt(mu / (1.0 + (mu / (r0 * r0) - 1.0) * std::exp(-2.0 * mu * t)));
+            return Vector{{r * std::cos(theta0 + omega * t), r * std::sin(theta0 + omega * t)}};
+          }};
+}
+
+// dai_index2: x1' = 1, x2' = u, x3' = -x3 + u with x2 >= sin(x1) active throughout (with the
+// least-change objective): x1 = x1(0) + t, x2 = sin x1, u = cos x1,
+// x3 = (cos x1 + sin x1)/2 + (x3(0) - (cos x1(0) + sin x1(0))/2) e^{-t}.
+inline ReferenceProblem DaiIndex2() {
+  const Scene scene = MakeScene("dai_index2");
+  const double x10 = scene.initial_state[0];
+  const double c0 = scene.initial_state[2] - 0.5 * (std::cos(x10) + std::sin(x10));
+  return {"dai_index2",
+          {},
+          [x10, c0](double t) {
+            const double s = x10 + t;
+            return Vector{{s, std::sin(s), 0.5 * (std::cos(s) + std::sin(s)) + c0 * std::exp(-t)}};
+          },
+          [x10](double t) { return Vector{{std::cos(x10 + t)}}; }};
+}
 
 inline ReferenceProblem S1() {
   return {"S1", {1.0}, [](double t) { return Vector{{t < 1.0 ? 2.0 - t : t}}; }};
