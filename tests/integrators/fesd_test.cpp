@@ -175,6 +175,31 @@ TEST(FesdTest, S3ContactLeavingAndFinalState) {
   for (const Vector& x : result.trajectory.x) EXPECT_GE(x[1] + 1.0, -1e-12);
 }
 
+// S4 with its fixed control: contact, sliding along the moving boundary, leaving, against the
+// derived closed form (tests/problems/reference_problems.hpp).
+TEST(FesdTest, S4ContactAndLeavingMatchClosedForm) {
+  const ReferenceProblem problem = testing::S4();
+  FesdOptions options;
+  options.stages = 3;
+  options.step_size = 0.05;
+  const FesdResult result = SimulateFesd(problem.Make(), options);
+  ExpectCertificates(result, options, "S4");
+  ASSERT_EQ(result.events.size(), 2u);
+  EXPECT_EQ(result.events[0].kind, EventKind::kEnter);
+  EXPECT_EQ(result.events[1].kind, EventKind::kLeave);
+  // Measured: switch times to 9e-16 and 4e-12, states to 1e-11; the tolerance of S3 above.
+  EXPECT_NEAR(result.events[0].t, problem.switch_times[0], 1e-9);
+  EXPECT_NEAR(result.events[1].t, problem.switch_times[1], 1e-9);
+  EXPECT_LE((result.final_state - problem.FinalState()).lpNorm<Eigen::Infinity>(), 1e-9);
+  // On the boundary between the switches, x1 = -cos(x2 - t) (the closed form's phase).
+  for (std::size_t k = 0; k < result.trajectory.size(); ++k) {
+    const double t = result.trajectory.t[k];
+    if (t <= problem.switch_times[0] || t >= problem.switch_times[1]) continue;
+    EXPECT_LE((result.trajectory.x[k] - problem.solution(t)).lpNorm<Eigen::Infinity>(), 1e-9)
+        << "t = " << t;
+  }
+}
+
 struct SwitchingCase {
   ReferenceProblem problem;
   SwitchingForm form;

@@ -51,8 +51,8 @@ TEST_P(IdaReferenceTest, FinalStateAndEventTimesMatchClosedForm) {
 
 INSTANTIATE_TEST_SUITE_P(ReferenceProblems, IdaReferenceTest,
                          ::testing::Values(testing::S1(), testing::S2(), testing::S3(),
-                                           testing::F1(), testing::F2a(), testing::F2b(),
-                                           testing::F2c(), testing::F3()),
+                                           testing::S4(), testing::F1(), testing::F2a(),
+                                           testing::F2b(), testing::F2c(), testing::F3()),
                          [](const auto& test_info) { return test_info.param.scene; });
 
 TEST(IdaTest, ThermostatSwitchesAndFinalStateMatchClosedForm) {

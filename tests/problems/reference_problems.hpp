@@ -90,6 +90,32 @@ inline ReferenceProblem S3() {
           }};
 }
 
+// S4 with its fixed control u = 2 and x0 = (1/2, 2) (derived; the IDA and FESD tests check it).
+// Free until cos(x2 - t) = -1/2: t1 = 2 pi/3 - 2. In contact, c = x1 + cos(phi) = 0 with
+// phi = x2 - t: c' = 0 gives lambda = sin phi / (1 + sin^2 phi) and phi' = 1 / (1 + sin^2 phi),
+// so t - t1 = 3/2 (phi - phi1) - (sin 2 phi - sin 2 phi1) / 4 with phi1 = 2 pi/3, and
+// x = (-cos phi, phi + t). lambda reaches 0 at phi = pi: the state leaves at
+// t2 = t1 + pi/2 - sqrt(3)/8 from (1, pi + t2) and moves freely, x = (1, pi + t2 + 2 (t - t2)).
+inline ReferenceProblem S4() {
+  const double pi = std::numbers::pi;
+  const double t1 = 2 * pi / 3 - 2, phi1 = 2 * pi / 3;
+  const double t2 = t1 + pi / 2 - std::sqrt(3.0) / 8;
+  return {"S4", {t1, t2}, [=](double t) {
+            if (t <= t1) return Vector{{0.5, 2 + 2 * t}};
+            if (t >= t2) return Vector{{1.0, pi + t2 + 2 * (t - t2)}};
+            // Newton on the monotone relation t(phi) (slope 1 + sin^2 phi in [1, 2]).
+            double phi = phi1 + (t - t1) / 1.5;
+            for (int k = 0; k < 50; ++k) {
+              const double residual =
+                  1.5 * (phi - phi1) - (std::sin(2 * phi) - std::sin(2 * phi1)) / 4 - (t - t1);
+              const double step = residual / (1 + std::sin(phi) * std::sin(phi));
+              phi -= step;
+              if (std::fabs(step) <= 1e-16 * phi) break;
+            }
+            return Vector{{-std::cos(phi), phi + t}};
+          }};
+}
+
 inline ReferenceProblem F1() {
   const double omega = 2 * std::numbers::pi;
   return {"F1", {1.0}, [omega](double t) {
