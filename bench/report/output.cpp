@@ -319,12 +319,20 @@ std::string WriteReport(const std::vector<Series>& series, const std::vector<Sce
                         const std::string& link_base) {
   fs::create_directories(directory);
   WriteCsv(series, directory + "/measurements.csv");
+  // Scenes without any successful run (every selected integrator refused it, e.g.
+  // --integrators fesd on dai_index2) get no image: gnuplot cannot draw an empty plot.
+  std::vector<const SceneCase*> plotted;
   for (const SceneCase& scene : scenes) {
     std::vector<const Series*> of_scene;
+    bool any_success = false;
     for (const Series& s : series) {
-      if (s.scene == &scene && s.refused.empty()) of_scene.push_back(&s);
+      if (s.scene != &scene || !s.refused.empty()) continue;
+      of_scene.push_back(&s);
+      for (const Measurement& p : s.points) any_success |= p.output.success;
     }
+    if (!any_success) continue;
     WritePlot(scene, of_scene, directory);
+    plotted.push_back(&scene);
   }
   const std::string link = fs::relative(fs::absolute(directory), fs::absolute(link_base)).string();
   std::ostringstream md;
@@ -372,8 +380,8 @@ std::string WriteReport(const std::vector<Series>& series, const std::vector<Sce
           "`deterministic` column of the CSV).\n";
   }
   md << "\nNot run (the integrator refuses the scene):\n\n" << RefusalMarkdown(series) << "\n";
-  for (const SceneCase& scene : scenes) {
-    md << "![" << scene.name << "](" << link << "/" << scene.name << ".png)\n";
+  for (const SceneCase* scene : plotted) {
+    md << "![" << scene->name << "](" << link << "/" << scene->name << ".png)\n";
   }
   const std::string text = md.str();
   std::ofstream out(directory + "/report.md");
