@@ -44,8 +44,9 @@ Fingerprint RunDefault(const Scene& scene) {
 
 // Bitwise equality of two vectors (distinguishes -0.0 from 0.0 and compares NaN payloads).
 bool BitEqual(const Vector& a, const Vector& b) {
-  return a.size() == b.size() &&
-         std::memcmp(a.data(), b.data(), sizeof(double) * static_cast<std::size_t>(a.size())) == 0;
+  if (a.size() != b.size()) return false;
+  if (a.size() == 0) return true;  // empty vectors may have null data (memcmp needs pointers)
+  return std::memcmp(a.data(), b.data(), sizeof(double) * static_cast<std::size_t>(a.size())) == 0;
 }
 bool BitEqual(double a, double b) { return std::memcmp(&a, &b, sizeof(double)) == 0; }
 
