@@ -428,6 +428,7 @@ class FesdRun {
     Vector y = y_start;
     Vector v_end = v_;
     Violation violation;
+    std::string trial_failure;  // why the trial pass suspected a switch, if not by signs
     for (int e = 0; e < *remaining; ++e) {
       GroupSetup setup;
       setup.y_start = y;
@@ -441,6 +442,9 @@ class FesdRun {
       CountNewton(solved);
       if (!solved.converged()) {
         // A fixed-status element that does not converge: look for a switch inside it.
+        trial_failure = "element " + std::to_string(e) +
+                        " with the current statuses did not converge (" + ToString(solved.status) +
+                        ": " + solved.message + "), so a switch was assumed";
         violation = {true, e, 0.5};
         break;
       }
@@ -539,7 +543,8 @@ class FesdRun {
       return true;
     }
     Fail(FesdStatus::kEventLocationFailure, y_start[system_.clock_index()],
-         "a switch was detected within the next " + std::to_string(rest) +
+         (trial_failure.empty() ? std::string("a switch was detected") : trial_failure) +
+             " within the next " + std::to_string(rest) +
              " but no group of equal elements ending on it converged in " +
              std::to_string(options_.max_event_retries) + " retries");
     return true;

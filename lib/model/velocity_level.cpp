@@ -223,7 +223,23 @@ class VelocitySystem final : public MixedComplementaritySystem {
   VelocitySystem(const LoweredSystem& system, const Vector& y, std::vector<PairRole> roles)
       : system_(system), y_(y), roles_(std::move(roles)) {
     for (PairRole role : roles_) complementary_ += role == PairRole::kComplementary ? 1 : 0;
+    // Row scales from the data: the rows are affine in v, and their values at v = 0 (the
+    // free velocities grad c . f + c_t) set the size of their terms. Stiff dynamics (|f| ~
+    // 1e5) make an absolute tolerance of 1e-12 unreachable in double precision; relative to
+    // the data it is (hard-case suite: stiff set).
+    system_.EvaluateVelocityLevel(y_, Vector::Zero(num_unknowns()), roles_, Derivatives::kNone,
+                                  &values_);
+    scale_.resize(num_unknowns());
+    for (int i = 0; i < num_equations(); ++i) {
+      scale_[i] = 1.0 / (1.0 + std::fabs(values_.equations[i]));
+    }
+    for (int k = 0; k < complementary_; ++k) {
+      const double size = std::max(std::fabs(values_.a[k]), std::fabs(values_.b[k]));
+      scale_[num_equations() + k] = 1.0 / (1.0 + size);
+    }
+    if (!scale_.allFinite()) scale_.setOnes();  // a non-finite model is reported by Evaluate
   }
+  void ResidualScale(const Vector& /*v*/, Vector* scale) override { *scale = scale_; }
   int num_unknowns() const override { return system_.num_algebraic(); }
   int num_equations() const override { return system_.num_algebraic() - complementary_; }
   int num_pairs() const override { return complementary_; }
@@ -249,6 +265,7 @@ class VelocitySystem final : public MixedComplementaritySystem {
   std::vector<PairRole> roles_;
   int complementary_ = 0;
   VelocityLevelEvaluation evaluation_, values_;
+  Vector scale_;
 };
 
 SemismoothNewtonOptions VelocityNewtonOptions() {

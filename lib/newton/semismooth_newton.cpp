@@ -276,6 +276,23 @@ SemismoothNewtonResult SemismoothNewton::Solve(MixedComplementaritySystem& syste
       use_gradient =
           !direction.allFinite() ||
           slope > -options_.descent_rho * std::pow(direction.norm(), options_.descent_power);
+      // The descent test compares the slope with |d|^p in absolute terms: unknowns of very
+      // different sizes (multipliers of 1e3 to 1e6 beside states of order 1, as for stiff
+      // dynamics in a moving set) give a long Newton step with a small slope even on a linear
+      // system. A descent direction whose full step decreases the merit sufficiently is kept.
+      if (use_gradient && direction.allFinite() && slope < 0.0) {
+        trial_w.noalias() = current.w + direction;
+        evaluate(trial_w, true, options_.ncp_function, &trial);
+        if (trial.valid && (trial.merit <= current.merit + options_.armijo * slope ||
+                            trial.norm <= options_.tolerance)) {
+          previous_norm = current.norm;
+          last_step_full = true;
+          std::swap(current, trial);
+          history.push_back(current.norm);
+          merits.push_back(current.merit);
+          continue;
+        }
+      }
     }
     if (use_gradient) {
       ++stats.gradient_steps;

@@ -74,7 +74,10 @@ struct SemismoothNewtonOptions {
   double backtrack = 0.5;
   /// Smallest step length before kLineSearchFailed, in (0, 1).
   double min_step = 1e-10;
-  /// Sufficient-descent test grad theta . d <= -descent_rho ||d||^descent_power.
+  /// Sufficient-descent test grad theta . d <= -descent_rho ||d||^descent_power; a Newton
+  /// direction that fails it but descends (slope < 0) and whose full step satisfies the
+  /// Armijo condition is still taken (the test is not scale invariant: large multipliers
+  /// beside small states make a good Newton step fail it).
   double descent_rho = 1e-10;
   double descent_power = 2.1;
   /// kStagnated when the merit decreased by less than a relative 1e-3 over this many
