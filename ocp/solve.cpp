@@ -133,6 +133,44 @@ class ShootingTnlp final : public Ipopt::TNLP {
   double final_objective_ = 0.0;
 };
 
+// IPOPT's name of its return status (IpReturnCodes_inc.h).
+std::string IpoptStatusName(Ipopt::ApplicationReturnStatus status) {
+  switch (status) {
+    case Ipopt::Solve_Succeeded:
+      return "Solve_Succeeded";
+    case Ipopt::Solved_To_Acceptable_Level:
+      return "Solved_To_Acceptable_Level";
+    case Ipopt::Infeasible_Problem_Detected:
+      return "Infeasible_Problem_Detected";
+    case Ipopt::Search_Direction_Becomes_Too_Small:
+      return "Search_Direction_Becomes_Too_Small";
+    case Ipopt::Diverging_Iterates:
+      return "Diverging_Iterates";
+    case Ipopt::User_Requested_Stop:
+      return "User_Requested_Stop";
+    case Ipopt::Feasible_Point_Found:
+      return "Feasible_Point_Found";
+    case Ipopt::Maximum_Iterations_Exceeded:
+      return "Maximum_Iterations_Exceeded";
+    case Ipopt::Restoration_Failed:
+      return "Restoration_Failed";
+    case Ipopt::Error_In_Step_Computation:
+      return "Error_In_Step_Computation";
+    case Ipopt::Maximum_CpuTime_Exceeded:
+      return "Maximum_CpuTime_Exceeded";
+    case Ipopt::Not_Enough_Degrees_Of_Freedom:
+      return "Not_Enough_Degrees_Of_Freedom";
+    case Ipopt::Invalid_Problem_Definition:
+      return "Invalid_Problem_Definition";
+    case Ipopt::Invalid_Option:
+      return "Invalid_Option";
+    case Ipopt::Invalid_Number_Detected:
+      return "Invalid_Number_Detected";
+    default:
+      return "IPOPT return status " + std::to_string(static_cast<int>(status));
+  }
+}
+
 OcpStatus StatusOf(Ipopt::ApplicationReturnStatus status) {
   switch (status) {
     case Ipopt::Solve_Succeeded:
@@ -261,7 +299,7 @@ OcpResult SolveOcp(const OcpProblem& problem, const OcpOptions& options) {
   const Ipopt::ApplicationReturnStatus status = app->OptimizeTNLP(holder);
   result.status = StatusOf(status);
   std::ostringstream s;
-  s << "IPOPT return status " << static_cast<int>(status);
+  s << "IPOPT: " << IpoptStatusName(status);
   if (!tnlp->last_failure().empty() && result.status == OcpStatus::kSolverFailure) {
     s << "; last evaluation failure: " << tnlp->last_failure();
   }
