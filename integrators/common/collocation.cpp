@@ -160,6 +160,16 @@ Vector CollocationStages::InitialGuess(const ConstVectorRef& y0, double h, const
         }
       }
     }
+  } else if (z_previous.size() == nz_) {
+    // No previous step: the clock's increments are still known (its rate does not depend on
+    // the state), and switching functions of time alone (sin(omega t) with omega h >> 1)
+    // make Newton from a frozen clock guess stagnate.
+    PointEvaluation start;
+    system_->Evaluate(y0, z_previous, Derivatives::kNone, &start);
+    const int clock = system_->clock_index();
+    if (std::isfinite(start.F[clock])) {
+      for (int i = 0; i < s_; ++i) w[state_offset(i) + clock] = h * tableau_.c[i] * start.F[clock];
+    }
   }
   for (int i = 0; i < s_; ++i) {
     guess_y_ = y0 + w.segment(state_offset(i), ny_);

@@ -87,10 +87,11 @@ TEST(CliValidationMatrix, BadInputExitsWith2AndNamesTheProblem) {
 // A numerical failure is exit code 1 with the status, time and reason, not a crash.
 TEST(CliValidationMatrix, NumericalFailureIsAStatus) {
   const Outcome outcome =
-      RunCli("run hard_fast_wall --integrator timestepping --quiet --no-plot --out " +
+      RunCli("run hard_fast_switching --integrator fesd --quiet --no-plot --out " +
              std::string(::testing::TempDir()) + "moreau_cli_validation");
   EXPECT_EQ(outcome.exit_code, 1) << outcome.output;
-  EXPECT_NE(outcome.output.find("newton_failure at t = 0"), std::string::npos) << outcome.output;
+  EXPECT_NE(outcome.output.find("event_location_failure at t = 0.001"), std::string::npos)
+      << outcome.output;
 }
 
 }  // namespace
