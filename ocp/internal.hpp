@@ -14,9 +14,9 @@ namespace moreau::ocp_internal {
 //  - a control input "speed" (the speed of time) when the final time is free.
 struct AugmentedScene {
   Scene scene;
-  int num_states = 0;      // n_x of the problem's scene
-  int cost_state = -1;     // index of q in x, or -1
-  int speed_input = -1;    // index of the speed in u, or -1
+  int num_states = 0;          // n_x of the problem's scene
+  int cost_state = -1;         // index of q in x, or -1
+  int speed_input = -1;        // index of the speed in u, or -1
   std::vector<int> decisions;  // decision inputs: the problem's controls, then the speed
 };
 

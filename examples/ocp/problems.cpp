@@ -23,13 +23,15 @@ OcpProblem StewartAnitescu() {
   problem.intervals = 4;
   problem.free_initial_states = {{0, -5.0, 5.0}};
   problem.running_cost = MakeSmoothFunction(
-      "stewart_anitescu.L", 1,
-      [](const auto& x, const auto&, const auto&, const auto&, auto& out) { out[0] = x[0] * x[0]; });
-  problem.terminal_cost = MakeSmoothFunction(
-      "stewart_anitescu.Phi", 1, [](const auto& x, const auto&, const auto&, const auto&, auto& out) {
-        const auto d = x[0] - 5.0 / 3.0;
-        out[0] = d * d;
+      "stewart_anitescu.L", 1, [](const auto& x, const auto&, const auto&, const auto&, auto& out) {
+        out[0] = x[0] * x[0];
       });
+  problem.terminal_cost =
+      MakeSmoothFunction("stewart_anitescu.Phi", 1,
+                         [](const auto& x, const auto&, const auto&, const auto&, auto& out) {
+                           const auto d = x[0] - 5.0 / 3.0;
+                           out[0] = d * d;
+                         });
   return problem;
 }
 
@@ -58,8 +60,9 @@ OcpProblem WaveRider() {
   problem.controls = {0};
   problem.intervals = 10;
   problem.running_cost = MakeSmoothFunction(
-      "wave_rider.L", 1,
-      [](const auto&, const auto& u_, const auto&, const auto&, auto& out) { out[0] = u_[0] * u_[0]; });
+      "wave_rider.L", 1, [](const auto&, const auto& u_, const auto&, const auto&, auto& out) {
+        out[0] = u_[0] * u_[0];
+      });
   problem.terminal_equalities = MakeSmoothFunction(
       "wave_rider.g", 2, [](const auto& x, const auto&, const auto&, const auto&, auto& out) {
         out[0] = x[0] - 1.0;

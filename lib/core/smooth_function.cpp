@@ -73,8 +73,8 @@ void TypedFunction::Jacobian(const ConstVectorRef& x, const ConstVectorRef& u, d
 }
 
 void TypedFunction::WeightedHessian(const ConstVectorRef& x, const ConstVectorRef& u, double t,
-                                    const ConstVectorRef& p, Wrt wrt,
-                                    const ConstVectorRef& weights, Matrix* hess) {
+                                    const ConstVectorRef& p, Wrt wrt, const ConstVectorRef& weights,
+                                    Matrix* hess) {
   const int nx = static_cast<int>(x.size()), nu = static_cast<int>(u.size()),
             np = static_cast<int>(p.size());
   const int columns = wrt.Columns(nx, nu, np);
@@ -182,9 +182,7 @@ SmoothFunction MakeZeroFunction(std::string name, int num_outputs) {
   return SmoothFunction(std::make_unique<internal::ZeroFunction>(std::move(name), num_outputs));
 }
 
-internal::TypedFunction* SmoothFunction::typed() const {
-  return impl_ ? impl_->typed() : nullptr;
-}
+internal::TypedFunction* SmoothFunction::typed() const { return impl_ ? impl_->typed() : nullptr; }
 
 namespace {
 const std::string kEmptyName = "<none>";

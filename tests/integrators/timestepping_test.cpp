@@ -213,7 +213,8 @@ TEST(TimeSteppingTest, SensitivitiesMatchCentralDifferences) {
       const Eigen::Index np = result.sensitivities.cols() - ny -
                               nu * static_cast<Eigen::Index>(result.segment_starts.size());
       for (Eigen::Index j = 0; j < result.sensitivities.cols(); ++j) {
-        if (j >= ny && j < ny + np) continue;  // parameters: no per-scene override here; same blocks as u
+        if (j >= ny && j < ny + np)
+          continue;  // parameters: no per-scene override here; same blocks as u
         TimeSteppingOptions plus = options, minus = options;
         plus.sensitivities = minus.sensitivities = false;
         Scene scene_plus = scene, scene_minus = scene;

@@ -195,10 +195,10 @@ class TypedFunction : public SmoothFunction::Concept {
   // out[0..num_outputs()) = g(x, u, t, p) in the scalar type; `out` is zeroed by the caller.
   virtual void Call(const double* x, int nx, const double* u, int nu, const double& t,
                     const double* p, int np, double* out) = 0;
-  virtual void Call(const Dual1* x, int nx, const Dual1* u, int nu, const Dual1& t,
-                    const Dual1* p, int np, Dual1* out) = 0;
-  virtual void Call(const Dual2* x, int nx, const Dual2* u, int nu, const Dual2& t,
-                    const Dual2* p, int np, Dual2* out) = 0;
+  virtual void Call(const Dual1* x, int nx, const Dual1* u, int nu, const Dual1& t, const Dual1* p,
+                    int np, Dual1* out) = 0;
+  virtual void Call(const Dual2* x, int nx, const Dual2* u, int nu, const Dual2& t, const Dual2* p,
+                    int np, Dual2* out) = 0;
 
  protected:
   std::string name_;
