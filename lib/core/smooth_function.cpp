@@ -114,24 +114,14 @@ void TypedFunction::WeightedHessian(const ConstVectorRef& x, const ConstVectorRe
 namespace {
 
 // The outputs of several typed functions one after the other.
-class StackedFunction final : public TypedFunction {
+class StackedFunction final : public TypedFunctionFor<StackedFunction> {
+  friend TypedFunctionFor<StackedFunction>;
+
  public:
   StackedFunction(std::string name, std::vector<SmoothFunction> parts, int num_outputs)
-      : TypedFunction(std::move(name), num_outputs), parts_(std::move(parts)) {}
+      : TypedFunctionFor(std::move(name), num_outputs), parts_(std::move(parts)) {}
   std::unique_ptr<SmoothFunction::Concept> Clone() const override {
     return std::make_unique<StackedFunction>(name_, parts_, num_outputs_);
-  }
-  void Call(const double* x, int nx, const double* u, int nu, const double& t, const double* p,
-            int np, double* out) override {
-    Invoke(x, nx, u, nu, t, p, np, out);
-  }
-  void Call(const Dual1* x, int nx, const Dual1* u, int nu, const Dual1& t, const Dual1* p, int np,
-            Dual1* out) override {
-    Invoke(x, nx, u, nu, t, p, np, out);
-  }
-  void Call(const Dual2* x, int nx, const Dual2* u, int nu, const Dual2& t, const Dual2* p, int np,
-            Dual2* out) override {
-    Invoke(x, nx, u, nu, t, p, np, out);
   }
 
  private:
@@ -146,18 +136,18 @@ class StackedFunction final : public TypedFunction {
 };
 
 // No outputs to write: all zero.
-class ZeroFunction final : public TypedFunction {
+class ZeroFunction final : public TypedFunctionFor<ZeroFunction> {
+  friend TypedFunctionFor<ZeroFunction>;
+
  public:
-  using TypedFunction::TypedFunction;
+  using TypedFunctionFor::TypedFunctionFor;
   std::unique_ptr<SmoothFunction::Concept> Clone() const override {
     return std::make_unique<ZeroFunction>(name_, num_outputs_);
   }
-  void Call(const double*, int, const double*, int, const double&, const double*, int,
-            double*) override {}
-  void Call(const Dual1*, int, const Dual1*, int, const Dual1&, const Dual1*, int,
-            Dual1*) override {}
-  void Call(const Dual2*, int, const Dual2*, int, const Dual2&, const Dual2*, int,
-            Dual2*) override {}
+
+ private:
+  template <class T>
+  void Invoke(const T*, int, const T*, int, const T&, const T*, int, T*) {}
 };
 
 }  // namespace

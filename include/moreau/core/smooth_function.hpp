@@ -219,33 +219,46 @@ class TypedFunction : public SmoothFunction::Concept {
   Space<Dual2> space2_;
 };
 
-// Implementation of SmoothFunction for a generic lambda F.
-template <class F>
-class AutoDiffFunction final : public TypedFunction {
+// A TypedFunction whose three Call overloads forward to one template
+// Derived::Invoke<T>(x, nx, u, nu, t, p, np, out) (declare TypedFunctionFor<Derived> a friend
+// if Invoke is private).
+template <class Derived>
+class TypedFunctionFor : public TypedFunction {
  public:
-  AutoDiffFunction(std::string name, int num_outputs, F f)
-      : TypedFunction(std::move(name), num_outputs), f_(std::move(f)) {}
-  std::unique_ptr<SmoothFunction::Concept> Clone() const override {
-    return std::make_unique<AutoDiffFunction>(name_, num_outputs_, f_);
-  }
+  using TypedFunction::TypedFunction;
   void Call(const double* x, int nx, const double* u, int nu, const double& t, const double* p,
-            int np, double* out) override {
-    Invoke(x, nx, u, nu, t, p, np, out);
+            int np, double* out) final {
+    static_cast<Derived*>(this)->Invoke(x, nx, u, nu, t, p, np, out);
   }
   void Call(const Dual1* x, int nx, const Dual1* u, int nu, const Dual1& t, const Dual1* p, int np,
-            Dual1* out) override {
-    Invoke(x, nx, u, nu, t, p, np, out);
+            Dual1* out) final {
+    static_cast<Derived*>(this)->Invoke(x, nx, u, nu, t, p, np, out);
   }
   void Call(const Dual2* x, int nx, const Dual2* u, int nu, const Dual2& t, const Dual2* p, int np,
-            Dual2* out) override {
-    Invoke(x, nx, u, nu, t, p, np, out);
+            Dual2* out) final {
+    static_cast<Derived*>(this)->Invoke(x, nx, u, nu, t, p, np, out);
+  }
+};
+
+// Implementation of SmoothFunction for a generic lambda F.
+template <class F>
+class AutoDiffFunction final : public TypedFunctionFor<AutoDiffFunction<F>> {
+  using Base = TypedFunctionFor<AutoDiffFunction<F>>;
+  friend Base;
+
+ public:
+  AutoDiffFunction(std::string name, int num_outputs, F f)
+      : Base(std::move(name), num_outputs), f_(std::move(f)) {}
+  std::unique_ptr<SmoothFunction::Concept> Clone() const override {
+    return std::make_unique<AutoDiffFunction>(this->name_, this->num_outputs_, f_);
   }
 
  private:
   template <class T>
   void Invoke(const T* x, int nx, const T* u, int nu, const T& t, const T* p, int np, T* out) {
-    ArgVector<T> xv(x, nx, "x", &name_), uv(u, nu, "u", &name_), pv(p, np, "p", &name_);
-    OutVector<T> ov(out, num_outputs_, &name_);
+    ArgVector<T> xv(x, nx, "x", &this->name_), uv(u, nu, "u", &this->name_),
+        pv(p, np, "p", &this->name_);
+    OutVector<T> ov(out, this->num_outputs_, &this->name_);
     f_(xv, uv, t, pv, ov);
   }
   F f_;
