@@ -2,29 +2,16 @@
 // (zero, negative, NaN, infinite, out of range, unknown), infeasible initial states and
 // unknown names exit with code 2 and a message naming the problem.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
 #include <cstdio>
 #include <string>
 
+#include "../tools/run_cli.hpp"
+
 namespace {
 
-struct Outcome {
-  int exit_code = -1;
-  std::string output;  // stdout and stderr
-};
-
-Outcome RunCli(const std::string& arguments) {
-  const std::string command = std::string(MOREAU_CLI_PATH) + " " + arguments + " 2>&1";
-  Outcome outcome;
-  FILE* pipe = popen(command.c_str(), "r");
-  if (pipe == nullptr) return outcome;
-  char buffer[512];
-  while (fgets(buffer, sizeof buffer, pipe) != nullptr) outcome.output += buffer;
-  const int status = pclose(pipe);
-  outcome.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return outcome;
-}
+using Outcome = moreau::testing::CliOutcome;
+using moreau::testing::RunCli;
 
 struct Case {
   const char* arguments;

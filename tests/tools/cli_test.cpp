@@ -1,6 +1,5 @@
 // Runs the `moreau` executable and checks exit codes, messages and output files.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
 #include <cstdio>
 #include <filesystem>
@@ -8,24 +7,12 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "run_cli.hpp"
+
 namespace {
 
-struct Outcome {
-  int exit_code = -1;
-  std::string output;  // stdout and stderr
-};
-
-Outcome RunCli(const std::string& arguments) {
-  const std::string command = std::string(MOREAU_CLI_PATH) + " " + arguments + " 2>&1";
-  Outcome outcome;
-  FILE* pipe = popen(command.c_str(), "r");
-  if (pipe == nullptr) return outcome;
-  char buffer[512];
-  while (fgets(buffer, sizeof buffer, pipe) != nullptr) outcome.output += buffer;
-  const int status = pclose(pipe);
-  outcome.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return outcome;
-}
+using Outcome = moreau::testing::CliOutcome;
+using moreau::testing::RunCli;
 
 void ExpectUsageError(const std::string& arguments, const std::string& fragment) {
   const Outcome outcome = RunCli(arguments);
