@@ -42,6 +42,19 @@ void RequireOnly(const RunSettings& settings, const std::set<std::string>& used)
   }
 }
 
+// The fields every integrator's result has: status (success when it equals `success`),
+// message, final time and state, trajectory; events where the result has them.
+template <class Result, class Status>
+void CopyOutcome(const Result& result, Status success, RunReport* report) {
+  report->status = ToString(result.status);
+  report->success = result.status == success;
+  report->message = result.message;
+  report->final_time = result.final_time;
+  report->final_state = result.final_state;
+  report->trajectory = result.trajectory;
+  if constexpr (requires { result.events; }) report->events = result.events;
+}
+
 RunReport RunRadau(const Scene& scene, const RunSettings& settings,
                    const ProgressCallback& progress) {
   std::set<std::string> used{"stages", "h", "adaptive", "linear-solver"};
@@ -66,12 +79,7 @@ RunReport RunRadau(const Scene& scene, const RunSettings& settings,
     report.options["rtol"] = options.relative_tolerance;
     report.options["atol"] = options.absolute_tolerance;
   }
-  report.status = ToString(result.status);
-  report.success = result.status == RadauStatus::kSuccess;
-  report.message = result.message;
-  report.final_time = result.final_time;
-  report.final_state = result.final_state;
-  report.trajectory = result.trajectory;
+  CopyOutcome(result, RadauStatus::kSuccess, &report);
   const RadauStats& s = result.stats;
   report.stats = {{"num_steps", s.num_steps},
                   {"num_rejected_steps", s.num_rejected_steps},
@@ -102,13 +110,7 @@ RunReport RunTimeStepping(const Scene& scene, const RunSettings& settings,
                     {"step_size", options.step_size},
                     {"switching_form", settings.switching_form},
                     {"newton_tolerance", options.newton.tolerance}};
-  report.status = ToString(result.status);
-  report.success = result.status == TimeSteppingStatus::kSuccess;
-  report.message = result.message;
-  report.final_time = result.final_time;
-  report.final_state = result.final_state;
-  report.trajectory = result.trajectory;
-  report.events = result.events;
+  CopyOutcome(result, TimeSteppingStatus::kSuccess, &report);
   const TimeSteppingStats& s = result.stats;
   report.stats = {{"num_steps", s.num_steps},
                   {"num_newton_iterations", s.num_newton_iterations},
@@ -143,13 +145,7 @@ RunReport RunFesd(const Scene& scene, const RunSettings& settings,
                     {"finite_elements", options.finite_elements},
                     {"switching_form", settings.switching_form},
                     {"newton_tolerance", options.newton.tolerance}};
-  report.status = ToString(result.status);
-  report.success = result.status == FesdStatus::kSuccess;
-  report.message = result.message;
-  report.final_time = result.final_time;
-  report.final_state = result.final_state;
-  report.trajectory = result.trajectory;
-  report.events = result.events;
+  CopyOutcome(result, FesdStatus::kSuccess, &report);
   report.numerical_trajectory = result.numerical_trajectory;
   report.relays = result.relays;
   if (settings.numerical_time) {
@@ -205,13 +201,7 @@ RunReport RunIda(const Scene& scene, const RunSettings& settings,
                     {"drift_rate", options.drift_rate},
                     {"switching_form", settings.switching_form},
                     {"linear_solver", settings.linear_solver}};
-  report.status = ToString(result.status);
-  report.success = result.status == IdaStatus::kSuccess;
-  report.message = result.message;
-  report.final_time = result.final_time;
-  report.final_state = result.final_state;
-  report.trajectory = result.trajectory;
-  report.events = result.events;
+  CopyOutcome(result, IdaStatus::kSuccess, &report);
   report.relays = result.relays;
   const IdaStats& s = result.stats;
   report.stats = {{"num_steps", s.num_steps},
@@ -253,13 +243,7 @@ RunReport RunAlpha(const Scene& scene, const RunSettings& settings,
       {"max_retries", options.max_retries},
       {"max_sqp_iterations", options.max_sqp_iterations},
       {"objective", ToString(options.objective)}};
-  report.status = ToString(result.status);
-  report.success = result.status == AlphaDaiStatus::kSuccess;
-  report.message = result.message;
-  report.final_time = result.final_time;
-  report.final_state = result.final_state;
-  report.trajectory = result.trajectory;
-  report.events = result.events;
+  CopyOutcome(result, AlphaDaiStatus::kSuccess, &report);
   const AlphaDaiStats& s = result.stats;
   report.stats = {
       {"num_steps", s.num_steps},
