@@ -51,61 +51,50 @@ inline double Seconds(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
-inline Outcome RunFesd(const Scene& scene, const FesdOptions& options) {
-  const auto start = std::chrono::steady_clock::now();
-  const FesdResult result = SimulateFesd(scene, options);
+// The fields shared by every integrator's result, timed from `start`.
+template <class Result, class Status>
+Outcome CommonOutcome(const char* integrator, const Result& result, Status success, long steps,
+                      std::chrono::steady_clock::time_point start) {
   Outcome outcome;
-  outcome.integrator = "fesd";
-  outcome.success = result.status == FesdStatus::kSuccess;
+  outcome.integrator = integrator;
+  outcome.success = result.status == success;
   outcome.status = ToString(result.status);
   outcome.message = result.message;
   outcome.final_time = result.final_time;
   outcome.final_state = result.final_state;
   outcome.trajectory = result.trajectory;
   outcome.events = result.events;
+  outcome.steps = steps;
+  outcome.seconds = Seconds(start);
+  return outcome;
+}
+
+inline Outcome RunFesd(const Scene& scene, const FesdOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  const FesdResult result = SimulateFesd(scene, options);
+  Outcome outcome =
+      CommonOutcome("fesd", result, FesdStatus::kSuccess, result.stats.num_elements, start);
   outcome.certificate =
       std::max(result.stats.max_complementarity, result.stats.max_cross_complementarity);
-  outcome.steps = result.stats.num_elements;
-  outcome.seconds = Seconds(start);
   return outcome;
 }
 
 inline Outcome RunTimeStepping(const Scene& scene, const TimeSteppingOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   const TimeSteppingResult result = SimulateTimeStepping(scene, options);
-  Outcome outcome;
-  outcome.integrator = "timestepping";
-  outcome.success = result.status == TimeSteppingStatus::kSuccess;
-  outcome.status = ToString(result.status);
-  outcome.message = result.message;
-  outcome.final_time = result.final_time;
-  outcome.final_state = result.final_state;
-  outcome.trajectory = result.trajectory;
-  outcome.events = result.events;
+  Outcome outcome = CommonOutcome("timestepping", result, TimeSteppingStatus::kSuccess,
+                                  result.stats.num_steps, start);
   outcome.certificate = 0.0;
   for (double r : result.step_complementarity_residual) {
     outcome.certificate = std::max(outcome.certificate, r);
   }
-  outcome.steps = result.stats.num_steps;
-  outcome.seconds = Seconds(start);
   return outcome;
 }
 
 inline Outcome RunIda(const Scene& scene, const IdaOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   const IdaResult result = SimulateIda(scene, options);
-  Outcome outcome;
-  outcome.integrator = "ida";
-  outcome.success = result.status == IdaStatus::kSuccess;
-  outcome.status = ToString(result.status);
-  outcome.message = result.message;
-  outcome.final_time = result.final_time;
-  outcome.final_state = result.final_state;
-  outcome.trajectory = result.trajectory;
-  outcome.events = result.events;
-  outcome.steps = result.stats.num_steps;
-  outcome.seconds = Seconds(start);
-  return outcome;
+  return CommonOutcome("ida", result, IdaStatus::kSuccess, result.stats.num_steps, start);
 }
 
 // Per-point certificates of a trajectory (see CheckTrajectory).
