@@ -213,8 +213,6 @@ TEST(TimeSteppingTest, SensitivitiesMatchCentralDifferences) {
       const Eigen::Index np = result.sensitivities.cols() - ny -
                               nu * static_cast<Eigen::Index>(result.segment_starts.size());
       for (Eigen::Index j = 0; j < result.sensitivities.cols(); ++j) {
-        if (j >= ny && j < ny + np)
-          continue;  // parameters: no per-scene override here; same blocks as u
         TimeSteppingOptions plus = options, minus = options;
         plus.sensitivities = minus.sensitivities = false;
         Scene scene_plus = scene, scene_minus = scene;
@@ -223,6 +221,9 @@ TEST(TimeSteppingTest, SensitivitiesMatchCentralDifferences) {
           minus.initial_state = y0;
           plus.initial_state[j] += kStep;
           minus.initial_state[j] -= kStep;
+        } else if (j < ny + np) {
+          scene_plus.parameters[static_cast<std::size_t>(j - ny)].value += kStep;
+          scene_minus.parameters[static_cast<std::size_t>(j - ny)].value -= kStep;
         } else {
           const Eigen::Index segment = (j - ny - np) / nu;
           const Eigen::Index input = (j - ny - np) % nu;
