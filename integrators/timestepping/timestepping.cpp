@@ -130,19 +130,20 @@ SemismoothNewtonResult SolveBySmoothing(MixedComplementaritySystem* system, cons
 // R_u du + R_p dp) with R_w the generalized Jacobian (pair rows weighted by the NCP function's
 // derivatives at the solution, as in Newton). Returns d y_end / d(y0, p, u) (n_y rows) with
 // y_end = y0 + Z_s, or false if R_w is singular.
-bool StepTransfer(StepSystem* system, internal::CollocationStages* stages, const Vector& y0,
-                  const Vector& w, double h, NcpFunctionKind ncp, Matrix* transfer) {
+bool StepTransfer(internal::CollocationStages* stages, const Vector& y0, const Vector& w, double h,
+                  NcpFunctionKind ncp, Matrix* transfer) {
   const int ny = stages->num_states(), s = stages->stages();
-  Vector r, a, b;
-  system->Evaluate(w, true, &r, &a, &b);
+  // One evaluation with every derivative gives the pair sides and all Jacobian blocks.
   stages->Evaluate(y0, w, Derivatives::kAll);
+  Vector r(stages->equation_rows()), a(stages->pair_rows()), b(stages->pair_rows());
+  stages->Residual(h, w, r, a, b);
   Vector da(a.size()), db(b.size());
   for (Eigen::Index k = 0; k < a.size(); ++k) {
     const NcpValue phi = EvaluateNcp(ncp, a[k], b[k]);
     da[k] = phi.da;
     db[k] = phi.db;
   }
-  const int n = system->num_unknowns();
+  const int n = stages->unknowns();
   SystemMatrix jacobian;
   jacobian.Reset(n, false);
   stages->AddJacobian(h, da, db, 0, stages->equation_rows(), 0, &jacobian);
@@ -270,7 +271,7 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
       }
       const Vector& w = solved.solution;
       if (options.sensitivities) {
-        if (!StepTransfer(&step_system, &stages, y, w, h, options.newton.ncp_function, &transfer)) {
+        if (!StepTransfer(&stages, y, w, h, options.newton.ncp_function, &transfer)) {
           std::ostringstream message;
           message.precision(17);
           message << "newton_failure at t = " << grid[k]
