@@ -143,7 +143,9 @@ class ShootingNlp::Impl {
     Vector y_end;
     Matrix d_start;      // ny x ny: d y_end / d y_start
     Matrix d_decisions;  // ny x nd
-    FesdResult fesd;     // kept when recording
+    // The interval's run, kept when recording (the time-stepping discretization fills its
+    // trajectory and events in the same type).
+    FesdResult recorded;
   };
 
   Interval Simulate(int k, const Vector& y_start, const ConstVectorRef& decisions, bool derivatives,
@@ -165,26 +167,26 @@ class ShootingNlp::Impl {
     fesd.record_trajectory = record;
     Interval out;
     try {
-      out.fesd = SimulateFesd(scene, fesd);
+      out.recorded = SimulateFesd(scene, fesd);
     } catch (const std::invalid_argument& error) {
       out.message = error.what();
       return out;
     }
     ++simulations_;
-    elements_ += out.fesd.stats.num_elements;
-    if (out.fesd.status != FesdStatus::kSuccess) {
+    elements_ += out.recorded.stats.num_elements;
+    if (out.recorded.status != FesdStatus::kSuccess) {
       std::ostringstream s;
-      s << "interval " << k << ": " << out.fesd.message;
+      s << "interval " << k << ": " << out.recorded.message;
       out.message = s.str();
       return out;
     }
     out.ok = true;
-    out.y_end = out.fesd.final_lowered_state;
+    out.y_end = out.recorded.final_lowered_state;
     if (derivatives) {
-      ExtractDerivatives(out.fesd.sensitivities.lowered,
-                         static_cast<int>(out.fesd.sensitivities.segment_starts.size()), &out);
+      ExtractDerivatives(out.recorded.sensitivities.lowered,
+                         static_cast<int>(out.recorded.sensitivities.segment_starts.size()), &out);
     }
-    if (!record) out.fesd = FesdResult();
+    if (!record) out.recorded = FesdResult();
     return out;
   }
 
@@ -234,10 +236,10 @@ class ShootingNlp::Impl {
                          &out);
     }
     if (record) {
-      out.fesd.trajectory = std::move(result.trajectory);
-      out.fesd.events = std::move(result.events);
-      out.fesd.final_state = result.final_state;
-      out.fesd.final_lowered_state = out.y_end;
+      out.recorded.trajectory = std::move(result.trajectory);
+      out.recorded.events = std::move(result.events);
+      out.recorded.final_state = result.final_state;
+      out.recorded.final_lowered_state = out.y_end;
     }
     return out;
   }
@@ -428,7 +430,7 @@ class ShootingNlp::Impl {
         result->message += " (re-integration at the solution failed: " + interval.message + ")";
         break;
       }
-      const FesdResult& fesd = interval.fesd;
+      const FesdResult& fesd = interval.recorded;
       const Trajectory& piece = fesd.trajectory;
       for (std::size_t i = (k == 0 ? 0 : 1); i < piece.size(); ++i) {
         result->trajectory.Append(piece.t[i], piece.x[i].head(problem_.scene.num_states()),
