@@ -153,8 +153,11 @@ Vector RandomPoint(OcpProblem problem, const OcpOptions& options, const Derivati
     std::uniform_real_distribution<double> uniform(1.0, 3.0);
     problem.speed.initial_guess = uniform(*random);
   }
+  // The only free initial state is Stewart-Anitescu's x0: negative values put its switch
+  // (at -x0/3 in [1/6, 1]) inside the first two of the four intervals.
   for (OcpProblem::FreeInitialState& free : problem.free_initial_states) {
-    std::uniform_real_distribution<double> uniform(-3.0, -0.5);
+    std::uniform_real_distribution<double> uniform(std::max(free.lower, -3.0),
+                                                   std::min(free.upper, -0.5));
     problem.scene.initial_state[free.state] = uniform(*random);
   }
   ShootingNlp nlp(problem, options);
