@@ -143,8 +143,8 @@ Errors MeasureErrors(const SceneCase& scene, const RunOutput& output) {
   errors.switch_time = scene.switch_times.empty() ? kNaN : Hausdorff(times, exact);
   errors.algebraic =
       scene.final_algebraic_inputs.size() > 0 &&
-              output.final_algebraic_inputs.size() == scene.final_algebraic_inputs.size()
-          ? (output.final_algebraic_inputs - scene.final_algebraic_inputs).lpNorm<Eigen::Infinity>()
+              output.final_inputs.size() == scene.final_algebraic_inputs.size()
+          ? (output.final_inputs - scene.final_algebraic_inputs).lpNorm<Eigen::Infinity>()
           : kNaN;
   errors.total =
       std::isnan(errors.switch_time) ? errors.state : std::max(errors.state, errors.switch_time);
@@ -194,9 +194,9 @@ void Summarize(Series* series) {
   for (const Measurement& point : series->points) {
     if (!point.output.success || !std::isfinite(point.errors.total)) continue;
     points.push_back(&point);
-    if (point.output.steps > 0) {
-      iterations_per_step.push_back(static_cast<double>(point.output.newton_iterations) /
-                                    static_cast<double>(point.output.steps));
+    if (point.output.num_steps > 0) {
+      iterations_per_step.push_back(static_cast<double>(point.output.num_iterations) /
+                                    static_cast<double>(point.output.num_steps));
     }
   }
   series->newton_per_step = Median(iterations_per_step);

@@ -1,28 +1,11 @@
-// One adapter per integrator: options from (stages, parameter), result to RunOutput. The
-// integrators refuse scenes they cannot handle (std::invalid_argument); the report records
-// the refusal instead of guessing applicability here.
-#include "moreau/integrators/alpha_dai.hpp"
-#include "moreau/integrators/fesd.hpp"
-#include "moreau/integrators/ida.hpp"
-#include "moreau/integrators/radau.hpp"
-#include "moreau/integrators/timestepping.hpp"
+// The methods of the report: integrator settings for moreau::Simulate(), the one entry point the
+// command line and the Python module use as well. The integrators refuse scenes they cannot
+// handle (std::invalid_argument); the report records the refusal instead of guessing
+// applicability here.
 #include "report.hpp"
 
 namespace moreau::report {
 namespace {
-
-// Fields every integrator result has under the same names (Radau IIA has no events).
-template <class Result>
-RunOutput Common(const Result& result, bool success) {
-  RunOutput out;
-  out.success = success;
-  out.status = ToString(result.status);
-  out.message = result.message;
-  out.final_time = result.final_time;
-  out.final_state = result.final_state;
-  if constexpr (requires { result.events; }) out.events = result.events;
-  return out;
-}
 
 // Newton tolerance (scaled residual) of the fixed-step integrators, below their default 1e-12:
 // the report measures errors of the discretization down to 1e-12, and the solve must not be
@@ -32,59 +15,8 @@ RunOutput Common(const Result& result, bool success) {
 // round-off (1e-13) and the runs take up to 16% more Newton iterations (S4, s = 3).
 constexpr double kNewtonTolerance = 1e-14;
 
-RunOutput RunFesd(const Scene& scene, int stages, double h) {
-  FesdOptions options;
-  options.stages = stages;
-  options.step_size = h;
-  options.newton.tolerance = kNewtonTolerance;
-  options.record_trajectory = false;
-  const FesdResult result = SimulateFesd(scene, options);
-  RunOutput out = Common(result, result.status == FesdStatus::kSuccess);
-  out.steps = result.stats.num_elements;
-  out.newton_iterations = result.stats.num_newton_iterations;
-  return out;
-}
-
-RunOutput RunTimeStepping(const Scene& scene, int stages, double h) {
-  TimeSteppingOptions options;
-  options.stages = stages;
-  options.step_size = h;
-  options.newton.tolerance = kNewtonTolerance;
-  options.record_trajectory = false;
-  const TimeSteppingResult result = SimulateTimeStepping(scene, options);
-  RunOutput out = Common(result, result.status == TimeSteppingStatus::kSuccess);
-  out.steps = result.stats.num_steps;
-  out.newton_iterations = result.stats.num_newton_iterations;
-  return out;
-}
-
-// Absolute tolerance relative to rtol: the scenes' states are of order 1 to 20.
+// Absolute tolerance relative to rtol (IDA): the scenes' states are of order 1 to 20.
 constexpr double kAbsoluteToRelative = 1e-2;
-
-RunOutput RunIda(const Scene& scene, double rtol) {
-  IdaOptions options;
-  options.relative_tolerance = rtol;
-  options.absolute_tolerance = kAbsoluteToRelative * rtol;
-  options.record_steps = false;
-  const IdaResult result = SimulateIda(scene, options);
-  RunOutput out = Common(result, result.status == IdaStatus::kSuccess);
-  out.steps = result.stats.num_steps;
-  out.newton_iterations = result.stats.num_nonlinear_iterations;
-  return out;
-}
-
-RunOutput RunRadau(const Scene& scene, int stages, double h) {
-  RadauOptions options;
-  options.stages = stages;
-  options.step_size = h;
-  options.newton_tolerance = kNewtonTolerance;
-  options.record_trajectory = false;
-  const RadauResult result = SimulateRadau(scene, options);
-  RunOutput out = Common(result, result.status == RadauStatus::kSuccess);
-  out.steps = result.stats.num_steps;
-  out.newton_iterations = result.stats.num_newton_iterations;
-  return out;
-}
 
 // rho = 0.5 (the default). Least-change objective: the DAI scene's closed form assumes the
 // constraint stays active, which is what the least-change solution does (with the reference
@@ -92,31 +24,35 @@ RunOutput RunRadau(const Scene& scene, int stages, double h) {
 // inputs (hopf) the objective plays no role.
 constexpr double kAlphaRho = 0.5;
 
-RunOutput RunAlpha(const Scene& scene, double h) {
-  AlphaDaiOptions options;
-  options.rho = kAlphaRho;
-  options.max_step_size = h;
-  options.objective = AlphaDaiObjective::kLeastChange;
-  options.record_trajectory = false;
-  const AlphaDaiResult result = SimulateAlphaDai(scene, options);
-  RunOutput out = Common(result, result.status == AlphaDaiStatus::kSuccess);
-  out.final_algebraic_inputs = result.final_inputs;
-  out.steps = result.stats.num_steps;
-  out.newton_iterations = result.stats.num_sqp_iterations;
-  return out;
-}
-
-Method StageMethod(const std::string& integrator, const std::string& name, int stages,
-                   OrderTheory theory, RunOutput (*run)(const Scene&, int, double)) {
+// A method that runs `integrator` with `fixed` options and the swept parameter as option
+// `swept` ("h" or "rtol"); `derived` adds options that follow the parameter.
+Method MakeMethod(const std::string& integrator, std::string label, int stages, OrderTheory theory,
+                  SimulationSettings settings, std::string swept, bool tolerance_driven = false) {
+  const IntegratorSpec& spec = FindIntegrator(integrator);
+  settings.integrator = integrator;
+  if (stages > 0) settings.options["stages"] = static_cast<long>(stages);
   Method method;
   method.integrator = integrator;
   method.stages = stages;
-  method.label = name + " s=" + std::to_string(stages);
+  method.label = std::move(label);
   method.theory = theory;
-  method.step_unit = "step";
-  method.iteration_unit = "Newton";
-  method.run = [run, stages](const Scene& scene, double h) { return run(scene, stages, h); };
+  method.tolerance_driven = tolerance_driven;
+  method.step_unit = spec.step_unit;
+  method.iteration_unit = spec.iteration_unit;
+  method.run = [settings, swept, tolerance_driven](const Scene& scene, double parameter) {
+    SimulationSettings run = settings;
+    run.options[swept] = parameter;
+    if (tolerance_driven) run.options["atol"] = kAbsoluteToRelative * parameter;
+    return Simulate(scene, run);
+  };
   return method;
+}
+
+// Fixed-step settings: Newton to kNewtonTolerance, only the final point recorded.
+SimulationSettings FixedStep() {
+  SimulationSettings settings;
+  settings.options = {{"newton_tol", kNewtonTolerance}, {"record_trajectory", false}};
+  return settings;
 }
 
 }  // namespace
@@ -124,34 +60,24 @@ Method StageMethod(const std::string& integrator, const std::string& name, int s
 std::vector<Method> Methods() {
   std::vector<Method> methods;
   for (int s = 1; s <= 4; ++s) {
-    Method m = StageMethod("fesd", "FESD", s, OrderTheory::kRadau, RunFesd);
-    m.step_unit = "element";
-    methods.push_back(m);
+    methods.push_back(MakeMethod("fesd", "FESD s=" + std::to_string(s), s, OrderTheory::kRadau,
+                                 FixedStep(), "h"));
   }
   for (int s = 1; s <= 3; ++s) {
-    methods.push_back(StageMethod("timestepping", "time-stepping", s,
-                                  OrderTheory::kFirstOrderAcrossSwitches, RunTimeStepping));
+    methods.push_back(MakeMethod("timestepping", "time-stepping s=" + std::to_string(s), s,
+                                 OrderTheory::kFirstOrderAcrossSwitches, FixedStep(), "h"));
   }
   for (int s = 1; s <= 4; ++s) {
-    methods.push_back(StageMethod("radau", "Radau IIA", s, OrderTheory::kRadau, RunRadau));
+    methods.push_back(MakeMethod("radau", "Radau IIA s=" + std::to_string(s), s,
+                                 OrderTheory::kRadau, FixedStep(), "h"));
   }
-  Method ida;
-  ida.integrator = "ida";
-  ida.label = "IDA";
-  ida.tolerance_driven = true;
-  ida.theory = OrderTheory::kNone;
-  ida.step_unit = "step";
-  ida.iteration_unit = "nonlinear";
-  ida.run = RunIda;
-  methods.push_back(ida);
-  Method alpha;
-  alpha.integrator = "alpha";
-  alpha.label = "alpha rho=0.5";
-  alpha.theory = OrderTheory::kSecondOrder;
-  alpha.step_unit = "step";
-  alpha.iteration_unit = "SQP";
-  alpha.run = RunAlpha;
-  methods.push_back(alpha);
+  SimulationSettings ida;
+  ida.options = {{"record_steps", false}};
+  methods.push_back(MakeMethod("ida", "IDA", 0, OrderTheory::kNone, ida, "rtol", true));
+  SimulationSettings alpha;
+  alpha.options = {
+      {"rho", kAlphaRho}, {"objective", std::string("least-change")}, {"record_trajectory", false}};
+  methods.push_back(MakeMethod("alpha", "alpha rho=0.5", 0, OrderTheory::kSecondOrder, alpha, "h"));
   return methods;
 }
 

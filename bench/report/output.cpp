@@ -88,8 +88,8 @@ void WriteCsv(const std::vector<Series>& series, const std::string& path) {
           << Sci(p.errors.algebraic, 6) << "," << p.errors.events_found << ","
           << s.scene->switch_times.size() << "," << Sci(p.timing.median_seconds, 6) << ","
           << Sci(p.timing.min_seconds, 6) << "," << p.timing.repeats << ","
-          << (p.timing.deterministic ? "yes" : "no") << "," << p.output.steps << ","
-          << s.method->step_unit << "," << p.output.newton_iterations << ","
+          << (p.timing.deterministic ? "yes" : "no") << "," << p.output.num_steps << ","
+          << s.method->step_unit << "," << p.output.num_iterations << ","
           << s.method->iteration_unit << "," << CsvField(p.output.message) << "\n";
     }
   }

@@ -7,7 +7,7 @@
 //
 // Layers of this program, one file each:
 //   cases.cpp    the scenes, their known answers, floors and grids
-//   methods.cpp  one adapter per integrator: options from (stages, parameter), result to RunOutput
+//   methods.cpp  the integrator settings of each method (run through moreau::Simulate)
 //   measure.cpp  the error of a run against its scene's answer (one place), CPU timing, fits
 //   output.cpp   CSV, gnuplot images, markdown table, README section
 
@@ -18,23 +18,14 @@
 
 #include "moreau/core/convergence.hpp"
 #include "moreau/core/types.hpp"
+#include "moreau/integrators/simulate.hpp"
 #include "moreau/model/events.hpp"
 #include "moreau/model/scene.hpp"
 
 namespace moreau::report {
 
-// What one run produced, whatever the integrator.
-struct RunOutput {
-  bool success = false;
-  std::string status;  // the integrator's status (ToString)
-  std::string message;
-  double final_time = 0.0;
-  Vector final_state;             // scene states at final_time
-  Vector final_algebraic_inputs;  // alpha-method: the algebraic inputs u(T); else empty
-  std::vector<Event> events;
-  long steps = 0;              // see Method::step_unit
-  long newton_iterations = 0;  // see Method::iteration_unit
-};
+// What one run produced, whatever the integrator: the library's common result.
+using RunOutput = SimulationResult;
 
 // What theory predicts for the error at T and the switch times of a method.
 enum class OrderTheory {
@@ -52,8 +43,8 @@ struct Method {
   std::string label;       // e.g. "FESD s=3"
   bool tolerance_driven = false;
   OrderTheory theory = OrderTheory::kNone;
-  std::string step_unit;       // what RunOutput::steps counts ("element", "step")
-  std::string iteration_unit;  // what RunOutput::newton_iterations counts ("Newton", "SQP")
+  std::string step_unit;       // what RunOutput::num_steps counts ("element", "step")
+  std::string iteration_unit;  // what RunOutput::num_iterations counts ("Newton", "SQP")
   std::function<RunOutput(const Scene&, double parameter)> run;
 };
 

@@ -1,4 +1,5 @@
 #include "moreau/integrators/alpha_dai.hpp"
+#include "moreau/integrators/simulate.hpp"
 
 #include <Eigen/Dense>
 #include <algorithm>
@@ -928,17 +929,8 @@ class AlphaDaiRun {
 AlphaDaiResult SimulateAlphaDai(const Scene& scene, const AlphaDaiOptions& options,
                                 const ProgressCallback& progress) {
   options.Validate();
-  RequireArgument(scene.time_scale_input < 0,
-                  "the alpha-method DAI stepper does not support the speed of time of scene '",
-                  scene.name, "' (time_scale_input); use the fesd integrator");
+  RequireSupportedEffects(scene, "alpha");
   ValidateScene(scene);
-  for (const Effect& effect : scene.effects) {
-    if (std::holds_alternative<PathConstraints>(effect)) continue;
-    ThrowInvalidArgument("the alpha-method DAI stepper does not support the ", EffectKind(effect),
-                         " '", EffectName(effect), "' of scene '", scene.name,
-                         "'; it handles path constraints (use the timestepping or fesd "
-                         "integrators for moving sets and switching surfaces)");
-  }
   AlphaDaiRun run(scene, options, progress);
   return run.Run();
 }

@@ -1,4 +1,5 @@
 #include "moreau/integrators/fesd.hpp"
+#include "moreau/integrators/simulate.hpp"
 
 #include <Eigen/Dense>
 #include <algorithm>
@@ -1016,11 +1017,7 @@ class FesdRun {
 FesdResult SimulateFesd(const Scene& scene, const FesdOptions& options,
                         const ProgressCallback& progress) {
   options.Validate();
-  for (const Effect& effect : scene.effects) {
-    if (!std::holds_alternative<PathConstraints>(effect)) continue;
-    ThrowInvalidArgument("the FESD integrator does not support the ", EffectKind(effect), " '",
-                         EffectName(effect), "' of scene '", scene.name, "'");
-  }
+  RequireSupportedEffects(scene, "fesd");
   FesdRun run(scene, options, progress);
   return run.Run();
 }

@@ -2,6 +2,7 @@
 // docs/ida.md). SUNDIALS types stay in this file.
 
 #include "moreau/integrators/ida.hpp"
+#include "moreau/integrators/simulate.hpp"
 
 #include <ida/ida.h>
 #include <ida/ida_ls.h>
@@ -731,15 +732,7 @@ class IdaRun {
 IdaResult SimulateIda(const Scene& scene, const IdaOptions& options,
                       const ProgressCallback& progress) {
   options.Validate();
-  RequireArgument(scene.time_scale_input < 0,
-                  "the IDA integrator does not support the speed of time of scene '", scene.name,
-                  "' (time_scale_input); use the fesd integrator");
-  for (const Effect& effect : scene.effects) {
-    if (!std::holds_alternative<PathConstraints>(effect)) continue;
-    ThrowInvalidArgument("the IDA integrator does not support the ", EffectKind(effect), " '",
-                         EffectName(effect), "' of scene '", scene.name,
-                         "' (use the alpha-method stepper)");
-  }
+  RequireSupportedEffects(scene, "ida");
   IdaRun run(scene, options, progress);
   return run.Run();
 }

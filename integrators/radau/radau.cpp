@@ -1,4 +1,5 @@
 #include "moreau/integrators/radau.hpp"
+#include "moreau/integrators/simulate.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -380,14 +381,7 @@ class RadauRun {
 RadauResult SimulateRadau(const Scene& scene, const RadauOptions& options,
                           const ProgressCallback& progress) {
   options.Validate();
-  RequireArgument(scene.time_scale_input < 0,
-                  "the smooth Radau IIA integrator does not support the speed of time of scene '",
-                  scene.name, "' (time_scale_input); use the fesd integrator");
-  for (const Effect& effect : scene.effects) {
-    ThrowInvalidArgument("the smooth Radau IIA integrator does not support the ",
-                         EffectKind(effect), " '", EffectName(effect), "' of scene '", scene.name,
-                         "'; use the timestepping, fesd, ida or alpha integrators");
-  }
+  RequireSupportedEffects(scene, "radau");
   RadauRun run(scene, options, progress);
   return run.Run();
 }

@@ -1,4 +1,5 @@
 #include "moreau/integrators/timestepping.hpp"
+#include "moreau/integrators/simulate.hpp"
 
 #include <Eigen/LU>
 #include <chrono>
@@ -175,17 +176,7 @@ std::vector<bool> PairStatuses(const PointEvaluation& e) {
 TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOptions& options,
                                         const ProgressCallback& progress) {
   options.Validate();
-  RequireArgument(scene.time_scale_input < 0,
-                  "the time-stepping integrator does not support the speed of time of scene '",
-                  scene.name, "' (time_scale_input); use the fesd integrator");
-  for (const Effect& effect : scene.effects) {
-    if (std::holds_alternative<MovingSet>(effect) ||
-        std::holds_alternative<SwitchingSurfaces>(effect)) {
-      continue;
-    }
-    ThrowInvalidArgument("the time-stepping integrator does not support the ", EffectKind(effect),
-                         " '", EffectName(effect), "' of scene '", scene.name, "'");
-  }
+  RequireSupportedEffects(scene, "timestepping");
   const auto start = std::chrono::steady_clock::now();
   LoweringOptions lowering;
   lowering.switching_form = options.switching_form;

@@ -24,7 +24,8 @@ TEST(CliValidationMatrix, BadInputExitsWith2AndNamesTheProblem) {
       {"run hard_grazing --nope 1", "--nope"},
       {"run ''", "unknown scene ''"},
       {"run hard_grazing --integrator alpha2", "unknown integrator 'alpha2'"},
-      {"run hard_zeno --switching nope", "unknown switching form 'nope'"},
+      {"run hard_zeno --switching nope",
+       "bad value 'nope' for option 'switching': expected one of stewart, heaviside"},
       {"run hard_grazing --set x0.x3=1", "has no value named 'x0.x3'"},
       // NaN / infinite values
       {"run hard_grazing --set omega=nan", "must be finite"},
@@ -50,7 +51,7 @@ TEST(CliValidationMatrix, BadInputExitsWith2AndNamesTheProblem) {
       {"run hard_index3 --errtol 0", "error_tolerance (ERRTOL) must be positive"},
       // options that do not apply, effects an integrator cannot handle
       {"run hard_grazing --integrator ida --fe 2",
-       "option --fe does not apply to integrator 'ida'"},
+       "option 'fe' does not apply to integrator 'ida'"},
       {"run hard_zeno --integrator radau", "does not support the switching surfaces 'twisting'"},
       {"run hard_index3 --integrator fesd", "path constraints 'floor'"},
       // infeasible initial states (x0 outside C(t0)); FESD's handling is being changed on

@@ -17,11 +17,12 @@
 #include <iostream>
 #include <sstream>
 
+#include "integrator_flags.hpp"
 #include "moreau/core/error.hpp"
+#include "moreau/integrators/simulate.hpp"
 #include "moreau/scenes/catalog.hpp"
 #include "ocp_command.hpp"
 #include "output.hpp"
-#include "run_report.hpp"
 
 namespace {
 
@@ -100,8 +101,13 @@ void List() {
     std::printf("  %-12s %s\n", definition.name.c_str(), definition.summary.c_str());
   }
   std::printf("\nintegrators (moreau run --integrator NAME):\n");
-  for (const auto& [name, description] : tool::IntegratorNames()) {
-    std::printf("  %-12s %s\n", name.c_str(), description.c_str());
+  std::printf("  %-12s %s\n", "auto",
+              "radau without effects, alpha for path constraints, fesd otherwise");
+  for (const moreau::IntegratorSpec& spec : moreau::Integrators()) {
+    std::string effects;
+    for (const std::string& kind : spec.supported_effects) effects += "; " + kind + "s";
+    std::printf("  %-12s %s%s\n", spec.name.c_str(), spec.description.c_str(),
+                effects.empty() ? "; no effects" : effects.c_str());
   }
   std::printf("\noptimal control problems (moreau ocp PROBLEM):\n");
   tool::ListOcpProblems();
@@ -157,21 +163,23 @@ void Show(const std::string& name) {
   }
 }
 
-int Run(Scene scene, const tool::RunSettings& settings, const std::string& out_directory, bool plot,
-        bool quiet) {
+int Run(Scene scene, const moreau::SimulationSettings& settings, bool numerical_time,
+        const std::string& out_directory, bool plot, bool quiet) {
   ProgressPrinter progress(scene.initial_time, scene.final_time, !quiet);
-  const tool::RunReport report =
-      tool::RunScene(scene, settings, [&progress](double t) { progress.Update(t); });
+  const moreau::SimulationResult report =
+      moreau::Simulate(scene, settings, [&progress](double t) { progress.Update(t); });
   progress.Finish();
+  const moreau::Trajectory& trajectory =
+      numerical_time ? report.numerical_trajectory : report.trajectory;
 
   std::filesystem::create_directories(out_directory);
-  tool::WriteTrajectoryCsv(report.trajectory, out_directory + "/trajectory.csv");
+  tool::WriteTrajectoryCsv(trajectory, out_directory + "/trajectory.csv");
   std::string extra_files;
   if (report.stage_trajectory.size() > 0) {
     tool::WriteTrajectoryCsv(report.stage_trajectory, out_directory + "/stages.csv");
     extra_files += ", " + out_directory + "/stages.csv";
   }
-  if (!report.element_columns.empty()) {
+  if (!report.record_columns.empty()) {
     tool::WriteElementsCsv(report, out_directory + "/elements.csv");
     extra_files += ", " + out_directory + "/elements.csv";
   }
@@ -179,12 +187,13 @@ int Run(Scene scene, const tool::RunSettings& settings, const std::string& out_d
     tool::WriteRelaysCsv(report, out_directory + "/relays.csv");
     extra_files += ", " + out_directory + "/relays.csv";
   }
-  if (report.numerical_trajectory.size() > 0 && !settings.numerical_time) {
+  if (report.numerical_trajectory.size() > 0 && !numerical_time) {
     tool::WriteTrajectoryCsv(report.numerical_trajectory, out_directory + "/numerical.csv");
     extra_files += ", " + out_directory + "/numerical.csv";
   }
   tool::WriteSummaryJson(report, out_directory + "/summary.json");
-  const std::string image = plot ? tool::WritePlot(report, out_directory) : "";
+  const std::string image =
+      plot ? tool::WritePlot(report, trajectory, out_directory, numerical_time) : "";
 
   const auto& names = report.state_names;
   std::ostringstream state;
@@ -194,7 +203,8 @@ int Run(Scene scene, const tool::RunSettings& settings, const std::string& out_d
   }
   if (names.size() > 8) state << ", ... (" << names.size() << " states, all in summary.json)";
   std::printf("scene       %s\n", report.scene.c_str());
-  std::printf("integrator  %s %s\n", report.integrator.c_str(), report.options.dump().c_str());
+  std::printf("integrator  %s %s\n", report.integrator.c_str(),
+              tool::OptionsJson(report).dump().c_str());
   std::printf("status      %s%s%s\n", report.status.c_str(), report.message.empty() ? "" : ": ",
               report.message.c_str());
   std::printf("t_final     %.17g\n", report.final_time);
@@ -214,8 +224,9 @@ int Run(Scene scene, const tool::RunSettings& settings, const std::string& out_d
     std::printf("relay       %s: w = %d at t0, %zu jumps, w = %d at t_final\n", relay.relay.c_str(),
                 relay.initial_value, relay.jump_times.size(), relay.FinalValue());
   }
-  std::printf("steps       %ld\n", report.num_steps);
-  std::printf("newton      %ld iterations\n", report.num_newton_iterations);
+  const moreau::IntegratorSpec& spec = moreau::FindIntegrator(report.integrator);
+  std::printf("steps       %ld (%ss)\n", report.num_steps, spec.step_unit.c_str());
+  std::printf("iterations  %ld (%s)\n", report.num_iterations, spec.iteration_unit.c_str());
   std::printf("cpu time    %.3g s\n", report.cpu_seconds);
   std::printf("stats       %s\n", report.stats_summary.c_str());
   std::printf("output      %s/trajectory.csv, %s/summary.json%s%s%s\n", out_directory.c_str(),
@@ -241,49 +252,27 @@ int main(int argc, char** argv) {
 
   auto* run = app.add_subcommand("run", "simulate a scene");
   std::string run_scene = moreau::DefaultSceneName();
-  tool::RunSettings settings;
+  moreau::SimulationSettings settings;
   std::vector<std::string> assignments;
   std::string out_directory;
   double tf = 0.0;
-  bool no_plot = false, quiet = false;
+  bool no_plot = false, quiet = false, numerical_time = false;
   run->add_option("scene", run_scene, "scene name (default: " + run_scene + ")");
   run->add_option("--integrator", settings.integrator,
                   "integrator (see `moreau list`; default auto: radau without effects, alpha "
                   "for path constraints, fesd otherwise)");
-  auto* stages = run->add_option("--stages", settings.stages, "Radau IIA stages s (order 2s-1)");
-  auto* h = run->add_option("--h", settings.step_size, "step size (initial step if adaptive)");
   auto* tf_option = run->add_option("--tf", tf, "final time (overrides the scene's horizon)");
   run->add_option("--set", assignments, "override a scene value: name=value (repeatable)");
   run->add_option("--out", out_directory, "output directory (default: out/<scene>)");
-  auto* adaptive = run->add_flag("--adaptive", settings.adaptive,
-                                 "step-size control by the embedded error estimate (radau)");
-  auto* rtol = run->add_option("--rtol", settings.relative_tolerance, "relative tolerance");
-  auto* atol = run->add_option("--atol", settings.absolute_tolerance, "absolute tolerance");
-  auto* linear =
-      run->add_option("--linear-solver", settings.linear_solver, "auto, dense or sparse");
-  auto* switching = run->add_option("--switching", settings.switching_form,
-                                    "lowering of switching surfaces: stewart or heaviside");
-  auto* fe = run->add_option("--fe", settings.finite_elements,
-                             "finite elements per integration step (fesd)");
-  auto* numerical_time = run->add_flag(
-      "--numerical-time", settings.numerical_time,
-      "hysteresis scenes (fesd): trajectory.csv in numerical time tau, with the relay "
-      "memories and the clock (default: physical time)");
-  auto* rho = run->add_option("--rho", settings.rho,
-                              "alpha-method regularization parameter rho in [0, 1) (alpha)");
-  auto* errtol = run->add_option("--errtol", settings.error_tolerance,
-                                 "ERRTOL of the alpha-method step-size rule (alpha; default: "
-                                 "fixed steps --h)");
-  auto* rank_tol = run->add_option("--rank-tol", settings.rank_tolerance,
-                                   "singular-value cut-off of the scaled basis matrix (alpha)");
-  auto* max_retries = run->add_option("--max-retries", settings.max_retries,
-                                      "MAXTRY: retries per step, rho reductions included (alpha)");
-  auto* objective = run->add_option(
-      "--objective", settings.objective,
-      "local objective of the alpha-method SQP: reference, least-change or feasibility");
+  run->add_flag("--numerical-time", numerical_time,
+                "hysteresis scenes (fesd): trajectory.csv in numerical time tau, with the relay "
+                "memories and the clock (default: physical time)");
   run->add_flag("--no-plot", no_plot, "do not write trajectory.png");
   run->add_flag("--quiet", quiet, "no progress output");
-
+  // Every integrator option, declared once in the library (moreau::Integrators()), becomes a
+  // flag --name (dashes for underscores); its value goes to moreau::Simulate() as text, which
+  // parses and validates it for the chosen integrator.
+  tool::IntegratorFlags integrator_flags(run);
   auto* ocp = app.add_subcommand("ocp", "solve an optimal control problem (see `moreau list`)");
   tool::OcpCommandSettings ocp_settings;
   bool single_shooting = false, no_verify = false;
@@ -336,30 +325,18 @@ int main(int argc, char** argv) {
       ocp_settings.quiet = quiet;
       return tool::RunOcpCommand(ocp_settings);
     }
-    const std::vector<std::pair<CLI::Option*, std::string>> tracked = {
-        {stages, "stages"},
-        {h, "h"},
-        {adaptive, "adaptive"},
-        {rtol, "rtol"},
-        {atol, "atol"},
-        {linear, "linear-solver"},
-        {switching, "switching"},
-        {fe, "fe"},
-        {numerical_time, "numerical-time"},
-        {rho, "rho"},
-        {errtol, "errtol"},
-        {rank_tol, "rank-tol"},
-        {max_retries, "max-retries"},
-        {objective, "objective"}};
-    for (const auto& [option, name] : tracked) {
-      if (option->count() > 0) settings.given.insert(name);
-    }
-    settings.step_size_given = h->count() > 0;
-    settings.stages_given = stages->count() > 0;
+    settings.options = integrator_flags.Given();
     Scene scene = moreau::MakeScene(run_scene);
     ApplySettings(&scene, assignments, tf, tf_option->count() > 0);
     if (out_directory.empty()) out_directory = "out/" + scene.name;
-    return Run(std::move(scene), settings, out_directory, !no_plot, quiet);
+    // The command line records FESD's stage points (stages.csv) unless told otherwise.
+    if (settings.integrator == "auto") settings.integrator = moreau::AutomaticIntegrator(scene);
+    if (settings.integrator == "fesd") settings.options.try_emplace("record_stages", true);
+    moreau::RequireArgument(
+        !numerical_time || (settings.integrator == "fesd" && scene.Has<moreau::HysteresisRelay>()),
+        "--numerical-time applies to scenes with hysteresis relays simulated by the fesd "
+        "integrator (elsewhere numerical and physical time coincide)");
+    return Run(std::move(scene), settings, numerical_time, out_directory, !no_plot, quiet);
   } catch (const std::invalid_argument& error) {
     std::fprintf(stderr, "moreau: error: %s\n", error.what());
     return 2;

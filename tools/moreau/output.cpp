@@ -1,6 +1,7 @@
 #include "output.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -38,7 +39,7 @@ void WriteTrajectoryCsv(const Trajectory& trajectory, const std::string& path) {
   }
 }
 
-void WriteRelaysCsv(const RunReport& report, const std::string& path) {
+void WriteRelaysCsv(const SimulationResult& report, const std::string& path) {
   std::ofstream out(path);
   RequireArgument(out.good(), "cannot write '", path, "'");
   out << "t";
@@ -64,24 +65,54 @@ void WriteRelaysCsv(const RunReport& report, const std::string& path) {
   out << "\n";
 }
 
-void WriteElementsCsv(const RunReport& report, const std::string& path) {
+void WriteElementsCsv(const SimulationResult& report, const std::string& path) {
   std::ofstream out(path);
   RequireArgument(out.good(), "cannot write '", path, "'");
-  for (std::size_t i = 0; i < report.element_columns.size(); ++i) {
-    out << (i ? "," : "") << report.element_columns[i];
+  for (std::size_t i = 0; i < report.record_columns.size(); ++i) {
+    out << (i ? "," : "") << report.record_columns[i];
   }
   out << "\n" << std::setprecision(17);
-  for (const std::vector<double>& row : report.element_rows) {
+  for (const std::vector<double>& row : report.records) {
     for (std::size_t i = 0; i < row.size(); ++i) out << (i ? "," : "") << row[i];
     out << "\n";
   }
 }
 
-nlohmann::json SummaryJson(const RunReport& report) {
+namespace {
+nlohmann::json NumberJson(double value) {
+  if (std::isfinite(value)) return value;
+  return std::isnan(value) ? "nan" : (value > 0 ? "inf" : "-inf");
+}
+}  // namespace
+
+nlohmann::json SettingJson(const SettingValue& value) {
+  return std::visit(
+      [](const auto& v) -> nlohmann::json {
+        using T = std::decay_t<decltype(v)>;
+        if constexpr (std::is_same_v<T, double>) {
+          return NumberJson(v);
+        } else if constexpr (std::is_same_v<T, std::vector<double>>) {
+          nlohmann::json list = nlohmann::json::array();
+          for (double x : v) list.push_back(NumberJson(x));
+          return list;
+        } else {
+          return v;
+        }
+      },
+      value);
+}
+
+nlohmann::json OptionsJson(const SimulationResult& result) {
+  nlohmann::json options = nlohmann::json::object();
+  for (const auto& [name, value] : result.options) options[name] = SettingJson(value);
+  return options;
+}
+
+nlohmann::json SummaryJson(const SimulationResult& report) {
   nlohmann::json summary;
   summary["scene"] = report.scene;
   summary["integrator"] = report.integrator;
-  summary["options"] = report.options;
+  summary["options"] = OptionsJson(report);
   summary["status"] = report.status;
   summary["message"] = report.message;
   summary["t_final"] = report.final_time;
@@ -112,39 +143,48 @@ nlohmann::json SummaryJson(const RunReport& report) {
     }
     summary["relays"] = relays;
   }
-  summary["stats"] = report.stats;
+  // Counters as integers, the rest as numbers (declared in the integrator's StatSpec).
+  const IntegratorSpec& spec = FindIntegrator(report.integrator);
+  nlohmann::json stats = nlohmann::json::object();
+  for (std::size_t i = 0; i < report.stats.size(); ++i) {
+    const auto& [name, value] = report.stats[i];
+    const bool count = i < spec.stats.size() && spec.stats[i].count;
+    stats[name] = count ? nlohmann::json(static_cast<long>(value)) : NumberJson(value);
+  }
+  summary["stats"] = stats;
   return summary;
 }
 
-void WriteSummaryJson(const RunReport& report, const std::string& path) {
+void WriteSummaryJson(const SimulationResult& report, const std::string& path) {
   std::ofstream out(path);
   RequireArgument(out.good(), "cannot write '", path, "'");
   out << std::setw(2) << SummaryJson(report) << "\n";
 }
 
-std::string WritePlot(const RunReport& report, const std::string& directory) {
+std::string WritePlot(const SimulationResult& report, const Trajectory& trajectory,
+                      const std::string& directory, bool numerical_time_axis) {
   const std::string csv = directory + "/trajectory.csv";
   const std::string image = directory + "/trajectory.png";
   const std::string script_path = directory + "/plot.gp";
   std::ofstream script(script_path);
   RequireArgument(script.good(), "cannot write '", script_path, "'");
-  const auto& names = report.trajectory.state_names;
+  const auto& names = trajectory.state_names;
   const std::size_t shown = std::min<std::size_t>(names.size(), kMaxPlottedStates);
   script << "set terminal pngcairo size 1000,600 noenhanced\n"
          << "set output '" << image << "'\n"
          << "set datafile separator ','\n"
          << "set key outside right top\n"
          << "set grid\n"
-         << "set xlabel '" << (report.numerical_time_axis ? "numerical time tau" : "t") << "'\n"
+         << "set xlabel '" << (numerical_time_axis ? "numerical time tau" : "t") << "'\n"
          << "set title '" << report.scene << " (" << report.integrator << ", " << report.status
          << (shown < names.size() ? ", first " + std::to_string(shown) + " states" : "") << ")'\n";
-  for (const Event& event : report.numerical_time_axis ? std::vector<Event>() : report.events) {
+  for (const Event& event : numerical_time_axis ? std::vector<Event>() : report.events) {
     script << "set arrow from " << std::setprecision(17) << event.t << ", graph 0 to " << event.t
            << ", graph 1 nohead dashtype 2 lc rgb '#999999'\n";
   }
   // Relay memories (physical time) in a lower panel.
-  const bool relays = !report.relays.empty() && !report.numerical_time_axis &&
-                      fs::exists(directory + "/relays.csv");
+  const bool relays =
+      !report.relays.empty() && !numerical_time_axis && fs::exists(directory + "/relays.csv");
   if (relays) {
     script << "set multiplot layout 2,1\nset lmargin at screen 0.08\nset rmargin at screen 0.8\n";
   }

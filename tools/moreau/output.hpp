@@ -4,7 +4,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-#include "run_report.hpp"
+#include "moreau/integrators/simulate.hpp"
 
 namespace moreau::tool {
 
@@ -16,18 +16,24 @@ inline constexpr std::size_t kMaxPlottedStates = 8;
 void WriteTrajectoryCsv(const Trajectory& trajectory, const std::string& path);
 // relays.csv: columns t and one per relay; a row at t0 with the initial memories, one per
 // jump time with the memories after it, and one at t_final (a step plot of w(t)).
-void WriteRelaysCsv(const RunReport& report, const std::string& path);
+void WriteRelaysCsv(const SimulationResult& report, const std::string& path);
 // elements.csv: one row per finite element (integrators with elements only).
-void WriteElementsCsv(const RunReport& report, const std::string& path);
+void WriteElementsCsv(const SimulationResult& report, const std::string& path);
+// SettingValue and statistics as JSON (non-finite numbers as "inf", "-inf" or "nan").
+nlohmann::json SettingJson(const SettingValue& value);
+// The options used, name -> value, in declaration order.
+nlohmann::json OptionsJson(const SimulationResult& result);
 // The summary object: scene, integrator, options, status, message, t_final, x_final
 // (state name -> value), events (t, kind, what, detail), stats, and for scenes with
 // hysteresis relays "relays" (name, initial, jumps [{t, w}], final).
-nlohmann::json SummaryJson(const RunReport& report);
-void WriteSummaryJson(const RunReport& report, const std::string& path);
+nlohmann::json SummaryJson(const SimulationResult& report);
+void WriteSummaryJson(const SimulationResult& report, const std::string& path);
 // Draws trajectory.png with gnuplot from DIR/trajectory.csv (events as dashed lines), with
 // the relay memories from DIR/relays.csv in a second panel when the scene has relays.
 // Returns the image path, or "" if gnuplot is unavailable or failed.
-std::string WritePlot(const RunReport& report, const std::string& directory);
+// With numerical_time_axis the trajectory is the numerical-time one (no event lines).
+std::string WritePlot(const SimulationResult& report, const Trajectory& trajectory,
+                      const std::string& directory, bool numerical_time_axis);
 // Runs gnuplot on a script that writes `image`; true if the image exists afterwards.
 bool RunGnuplot(const std::string& script_path, const std::string& image);
 

@@ -1,0 +1,148 @@
+#pragma once
+/// @file
+/// One way to run a simulation: `Simulate(scene, settings)` with any integrator.
+///
+/// Every integrator is declared once (IntegratorSpec): its name, which effects it supports,
+/// its options (name, meaning, type, default, allowed choices) and its statistics (name,
+/// meaning). The declarations bind to the integrator's own XxxOptions and XxxStats structs, so
+/// defaults stay at their declarations and XxxOptions::Validate() stays the validation; the
+/// command-line flags, summary.json, the work-precision report and the Python keywords are all
+/// generated from these declarations, and every front end goes through Simulate(). Refusals of
+/// unsupported effects are derived from the declared support (RequireSupportedEffects), both
+/// here and inside each SimulateXxx function.
+///
+/// Option names are lower-case with underscores (`rank_tol`); the command line spells them
+/// with dashes (`--rank-tol`). Values arrive as SettingValue: a number, an integer, a bool, a
+/// name or a list of numbers; strings are parsed (the command line passes every value as
+/// text), integers are accepted where reals are expected, and anything else is refused with a
+/// message naming the option, what it expects and what it got.
+
+#include <map>
+#include <optional>
+#include <string>
+#include <utility>
+#include <variant>
+#include <vector>
+
+#include "moreau/core/types.hpp"
+#include "moreau/integrators/simulation.hpp"
+#include "moreau/model/events.hpp"
+#include "moreau/model/scene.hpp"
+
+namespace moreau {
+
+/// A setting as given by a front end.
+using SettingValue = std::variant<bool, long, double, std::string, std::vector<double>>;
+
+/// "true", "3", "0.5", "stewart", "[0.1, 0.2]": for messages and summary.json-like output.
+std::string FormatSetting(const SettingValue& value);
+
+/// One option of an integrator, declared once.
+struct OptionSpec {
+  enum class Type { kBool, kInteger, kReal, kChoice, kRealList };
+  std::string name;     ///< keyword (Python) and flag (command line, with '-' for '_')
+  std::string meaning;  ///< one line: what it does, unit, valid range
+  Type type = Type::kReal;
+  std::vector<std::string> choices;  ///< kChoice: the accepted names
+  SettingValue default_value;        ///< read off a default-constructed XxxOptions
+};
+std::string ToString(OptionSpec::Type type);
+
+/// One statistic of an integrator's run, declared once.
+struct StatSpec {
+  std::string name;
+  std::string meaning;
+  bool count = false;  ///< an integer counter (num_*), else a real value
+};
+
+/// An integrator as front ends see it.
+struct IntegratorSpec {
+  std::string name;         ///< "fesd", "ida", ...
+  std::string title;        ///< "the FESD integrator" (used in messages)
+  std::string description;  ///< one line for listings
+  /// EffectKind() names of the effects it simulates ("moving set", ...).
+  std::vector<std::string> supported_effects;
+  /// Whether it supports a speed of time (Scene::time_scale_input).
+  bool supports_time_scale = false;
+  std::vector<OptionSpec> options;
+  std::vector<StatSpec> stats;
+  /// What a "step" and an "iteration" count in the common result (SimulationResult).
+  std::string step_unit;
+  std::string iteration_unit;
+
+  const OptionSpec* FindOption(const std::string& option) const;
+};
+
+/// All integrators, in the order listings show them (radau, timestepping, fesd, ida, alpha).
+const std::vector<IntegratorSpec>& Integrators();
+/// The integrator with this name; throws std::invalid_argument listing the valid names.
+const IntegratorSpec& FindIntegrator(const std::string& name);
+/// The integrator "auto" picks: radau without effects, alpha for path constraints, and
+/// otherwise the first declared integrator (fesd) that supports every effect of the scene.
+std::string AutomaticIntegrator(const Scene& scene);
+/// The names of the integrators that support every effect (and the speed of time) of `scene`.
+std::vector<std::string> IntegratorsSupporting(const Scene& scene);
+/// Throws std::invalid_argument if integrator `name` does not support an effect of the scene
+/// (or its speed of time); the message names the effect and the integrators that support it.
+void RequireSupportedEffects(const Scene& scene, const std::string& name);
+
+/// What to run: an integrator ("auto" or a name) and option values by name. Options left out
+/// keep their declared defaults.
+struct SimulationSettings {
+  std::string integrator = "auto";
+  std::map<std::string, SettingValue> options;
+};
+
+/// Derivatives of the final scene state, for shooting codes (integrators with a
+/// `sensitivities` option): rows are the scene's states.
+struct SimulationSensitivities {
+  Matrix initial_state;                ///< dx(T)/dx(0), n_x x n_x
+  Matrix parameters;                   ///< dx(T)/dp, n_x x n_p
+  Matrix inputs;                       ///< dx(T)/du, n_x x (n_u * segments)
+  std::vector<double> segment_starts;  ///< start of each control segment
+};
+
+/// The common result of every integrator.
+struct SimulationResult {
+  std::string scene;
+  std::string integrator;  ///< the integrator that ran ("auto" resolved)
+  /// Every declared option of that integrator with the value used, in declaration order.
+  std::vector<std::pair<std::string, SettingValue>> options;
+  bool success = false;
+  std::string status;  ///< the integrator's status name (ToString of its enum)
+  std::string message;
+  double final_time = 0.0;
+  std::vector<std::string> state_names;
+  Vector final_state;
+  Vector final_inputs;  ///< algebraic inputs at T (alpha), else empty
+  Trajectory trajectory;
+  /// Every collocation stage point (FESD with record_stages), else empty.
+  Trajectory stage_trajectory;
+  /// Time-freezing scenes: the numerical-time trajectory (x, memories, clock), else empty.
+  Trajectory numerical_trajectory;
+  std::vector<Event> events;
+  std::vector<RelaySignal> relays;
+  /// The integrator's statistics, named as declared (IntegratorSpec::stats), in order.
+  std::vector<std::pair<std::string, double>> stats;
+  std::string stats_summary;  ///< the integrator's one-line Summary()
+  long num_steps = 0;         ///< IntegratorSpec::step_unit
+  long num_iterations = 0;    ///< IntegratorSpec::iteration_unit
+  double cpu_seconds = 0.0;
+  /// Per-element (FESD) or per-step (alpha) certificates: column names and rows.
+  std::vector<std::string> record_columns;
+  std::vector<std::vector<double>> records;
+  /// With the `sensitivities` option.
+  std::optional<SimulationSensitivities> sensitivities;
+
+  /// The statistic with this name (std::invalid_argument if the integrator has none).
+  double Stat(const std::string& name) const;
+};
+
+/// Simulates `scene` with the settings' integrator. Throws std::invalid_argument for an
+/// unknown integrator or option, a value of the wrong type or out of range, an invalid scene
+/// or an unsupported effect; a numerical failure is a result with success = false and the
+/// integrator's status and message.
+SimulationResult Simulate(const Scene& scene, const SimulationSettings& settings,
+                          const ProgressCallback& progress = {});
+
+}  // namespace moreau

@@ -1,0 +1,195 @@
+#pragma once
+// Declarations of an integrator for Simulate() (include/moreau/integrators/simulate.hpp):
+// options bound to the members of its XxxOptions struct, statistics bound to its XxxStats, and
+// the conversion of its XxxResult into the common SimulationResult. Each integrator folder
+// declares its entry once (<name>/<name>_entry.cpp); simulate.cpp collects them.
+
+#include <functional>
+#include <string>
+#include <type_traits>
+#include <utility>
+#include <vector>
+
+#include "moreau/core/error.hpp"
+#include "moreau/integrators/simulate.hpp"
+
+namespace moreau::internal {
+
+// Converts a front end's value to the option's type; throws std::invalid_argument naming the
+// option, what it expects and what it got.
+bool SettingToBool(const OptionSpec& spec, const SettingValue& value);
+long SettingToInteger(const OptionSpec& spec, const SettingValue& value);
+double SettingToReal(const OptionSpec& spec, const SettingValue& value);
+std::string SettingToChoice(const OptionSpec& spec, const SettingValue& value);
+std::vector<double> SettingToRealList(const OptionSpec& spec, const SettingValue& value);
+
+// An option bound to a field of Options (through get/set, so nested fields such as
+// newton.tolerance bind as well).
+template <class Options>
+struct OptionBinding {
+  OptionSpec spec;
+  std::function<void(Options*, const SettingValue&)> set;
+  std::function<SettingValue(const Options&)> get;
+};
+
+template <class Options, class Field>
+OptionBinding<Options> BindReal(std::string name, Field Options::*member, std::string meaning) {
+  OptionBinding<Options> binding;
+  binding.spec = {std::move(name), std::move(meaning), OptionSpec::Type::kReal, {}, {}};
+  binding.set = [member, spec = binding.spec](Options* o, const SettingValue& v) {
+    o->*member = SettingToReal(spec, v);
+  };
+  binding.get = [member](const Options& o) { return SettingValue(static_cast<double>(o.*member)); };
+  return binding;
+}
+
+template <class Options, class Field>
+OptionBinding<Options> BindInteger(std::string name, Field Options::*member, std::string meaning) {
+  OptionBinding<Options> binding;
+  binding.spec = {std::move(name), std::move(meaning), OptionSpec::Type::kInteger, {}, {}};
+  binding.set = [member, spec = binding.spec](Options* o, const SettingValue& v) {
+    const long value = SettingToInteger(spec, v);
+    RequireArgument(static_cast<long>(static_cast<Field>(value)) == value, "option '", spec.name,
+                    "': ", value, " is out of range");
+    o->*member = static_cast<Field>(value);
+  };
+  binding.get = [member](const Options& o) { return SettingValue(static_cast<long>(o.*member)); };
+  return binding;
+}
+
+template <class Options>
+OptionBinding<Options> BindBool(std::string name, bool Options::*member, std::string meaning) {
+  OptionBinding<Options> binding;
+  binding.spec = {std::move(name), std::move(meaning), OptionSpec::Type::kBool, {}, {}};
+  binding.set = [member, spec = binding.spec](Options* o, const SettingValue& v) {
+    o->*member = SettingToBool(spec, v);
+  };
+  binding.get = [member](const Options& o) { return SettingValue(o.*member); };
+  return binding;
+}
+
+template <class Options>
+OptionBinding<Options> BindRealList(std::string name, std::vector<double> Options::*member,
+                                    std::string meaning) {
+  OptionBinding<Options> binding;
+  binding.spec = {std::move(name), std::move(meaning), OptionSpec::Type::kRealList, {}, {}};
+  binding.set = [member, spec = binding.spec](Options* o, const SettingValue& v) {
+    o->*member = SettingToRealList(spec, v);
+  };
+  binding.get = [member](const Options& o) { return SettingValue(o.*member); };
+  return binding;
+}
+
+// An enum field with named values: `parse` maps a name to the enum (throwing for others),
+// `format` the enum to its name.
+template <class Options, class Enum>
+OptionBinding<Options> BindChoice(std::string name, Enum Options::*member,
+                                  std::vector<std::string> choices,
+                                  Enum (*parse)(const std::string&), std::string (*format)(Enum),
+                                  std::string meaning) {
+  OptionBinding<Options> binding;
+  binding.spec = {
+      std::move(name), std::move(meaning), OptionSpec::Type::kChoice, std::move(choices), {}};
+  binding.set = [member, parse, spec = binding.spec](Options* o, const SettingValue& v) {
+    o->*member = parse(SettingToChoice(spec, v));
+  };
+  binding.get = [member, format](const Options& o) { return SettingValue(format(o.*member)); };
+  return binding;
+}
+
+// A nested field: the binding of `inner` applied to (outer.*member).
+template <class Options, class Inner>
+OptionBinding<Options> Nested(Inner Options::*member, OptionBinding<Inner> inner) {
+  OptionBinding<Options> binding;
+  binding.spec = inner.spec;
+  binding.set = [member, set = inner.set](Options* o, const SettingValue& v) {
+    set(&(o->*member), v);
+  };
+  binding.get = [member, get = inner.get](const Options& o) { return get(o.*member); };
+  return binding;
+}
+
+// A statistic bound to a field of Stats.
+template <class Stats>
+struct StatBinding {
+  StatSpec spec;
+  std::function<double(const Stats&)> get;
+};
+template <class Stats, class Field>
+StatBinding<Stats> BindStat(std::string name, Field Stats::*member, std::string meaning) {
+  return {{std::move(name), std::move(meaning), std::is_integral_v<Field>},
+          [member](const Stats& s) { return static_cast<double>(s.*member); }};
+}
+
+// The type-erased entry Simulate() dispatches to.
+struct IntegratorEntry {
+  IntegratorSpec spec;
+  std::function<SimulationResult(const Scene&, const std::map<std::string, SettingValue>&,
+                                 const ProgressCallback&)>
+      run;
+};
+
+// Builds an entry from an integrator's bindings. `simulate` runs the integrator on the
+// options built from the settings (defaults, then the given values, then Validate());
+// `convert` fills the integrator-specific parts of the common result (records, relays, ...)
+// after the shared fields (status, message, final time and state, trajectory, events, stats)
+// are copied.
+template <class Options, class Result>
+IntegratorEntry MakeEntry(
+    IntegratorSpec spec, std::vector<OptionBinding<Options>> options,
+    std::vector<StatBinding<decltype(Result::stats)>> stats,
+    std::function<Result(const Scene&, const Options&, const ProgressCallback&)> simulate,
+    std::function<void(const Scene&, const Result&, SimulationResult*)> convert,
+    std::function<void(const std::map<std::string, SettingValue>&, Options*)> adjust = {}) {
+  const Options defaults;
+  for (OptionBinding<Options>& binding : options) {
+    binding.spec.default_value = binding.get(defaults);
+    spec.options.push_back(binding.spec);
+  }
+  for (const auto& stat : stats) spec.stats.push_back(stat.spec);
+  IntegratorEntry entry;
+  entry.spec = spec;
+  entry.run = [spec, options, stats, simulate, convert, adjust](
+                  const Scene& scene, const std::map<std::string, SettingValue>& given,
+                  const ProgressCallback& progress) {
+    Options built;
+    for (const auto& [name, value] : given) {
+      const OptionBinding<Options>* found = nullptr;
+      for (const auto& binding : options) {
+        if (binding.spec.name == name) found = &binding;
+      }
+      RequireArgument(found != nullptr, "option '", name, "' does not apply to integrator '",
+                      spec.name, "'");
+      found->set(&built, value);
+    }
+    if (adjust) adjust(given, &built);
+    built.Validate();
+    const Result result = simulate(scene, built, progress);
+    SimulationResult out;
+    out.integrator = spec.name;
+    for (const auto& binding : options)
+      out.options.emplace_back(binding.spec.name, binding.get(built));
+    out.status = ToString(result.status);
+    out.success = result.status == decltype(result.status)::kSuccess;
+    out.message = result.message;
+    out.final_time = result.final_time;
+    out.final_state = result.final_state;
+    out.trajectory = result.trajectory;
+    if constexpr (requires { result.events; }) out.events = result.events;
+    for (const auto& stat : stats) out.stats.emplace_back(stat.spec.name, stat.get(result.stats));
+    out.stats_summary = result.stats.Summary();
+    out.cpu_seconds = result.stats.cpu_seconds;
+    convert(scene, result, &out);
+    return out;
+  };
+  return entry;
+}
+
+// Each integrator's entry (defined in its folder).
+IntegratorEntry RadauEntry();
+IntegratorEntry TimeSteppingEntry();
+IntegratorEntry FesdEntry();
+IntegratorEntry IdaEntry();
+IntegratorEntry AlphaDaiEntry();
+
+}  // namespace moreau::internal

@@ -1,0 +1,269 @@
+// Simulate(): the one entry point every front end uses (include/moreau/integrators/simulate.hpp).
+#include "moreau/integrators/simulate.hpp"
+
+#include <cmath>
+#include <cstdlib>
+#include <sstream>
+
+#include "integrator_entry.hpp"
+#include "moreau/core/error.hpp"
+
+namespace moreau {
+namespace internal {
+namespace {
+
+std::string Describe(const SettingValue& value) {
+  if (std::holds_alternative<std::string>(value)) {
+    return "'" + std::get<std::string>(value) + "'";
+  }
+  return FormatSetting(value);
+}
+
+[[noreturn]] void ThrowWrongType(const OptionSpec& spec, const SettingValue& value) {
+  std::string expected;
+  switch (spec.type) {
+    case OptionSpec::Type::kBool:
+      expected = "true or false";
+      break;
+    case OptionSpec::Type::kInteger:
+      expected = "an integer";
+      break;
+    case OptionSpec::Type::kReal:
+      expected = "a number";
+      break;
+    case OptionSpec::Type::kRealList:
+      expected = "a list of numbers";
+      break;
+    case OptionSpec::Type::kChoice: {
+      for (const std::string& choice : spec.choices) {
+        expected += (expected.empty() ? "one of " : ", ") + choice;
+      }
+      break;
+    }
+  }
+  ThrowInvalidArgument("bad value ", Describe(value), " for option '", spec.name, "': expected ",
+                       expected);
+}
+
+// Parses all of `text` as a number (strtod: also "inf" and "1e-8").
+bool ParseReal(const std::string& text, double* value) {
+  if (text.empty()) return false;
+  char* end = nullptr;
+  *value = std::strtod(text.c_str(), &end);
+  return end == text.c_str() + text.size();
+}
+
+}  // namespace
+
+bool SettingToBool(const OptionSpec& spec, const SettingValue& value) {
+  if (const bool* b = std::get_if<bool>(&value)) return *b;
+  if (const std::string* s = std::get_if<std::string>(&value)) {
+    if (*s == "true" || *s == "1" || *s == "yes" || *s == "on") return true;
+    if (*s == "false" || *s == "0" || *s == "no" || *s == "off") return false;
+  }
+  ThrowWrongType(spec, value);
+}
+
+long SettingToInteger(const OptionSpec& spec, const SettingValue& value) {
+  if (const long* i = std::get_if<long>(&value)) return *i;
+  double real = 0.0;
+  bool is_number = false;
+  if (const double* d = std::get_if<double>(&value)) {
+    real = *d;
+    is_number = true;
+  } else if (const std::string* s = std::get_if<std::string>(&value)) {
+    is_number = ParseReal(*s, &real);
+  }
+  // Whole numbers only (3.0 is accepted, 3.5 is not), within the range of long.
+  if (!is_number || !std::isfinite(real) || real != std::floor(real) || std::fabs(real) > 9e18) {
+    ThrowWrongType(spec, value);
+  }
+  return static_cast<long>(real);
+}
+
+double SettingToReal(const OptionSpec& spec, const SettingValue& value) {
+  if (const double* d = std::get_if<double>(&value)) return *d;
+  if (const long* i = std::get_if<long>(&value)) return static_cast<double>(*i);
+  if (const std::string* s = std::get_if<std::string>(&value)) {
+    double real = 0.0;
+    if (ParseReal(*s, &real)) return real;
+  }
+  ThrowWrongType(spec, value);
+}
+
+std::string SettingToChoice(const OptionSpec& spec, const SettingValue& value) {
+  if (const std::string* s = std::get_if<std::string>(&value)) {
+    for (const std::string& choice : spec.choices) {
+      if (*s == choice) return *s;
+    }
+  }
+  ThrowWrongType(spec, value);
+}
+
+std::vector<double> SettingToRealList(const OptionSpec& spec, const SettingValue& value) {
+  if (const auto* list = std::get_if<std::vector<double>>(&value)) return *list;
+  if (const std::string* s = std::get_if<std::string>(&value)) {
+    // "0.1,0.2,0.5" (the command line's form).
+    std::vector<double> list;
+    std::stringstream stream(*s);
+    std::string item;
+    while (std::getline(stream, item, ',')) {
+      double real = 0.0;
+      if (!ParseReal(item, &real)) ThrowWrongType(spec, value);
+      list.push_back(real);
+    }
+    return list;
+  }
+  if (std::holds_alternative<double>(value) || std::holds_alternative<long>(value)) {
+    return {SettingToReal(spec, value)};
+  }
+  ThrowWrongType(spec, value);
+}
+
+namespace {
+
+const std::vector<IntegratorEntry>& Entries() {
+  static const std::vector<IntegratorEntry> entries = {RadauEntry(), TimeSteppingEntry(),
+                                                       FesdEntry(), IdaEntry(), AlphaDaiEntry()};
+  return entries;
+}
+
+const IntegratorEntry& FindEntry(const std::string& name) {
+  std::string valid = "auto";
+  for (const IntegratorEntry& entry : Entries()) {
+    if (entry.spec.name == name) return entry;
+    valid += ", " + entry.spec.name;
+  }
+  ThrowInvalidArgument("unknown integrator '", name, "'; available: ", valid);
+}
+
+bool Supports(const IntegratorSpec& spec, const Effect& effect) {
+  const std::string kind = EffectKind(effect);
+  for (const std::string& supported : spec.supported_effects) {
+    if (supported == kind) return true;
+  }
+  return false;
+}
+
+}  // namespace
+}  // namespace internal
+
+std::string FormatSetting(const SettingValue& value) {
+  std::ostringstream out;
+  out.precision(17);
+  std::visit(
+      [&out](const auto& v) {
+        using T = std::decay_t<decltype(v)>;
+        if constexpr (std::is_same_v<T, bool>) {
+          out << (v ? "true" : "false");
+        } else if constexpr (std::is_same_v<T, std::vector<double>>) {
+          out << "[";
+          for (std::size_t i = 0; i < v.size(); ++i) out << (i ? ", " : "") << v[i];
+          out << "]";
+        } else {
+          out << v;
+        }
+      },
+      value);
+  return out.str();
+}
+
+std::string ToString(OptionSpec::Type type) {
+  switch (type) {
+    case OptionSpec::Type::kBool:
+      return "bool";
+    case OptionSpec::Type::kInteger:
+      return "integer";
+    case OptionSpec::Type::kReal:
+      return "real";
+    case OptionSpec::Type::kChoice:
+      return "choice";
+    case OptionSpec::Type::kRealList:
+      return "list of reals";
+  }
+  return "?";
+}
+
+const OptionSpec* IntegratorSpec::FindOption(const std::string& option) const {
+  for (const OptionSpec& spec : options) {
+    if (spec.name == option) return &spec;
+  }
+  return nullptr;
+}
+
+const std::vector<IntegratorSpec>& Integrators() {
+  static const std::vector<IntegratorSpec> specs = [] {
+    std::vector<IntegratorSpec> list;
+    for (const internal::IntegratorEntry& entry : internal::Entries()) list.push_back(entry.spec);
+    return list;
+  }();
+  return specs;
+}
+
+const IntegratorSpec& FindIntegrator(const std::string& name) {
+  return internal::FindEntry(name).spec;
+}
+
+std::vector<std::string> IntegratorsSupporting(const Scene& scene) {
+  std::vector<std::string> names;
+  for (const IntegratorSpec& spec : Integrators()) {
+    bool all = scene.time_scale_input < 0 || spec.supports_time_scale;
+    for (const Effect& effect : scene.effects) all = all && internal::Supports(spec, effect);
+    if (all) names.push_back(spec.name);
+  }
+  return names;
+}
+
+std::string AutomaticIntegrator(const Scene& scene) {
+  if (scene.effects.empty() && scene.time_scale_input < 0) return "radau";
+  const std::vector<std::string> supporting = IntegratorsSupporting(scene);
+  for (const char* preferred : {"fesd", "alpha", "ida", "timestepping"}) {
+    for (const std::string& name : supporting) {
+      if (name == preferred) return name;
+    }
+  }
+  RequireSupportedEffects(scene, "fesd");  // throws, naming what no integrator supports
+  return "fesd";
+}
+
+void RequireSupportedEffects(const Scene& scene, const std::string& name) {
+  const IntegratorSpec& spec = FindIntegrator(name);
+  // The integrators that would take the scene, for the message.
+  auto alternatives = [&scene, &name](const std::string& what) {
+    std::string list;
+    for (const std::string& other : IntegratorsSupporting(scene)) {
+      if (other != name) list += (list.empty() ? "" : ", ") + other;
+    }
+    if (list.empty()) return std::string("; no integrator supports this scene's effects together");
+    return "; " + what + ": " + list;
+  };
+  RequireArgument(scene.time_scale_input < 0 || spec.supports_time_scale, spec.title,
+                  " does not support the speed of time of scene '", scene.name,
+                  "' (time_scale_input)", alternatives("integrators that do"));
+  for (const Effect& effect : scene.effects) {
+    RequireArgument(internal::Supports(spec, effect), spec.title, " does not support the ",
+                    EffectKind(effect), " '", EffectName(effect), "' of scene '", scene.name, "'",
+                    alternatives("integrators that support the scene"));
+  }
+}
+
+double SimulationResult::Stat(const std::string& name) const {
+  for (const auto& [stat, value] : stats) {
+    if (stat == name) return value;
+  }
+  ThrowInvalidArgument("integrator '", integrator, "' has no statistic '", name, "'");
+}
+
+SimulationResult Simulate(const Scene& scene, const SimulationSettings& settings,
+                          const ProgressCallback& progress) {
+  const std::string name =
+      settings.integrator == "auto" ? AutomaticIntegrator(scene) : settings.integrator;
+  const internal::IntegratorEntry& entry = internal::FindEntry(name);
+  RequireSupportedEffects(scene, name);
+  SimulationResult result = entry.run(scene, settings.options, progress);
+  result.scene = scene.name;
+  result.state_names = scene.state_names;
+  return result;
+}
+
+}  // namespace moreau

@@ -1,0 +1,89 @@
+// FESD Radau IIA as Simulate() sees it (integrators/common/integrator_entry.hpp).
+#include "../common/integrator_entry.hpp"
+#include "moreau/integrators/fesd.hpp"
+#include "moreau/linalg/linear_solver.hpp"
+
+namespace moreau::internal {
+
+IntegratorEntry FesdEntry() {
+  using O = FesdOptions;
+  using N = SemismoothNewtonOptions;
+  IntegratorSpec spec;
+  spec.name = "fesd";
+  spec.title = "the FESD integrator";
+  spec.description = "FESD Radau IIA: switches on element boundaries, order 2s-1 across switches";
+  spec.supported_effects = {"moving set", "switching surfaces", "hysteresis relay"};
+  spec.supports_time_scale = true;
+  spec.step_unit = "element";
+  spec.iteration_unit = "Newton";
+  std::vector<OptionBinding<O>> options = {
+      BindInteger("stages", &O::stages, "Radau IIA stages s in 1..7 (order 2s - 1)"),
+      BindReal("h", &O::step_size,
+               "integration step H > 0 (control interval; numerical time with relays)"),
+      BindInteger("fe", &O::finite_elements, "nominal finite elements per step N_fe >= 1"),
+      BindChoice("switching", &O::switching_form, {"stewart", "heaviside"}, ParseSwitchingForm,
+                 ToString, "lowering of switching surfaces"),
+      Nested(&O::newton, BindReal("newton_tol", &N::tolerance,
+                                  "Newton tolerance on the scaled residual ||S Phi||_inf, > 0")),
+      Nested(&O::newton, BindInteger("max_newton_iterations", &N::max_iterations,
+                                     "Newton iterations per element or group solve, >= 1")),
+      Nested(&O::newton, BindChoice("linear_solver", &N::linear_solver, {"auto", "dense", "sparse"},
+                                    ParseLinearSolverKind, ToString,
+                                    "LU backend (auto: dense up to 256 unknowns, KLU above)")),
+      BindReal("event_tol", &O::event_tolerance,
+               "free sides within this of zero are decided by the velocity-level problem, > 0"),
+      BindReal("min_element_fraction", &O::min_element_fraction,
+               "remainders shorter than this fraction of H / N_fe merge into the next step, "
+               "in (0, 0.5]"),
+      BindInteger("max_event_retries", &O::max_event_retries, "re-solves per switch, >= 1"),
+      BindBool("sensitivities", &O::sensitivities,
+               "dx(T)/dx(0), dx(T)/dp, dx(T)/du through switches (IFT on every group)"),
+      BindBool("record_stages", &O::record_stages, "record every collocation stage point"),
+      BindBool("record_trajectory", &O::record_trajectory,
+               "record element ends (false: initial and final points only)"),
+  };
+  using S = FesdStats;
+  std::vector<StatBinding<S>> stats = {
+      BindStat("num_steps", &S::num_steps, "integration steps"),
+      BindStat("num_elements", &S::num_elements, "finite elements"),
+      BindStat("num_switches", &S::num_switches, "element boundaries with a switch"),
+      BindStat("num_groups", &S::num_groups, "group solves with the event equation"),
+      BindStat("num_event_retries", &S::num_event_retries, "re-solves at switches"),
+      BindStat("num_newton_iterations", &S::num_newton_iterations, "Newton iterations"),
+      BindStat("num_factorizations", &S::num_factorizations, "LU factorizations"),
+      BindStat("max_cross_complementarity", &S::max_cross_complementarity,
+               "max over elements of the cross-complementarity certificate"),
+      BindStat("max_complementarity", &S::max_complementarity,
+               "max over elements and stages of |min(a, b)|"),
+      BindStat("min_element_length", &S::min_element_length, "shortest element"),
+      BindStat("frozen_time", &S::frozen_time, "numerical time with physical time frozen (relays)"),
+      BindStat("cpu_seconds", &S::cpu_seconds, "thread CPU time"),
+  };
+  return MakeEntry<O, FesdResult>(
+      spec, options, stats, SimulateFesd,
+      [](const Scene&, const FesdResult& result, SimulationResult* out) {
+        out->num_steps = result.stats.num_elements;
+        out->num_iterations = result.stats.num_newton_iterations;
+        out->stage_trajectory = result.stage_trajectory;
+        out->numerical_trajectory = result.numerical_trajectory;
+        out->relays = result.relays;
+        out->record_columns = {"t_start",         "physical_start",  "length",
+                               "frozen",          "ends_at_switch",  "newton_iterations",
+                               "newton_residual", "complementarity", "cross_complementarity"};
+        for (const FesdElement& e : result.elements) {
+          out->records.push_back({e.t_start, e.physical_start, e.length, e.frozen ? 1.0 : 0.0,
+                                  e.ends_at_switch ? 1.0 : 0.0,
+                                  static_cast<double>(e.newton_iterations), e.newton_residual,
+                                  e.complementarity, e.cross_complementarity});
+        }
+        if (result.sensitivities.lowered.size() == 0) return;
+        SimulationSensitivities s;
+        s.initial_state = result.sensitivities.initial_state;
+        s.parameters = result.sensitivities.parameters;
+        s.inputs = result.sensitivities.inputs;
+        s.segment_starts = result.sensitivities.segment_starts;
+        out->sensitivities = s;
+      });
+}
+
+}  // namespace moreau::internal

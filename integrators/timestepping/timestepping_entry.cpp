@@ -1,0 +1,68 @@
+// The time-stepping baseline as Simulate() sees it (integrators/common/integrator_entry.hpp).
+#include "../common/integrator_entry.hpp"
+#include "moreau/integrators/timestepping.hpp"
+#include "moreau/linalg/linear_solver.hpp"
+
+namespace moreau::internal {
+
+IntegratorEntry TimeSteppingEntry() {
+  using O = TimeSteppingOptions;
+  using N = SemismoothNewtonOptions;
+  IntegratorSpec spec;
+  spec.name = "timestepping";
+  spec.title = "the time-stepping integrator";
+  spec.description =
+      "fixed-step Radau IIA with stage complementarity (first-order baseline, no switch "
+      "detection)";
+  spec.supported_effects = {"moving set", "switching surfaces"};
+  spec.step_unit = "step";
+  spec.iteration_unit = "Newton";
+  std::vector<OptionBinding<O>> options = {
+      BindInteger("stages", &O::stages, "Radau IIA stages s in 1..7"),
+      BindReal("h", &O::step_size, "fixed step > 0"),
+      BindChoice("switching", &O::switching_form, {"stewart", "heaviside"}, ParseSwitchingForm,
+                 ToString, "lowering of switching surfaces"),
+      Nested(&O::newton, BindReal("newton_tol", &N::tolerance,
+                                  "Newton tolerance on the scaled residual ||S Phi||_inf, > 0")),
+      Nested(&O::newton, BindInteger("max_newton_iterations", &N::max_iterations,
+                                     "Newton iterations per step, >= 1")),
+      Nested(&O::newton, BindChoice("linear_solver", &N::linear_solver, {"auto", "dense", "sparse"},
+                                    ParseLinearSolverKind, ToString,
+                                    "LU backend (auto: dense up to 256 unknowns, KLU above)")),
+      BindBool("record_trajectory", &O::record_trajectory,
+               "record every step (false: initial and final points only)"),
+      BindBool("sensitivities", &O::sensitivities,
+               "dx(T)/dx(0), dx(T)/dp, dx(T)/du by the IFT on every step (no switch-time terms)"),
+  };
+  using S = TimeSteppingStats;
+  std::vector<StatBinding<S>> stats = {
+      BindStat("num_steps", &S::num_steps, "steps"),
+      BindStat("num_newton_iterations", &S::num_newton_iterations, "Newton iterations"),
+      BindStat("num_factorizations", &S::num_factorizations, "LU factorizations"),
+      BindStat("num_backtracks", &S::num_backtracks, "line-search backtracks"),
+      BindStat("max_complementarity_residual", &S::max_complementarity_residual,
+               "max over steps of max |min(a, b)|"),
+      BindStat("max_newton_residual", &S::max_newton_residual,
+               "max over steps of ||S Phi||_inf at convergence"),
+      BindStat("cpu_seconds", &S::cpu_seconds, "thread CPU time"),
+  };
+  return MakeEntry<O, TimeSteppingResult>(
+      spec, options, stats, SimulateTimeStepping,
+      [](const Scene& scene, const TimeSteppingResult& result, SimulationResult* out) {
+        out->num_steps = result.stats.num_steps;
+        out->num_iterations = result.stats.num_newton_iterations;
+        if (result.sensitivities.size() == 0) return;
+        // Columns of the lowered derivative: y0 (n_y = n_x + clock), p, then u per segment.
+        const Eigen::Index nx = scene.num_states(), np = scene.num_parameters();
+        const Eigen::Index ny = result.sensitivities.rows();
+        const Eigen::Index nu_all = result.sensitivities.cols() - ny - np;
+        SimulationSensitivities s;
+        s.segment_starts = result.segment_starts;
+        s.initial_state = result.sensitivities.topLeftCorner(nx, nx);
+        s.parameters = result.sensitivities.block(0, ny, nx, np);
+        s.inputs = result.sensitivities.block(0, ny + np, nx, nu_all);
+        out->sensitivities = s;
+      });
+}
+
+}  // namespace moreau::internal
