@@ -1,0 +1,352 @@
+"""moreau: simulate nonsmooth dynamical systems with measured accuracy, from Python.
+
+Sweeping processes with moving sets, Filippov switching systems, hysteresis (time-freezing)
+and differential-algebraic inequalities, simulated by the C++ library through its one entry
+point (``moreau::Simulate``): FESD Radau IIA, the time-stepping baseline, SUNDIALS IDA, smooth
+Radau IIA and the alpha-method DAI stepper.
+
+    >>> import moreau
+    >>> s3 = moreau.scene("S3")
+    >>> r = moreau.simulate(s3, integrator="fesd", stages=3, h=0.05)
+    >>> r.status, r.x[-1], [e.t for e in r.events]
+
+Options are the integrator's declared options (``moreau.integrators()`` lists them with their
+meaning and default); bad input raises ``ValueError`` with the library's message, a numerical
+failure is a result with ``success == False`` and the time and reason in ``message``.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from typing import Any, Callable, Dict, List, NamedTuple, Optional, Sequence
+
+import numpy as np
+
+from . import _moreau
+
+__all__ = [
+    "Event",
+    "Integrator",
+    "Relay",
+    "Result",
+    "Scene",
+    "Sensitivities",
+    "integrators",
+    "scene",
+    "scenes",
+    "simulate",
+]
+
+
+class Event(NamedTuple):
+    """A switch event: time, kind (enter, leave, switch, ambiguous, ...), what and detail."""
+
+    t: float
+    kind: str
+    what: str
+    detail: str
+
+
+class Relay(NamedTuple):
+    """A hysteresis relay's memory w(t) in physical time: initial value, jump times and the
+    value after each jump."""
+
+    name: str
+    initial: int
+    jump_times: List[float]
+    values: List[int]
+
+
+class Sensitivities(NamedTuple):
+    """Derivatives of the final scene state (rows) for shooting codes."""
+
+    dx_dx0: np.ndarray  #: (n_x, n_x)
+    dx_dp: np.ndarray  #: (n_x, n_p)
+    dx_du: np.ndarray  #: (n_x, n_u * segments), segment k's inputs in columns k*n_u...
+    segment_starts: List[float]
+
+
+def _check_finite(name: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"value of '{name}' must be a number, got {type(value).__name__}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise ValueError(f"value of '{name}' must be finite, got {value}")
+    return value
+
+
+class Scene:
+    """A scene: states with initial values, horizon, parameters, inputs, dynamics and effects.
+
+    Get one with :func:`scene` (built-in) or :func:`load_scene` / :func:`parse_scene` /
+    :func:`scene_from_dict` (scene files and dicts). Named values are overridden with
+    :meth:`set`, exactly as ``--set`` does on the command line.
+    """
+
+    def __init__(self, native: "_moreau._Scene"):
+        self._native = native
+
+    @property
+    def name(self) -> str:
+        return self._native.name
+
+    @property
+    def description(self) -> str:
+        return self._native.description
+
+    @property
+    def state_names(self) -> List[str]:
+        return self._native.state_names
+
+    @property
+    def x0(self) -> np.ndarray:
+        """Initial state (a copy)."""
+        return self._native.x0
+
+    @property
+    def t0(self) -> float:
+        return self._native.t0
+
+    @property
+    def tf(self) -> float:
+        return self._native.tf
+
+    @property
+    def parameters(self) -> Dict[str, float]:
+        """Parameter values by name."""
+        return {name: value for name, value, _ in self._native.parameters}
+
+    @property
+    def effects(self) -> List[tuple]:
+        """(kind, name) of every effect."""
+        return self._native.effects
+
+    def overridable_names(self) -> List[str]:
+        """Names :meth:`set` accepts: ``tf``, ``x0.<state>`` and every parameter."""
+        return self._native.overridable_names()
+
+    def set(self, **values: float) -> "Scene":
+        """Overrides named values in place and returns the scene (for chaining):
+        ``scene.set(r=0.3, **{"x0.x1": 2})``. Unknown names and non-finite values raise
+        ValueError naming the valid ones."""
+        for name, value in values.items():
+            self._native.set_value(name, _check_finite(name, value))
+        self._native.validate()
+        return self
+
+    def copy(self) -> "Scene":
+        """An independent copy."""
+        return Scene(_moreau._Scene(self._native))
+
+    def integrators(self) -> List[str]:
+        """The integrators that support every effect of this scene."""
+        return self._native.supporting_integrators()
+
+    def __repr__(self) -> str:
+        effects = ", ".join(f"{kind} '{name}'" for kind, name in self.effects) or "no effects"
+        return (f"<moreau.Scene {self.name}: {len(self.state_names)} states, "
+                f"t in [{self.t0:g}, {self.tf:g}], {effects}>")
+
+
+def scenes() -> Dict[str, str]:
+    """The built-in scenes: name -> one-line summary (``moreau list``)."""
+    return {name: summary for name, summary in _moreau._catalog()}
+
+
+def scene(name: str) -> Scene:
+    """A built-in scene by name (``moreau show NAME``); ValueError lists the valid names."""
+    if not isinstance(name, str):
+        raise ValueError(f"scene name must be a string, got {type(name).__name__}")
+    return Scene(_moreau._make_scene(name))
+
+
+def integrators() -> List[Dict[str, Any]]:
+    """Every integrator with its supported effects, options (name, meaning, type, default,
+    choices) and statistics, as declared once in the C++ library."""
+    return _moreau._integrators()
+
+
+class Result:
+    """The result of a simulation (the same for every integrator).
+
+    Attributes: ``status``, ``success``, ``message``, ``integrator``, ``final_time``,
+    ``final_state``; arrays ``t`` (N,), ``x`` (N, n_x), ``algebraic`` (N, n_a; NaN where an
+    integrator has no value, e.g. at t0) and ``step`` (N,); ``events``, ``relays``, ``stats``
+    (dict), ``options`` (the options used, with defaults), ``records`` (per-element or per-step
+    certificates as arrays), ``sensitivities`` (with ``sensitivities=True``).
+    """
+
+    def __init__(self, native: "_moreau._Result"):
+        self._native = native
+        self.scene: str = native.scene
+        self.integrator: str = native.integrator
+        self.success: bool = native.success
+        self.status: str = native.status
+        self.message: str = native.message
+        self.final_time: float = native.final_time
+
+    @functools.cached_property
+    def final_state(self) -> np.ndarray:
+        return self._native.final_state
+
+    @functools.cached_property
+    def final_inputs(self) -> np.ndarray:
+        """Algebraic inputs at the final time (alpha-method stepper), else empty."""
+        return self._native.final_inputs
+
+    @functools.cached_property
+    def _trajectory(self) -> Dict[str, Any]:
+        return self._native.trajectory()
+
+    @property
+    def t(self) -> np.ndarray:
+        return self._trajectory["t"]
+
+    @property
+    def x(self) -> np.ndarray:
+        return self._trajectory["x"]
+
+    @property
+    def algebraic(self) -> np.ndarray:
+        """Multipliers and other algebraic values, columns named by ``algebraic_names``."""
+        return self._trajectory["algebraic"]
+
+    @property
+    def step(self) -> np.ndarray:
+        """Length of the step or element ending at each t (0 at t0)."""
+        return self._trajectory["step"]
+
+    @property
+    def state_names(self) -> List[str]:
+        return self._trajectory["state_names"]
+
+    @property
+    def algebraic_names(self) -> List[str]:
+        return self._trajectory["algebraic_names"]
+
+    @functools.cached_property
+    def stage_trajectory(self) -> Dict[str, Any]:
+        """FESD with ``record_stages=True``: every collocation stage (dict of arrays)."""
+        return self._native.stage_trajectory()
+
+    @functools.cached_property
+    def numerical_trajectory(self) -> Dict[str, Any]:
+        """Hysteresis scenes (FESD): the numerical-time trajectory (x, memories, clock)."""
+        return self._native.numerical_trajectory()
+
+    @functools.cached_property
+    def events(self) -> List[Event]:
+        return [Event(*e) for e in self._native.events()]
+
+    @functools.cached_property
+    def relays(self) -> List[Relay]:
+        return [Relay(*r) for r in self._native.relays()]
+
+    @functools.cached_property
+    def stats(self) -> Dict[str, float]:
+        return self._native.stats()
+
+    @functools.cached_property
+    def options(self) -> Dict[str, Any]:
+        return self._native.options()
+
+    @functools.cached_property
+    def records(self) -> Dict[str, np.ndarray]:
+        return self._native.records()
+
+    @functools.cached_property
+    def sensitivities(self) -> Optional[Sensitivities]:
+        native = self._native.sensitivities()
+        if native is None:
+            return None
+        return Sensitivities(native["dx_dx0"], native["dx_dp"], native["dx_du"],
+                             list(native["segment_starts"]))
+
+    @property
+    def num_steps(self) -> int:
+        return self._native.num_steps
+
+    @property
+    def num_iterations(self) -> int:
+        return self._native.num_iterations
+
+    @property
+    def cpu_seconds(self) -> float:
+        return self._native.cpu_seconds
+
+    def plot(self, states: Optional[Sequence[str]] = None, multipliers: bool = True,
+             events: bool = True, ax=None):
+        """Plots states (and multipliers in a second panel) over time with matplotlib, switch
+        events as dashed vertical lines, relay memories as steps. Returns the figure."""
+        from ._plot import plot_result
+        return plot_result(self, states=states, multipliers=multipliers, events=events, ax=ax)
+
+    def __repr__(self) -> str:
+        return (f"<moreau.Result {self.scene} ({self.integrator}): {self.status}, "
+                f"t_final = {self.final_time:.12g}, {len(self.events)} events>")
+
+
+def _progress_arg(progress: Optional[Callable[[float], Any]]):
+    if progress is not None and not callable(progress):
+        raise ValueError("progress must be callable (it is called with the current time t)")
+    return progress
+
+
+def simulate(scene: Scene, integrator: str = "auto",
+             progress: Optional[Callable[[float], Any]] = None, **options: Any) -> Result:
+    """Simulates ``scene`` with ``integrator`` ("auto", "fesd", "timestepping", "ida",
+    "radau", "alpha") and its options as keywords (``stages=3, h=0.05``; see
+    :func:`integrators`). The GIL is released while the C++ code runs; ``progress(t)`` is
+    called during long runs. Raises ValueError for bad input (unknown integrator or option,
+    wrong type, out-of-range value, unsupported effect)."""
+    if not isinstance(scene, Scene):
+        raise ValueError(f"scene must be a moreau.Scene, got {type(scene).__name__}")
+    if not isinstance(integrator, str):
+        raise ValueError(f"integrator must be a string, got {type(integrator).__name__}")
+    return Result(_moreau._simulate(scene._native, integrator, options, _progress_arg(progress)))
+
+
+class Integrator:
+    """An integrator bound to one scene and one set of options, for many runs (shooting
+    codes): each :meth:`simulate` call may change the initial state and parameters.
+
+    The integrator and options are checked once here (a first run is not needed); each call
+    then costs what the C++ run costs plus the conversion of the result.
+    """
+
+    def __init__(self, scene: Scene, integrator: str = "auto", **options: Any):
+        if not isinstance(scene, Scene):
+            raise ValueError(f"scene must be a moreau.Scene, got {type(scene).__name__}")
+        self.scene = scene.copy()
+        self.integrator = (self.scene._native.automatic_integrator() if integrator == "auto"
+                           else integrator)
+        known = {spec["name"]: spec for spec in integrators()}
+        if self.integrator not in known:
+            raise ValueError(f"unknown integrator '{self.integrator}'; available: auto, "
+                             + ", ".join(known))
+        declared = {o["name"] for o in known[self.integrator]["options"]}
+        for name in options:
+            if name not in declared:
+                raise ValueError(f"option '{name}' does not apply to integrator "
+                                 f"'{self.integrator}'")
+        self.options = dict(options)
+
+    def simulate(self, x0: Optional[Sequence[float]] = None,
+                 parameters: Optional[Dict[str, float]] = None,
+                 progress: Optional[Callable[[float], Any]] = None) -> Result:
+        """Runs from ``x0`` (default: the scene's) with ``parameters`` overridden by name."""
+        native = self.scene._native
+        if x0 is not None or parameters:
+            native = _moreau._Scene(native)
+            if x0 is not None:
+                x0 = np.asarray(x0, dtype=float)
+                names = self.scene.state_names
+                if x0.shape != (len(names),):
+                    raise ValueError(f"x0 must have shape ({len(names)},), got {x0.shape}")
+                for name, value in zip(names, x0):
+                    native.set_value("x0." + name, _check_finite("x0." + name, value))
+            for name, value in (parameters or {}).items():
+                native.set_value(name, _check_finite(name, value))
+        return Result(_moreau._simulate(native, self.integrator, self.options,
+                                        _progress_arg(progress)))
