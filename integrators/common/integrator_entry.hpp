@@ -12,6 +12,9 @@
 
 #include "moreau/core/error.hpp"
 #include "moreau/integrators/simulate.hpp"
+#include "moreau/linalg/linear_solver.hpp"
+#include "moreau/model/lowered_system.hpp"
+#include "moreau/newton/semismooth_newton.hpp"
 
 namespace moreau::internal {
 
@@ -107,6 +110,28 @@ OptionBinding<Options> Nested(Inner Options::*member, OptionBinding<Inner> inner
   };
   binding.get = [member, get = inner.get](const Options& o) { return get(o.*member); };
   return binding;
+}
+
+// Options several integrators share, declared once.
+template <class Options>
+OptionBinding<Options> BindSwitching(SwitchingForm Options::*member) {
+  return BindChoice("switching", member, {"stewart", "heaviside"}, ParseSwitchingForm, ToString,
+                    "lowering of switching surfaces");
+}
+template <class Options>
+OptionBinding<Options> BindLinearSolver(LinearSolverKind Options::*member) {
+  return BindChoice("linear_solver", member, {"auto", "dense", "sparse"}, ParseLinearSolverKind,
+                    ToString, "LU backend (auto: dense up to 256 unknowns, sparse KLU above)");
+}
+// The semismooth Newton settings of the complementarity integrators (FESD, time-stepping).
+template <class Options>
+std::vector<OptionBinding<Options>> BindNewton(SemismoothNewtonOptions Options::*member) {
+  using N = SemismoothNewtonOptions;
+  return {Nested(member, BindReal("newton_tol", &N::tolerance,
+                                  "Newton tolerance on the scaled residual ||S Phi||_inf, > 0")),
+          Nested(member, BindInteger("max_newton_iterations", &N::max_iterations,
+                                     "Newton iterations per solve, >= 1")),
+          Nested(member, BindLinearSolver(&N::linear_solver))};
 }
 
 // A statistic bound to a field of Stats.

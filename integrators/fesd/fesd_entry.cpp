@@ -7,7 +7,6 @@ namespace moreau::internal {
 
 IntegratorEntry FesdEntry() {
   using O = FesdOptions;
-  using N = SemismoothNewtonOptions;
   IntegratorSpec spec;
   spec.name = "fesd";
   spec.title = "the FESD integrator";
@@ -21,15 +20,7 @@ IntegratorEntry FesdEntry() {
       BindReal("h", &O::step_size,
                "integration step H > 0 (control interval; numerical time with relays)"),
       BindInteger("fe", &O::finite_elements, "nominal finite elements per step N_fe >= 1"),
-      BindChoice("switching", &O::switching_form, {"stewart", "heaviside"}, ParseSwitchingForm,
-                 ToString, "lowering of switching surfaces"),
-      Nested(&O::newton, BindReal("newton_tol", &N::tolerance,
-                                  "Newton tolerance on the scaled residual ||S Phi||_inf, > 0")),
-      Nested(&O::newton, BindInteger("max_newton_iterations", &N::max_iterations,
-                                     "Newton iterations per element or group solve, >= 1")),
-      Nested(&O::newton, BindChoice("linear_solver", &N::linear_solver, {"auto", "dense", "sparse"},
-                                    ParseLinearSolverKind, ToString,
-                                    "LU backend (auto: dense up to 256 unknowns, KLU above)")),
+      BindSwitching(&O::switching_form),
       BindReal("event_tol", &O::event_tolerance,
                "free sides within this of zero are decided by the velocity-level problem, > 0"),
       BindReal("min_element_fraction", &O::min_element_fraction,
@@ -42,6 +33,7 @@ IntegratorEntry FesdEntry() {
       BindBool("record_trajectory", &O::record_trajectory,
                "record element ends (false: initial and final points only)"),
   };
+  for (auto& binding : BindNewton(&O::newton)) options.push_back(binding);
   using S = FesdStats;
   std::vector<StatBinding<S>> stats = {
       BindStat("num_steps", &S::num_steps, "integration steps"),

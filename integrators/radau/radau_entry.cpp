@@ -27,9 +27,7 @@ IntegratorEntry RadauEntry() {
       BindInteger("max_newton_iterations", &O::max_newton_iterations,
                   "Newton iterations per step before it fails, >= 1"),
       BindInteger("max_steps", &O::max_steps, "accepted steps before the run stops, >= 1"),
-      BindChoice("linear_solver", &O::linear_solver, {"auto", "dense", "sparse"},
-                 ParseLinearSolverKind, ToString,
-                 "LU backend (auto: dense up to 256 unknowns, KLU above)"),
+      BindLinearSolver(&O::linear_solver),
       BindBool("record_trajectory", &O::record_trajectory,
                "record every step (false: initial and final points only)"),
   };

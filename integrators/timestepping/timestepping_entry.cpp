@@ -7,7 +7,6 @@ namespace moreau::internal {
 
 IntegratorEntry TimeSteppingEntry() {
   using O = TimeSteppingOptions;
-  using N = SemismoothNewtonOptions;
   IntegratorSpec spec;
   spec.name = "timestepping";
   spec.title = "the time-stepping integrator";
@@ -20,20 +19,13 @@ IntegratorEntry TimeSteppingEntry() {
   std::vector<OptionBinding<O>> options = {
       BindInteger("stages", &O::stages, "Radau IIA stages s in 1..7"),
       BindReal("h", &O::step_size, "fixed step > 0"),
-      BindChoice("switching", &O::switching_form, {"stewart", "heaviside"}, ParseSwitchingForm,
-                 ToString, "lowering of switching surfaces"),
-      Nested(&O::newton, BindReal("newton_tol", &N::tolerance,
-                                  "Newton tolerance on the scaled residual ||S Phi||_inf, > 0")),
-      Nested(&O::newton, BindInteger("max_newton_iterations", &N::max_iterations,
-                                     "Newton iterations per step, >= 1")),
-      Nested(&O::newton, BindChoice("linear_solver", &N::linear_solver, {"auto", "dense", "sparse"},
-                                    ParseLinearSolverKind, ToString,
-                                    "LU backend (auto: dense up to 256 unknowns, KLU above)")),
+      BindSwitching(&O::switching_form),
       BindBool("record_trajectory", &O::record_trajectory,
                "record every step (false: initial and final points only)"),
       BindBool("sensitivities", &O::sensitivities,
                "dx(T)/dx(0), dx(T)/dp, dx(T)/du by the IFT on every step (no switch-time terms)"),
   };
+  for (auto& binding : BindNewton(&O::newton)) options.push_back(binding);
   using S = TimeSteppingStats;
   std::vector<StatBinding<S>> stats = {
       BindStat("num_steps", &S::num_steps, "steps"),
