@@ -146,12 +146,14 @@ StatBinding<Stats> BindStat(std::string name, Field Stats::*member, std::string 
           [member](const Stats& s) { return static_cast<double>(s.*member); }};
 }
 
-// The type-erased entry Simulate() dispatches to.
+// The type-erased entry Simulate() dispatches to; `check` builds and validates the options
+// without running.
 struct IntegratorEntry {
   IntegratorSpec spec;
   std::function<SimulationResult(const Scene&, const std::map<std::string, SettingValue>&,
                                  const ProgressCallback&)>
       run;
+  std::function<void(const std::map<std::string, SettingValue>&)> check;
 };
 
 // Builds an entry from an integrator's bindings. `simulate` runs the integrator on the
@@ -172,11 +174,8 @@ IntegratorEntry MakeEntry(
     spec.options.push_back(binding.spec);
   }
   for (const auto& stat : stats) spec.stats.push_back(stat.spec);
-  IntegratorEntry entry;
-  entry.spec = spec;
-  entry.run = [spec, options, stats, simulate, convert, adjust](
-                  const Scene& scene, const std::map<std::string, SettingValue>& given,
-                  const ProgressCallback& progress) {
+  // Defaults, then the given values, then the integrator's adjustments and Validate().
+  auto build = [spec, options, adjust](const std::map<std::string, SettingValue>& given) {
     Options built;
     for (const auto& [name, value] : given) {
       const OptionBinding<Options>* found = nullptr;
@@ -189,6 +188,15 @@ IntegratorEntry MakeEntry(
     }
     if (adjust) adjust(given, &built);
     built.Validate();
+    return built;
+  };
+  IntegratorEntry entry;
+  entry.spec = spec;
+  entry.check = [build](const std::map<std::string, SettingValue>& given) { build(given); };
+  entry.run = [spec, options, stats, simulate, convert, build](
+                  const Scene& scene, const std::map<std::string, SettingValue>& given,
+                  const ProgressCallback& progress) {
+    const Options built = build(given);
     const Result result = simulate(scene, built, progress);
     SimulationResult out;
     out.integrator = spec.name;

@@ -254,6 +254,14 @@ double SimulationResult::Stat(const std::string& name) const {
   ThrowInvalidArgument("integrator '", integrator, "' has no statistic '", name, "'");
 }
 
+void ValidateSimulationSettings(const Scene& scene, const SimulationSettings& settings) {
+  const std::string name =
+      settings.integrator == "auto" ? AutomaticIntegrator(scene) : settings.integrator;
+  const internal::IntegratorEntry& entry = internal::FindEntry(name);
+  RequireSupportedEffects(scene, name);
+  entry.check(settings.options);
+}
+
 SimulationResult Simulate(const Scene& scene, const SimulationSettings& settings,
                           const ProgressCallback& progress) {
   const std::string name =

@@ -23,6 +23,7 @@
 #include "moreau/scenes/catalog.hpp"
 #include "ocp_command.hpp"
 #include "output.hpp"
+#include "sweep_command.hpp"
 
 namespace {
 
@@ -273,6 +274,32 @@ int main(int argc, char** argv) {
   // flag --name (dashes for underscores); its value goes to moreau::Simulate() as text, which
   // parses and validates it for the chosen integrator.
   tool::IntegratorFlags integrator_flags(run);
+  auto* sweep = app.add_subcommand(
+      "sweep", "run a scene over grids and samples of its named values on all cores");
+  std::string sweep_scene;
+  tool::SweepCommandSettings sweep_settings;
+  std::vector<std::string> sweep_assignments;
+  double sweep_tf = 0.0;
+  sweep->add_option("scene", sweep_scene, "scene name")->required();
+  sweep->add_option("--grid", sweep_settings.grids,
+                    "vary a named value over a grid: name=start:stop:count (several: product)");
+  sweep->add_option("--sample", sweep_settings.samples,
+                    "sample a named value: name=normal:mean:std or name=uniform:a:b");
+  sweep->add_option("--samples", sweep_settings.num_samples,
+                    "draws per grid point (with --sample)");
+  sweep->add_option("--seed", sweep_settings.seed, "seed of the samples (default 0)");
+  sweep->add_option("--jobs", sweep_settings.jobs, "worker threads (default 0: all cores)");
+  sweep->add_option("--events", sweep_settings.event_times, "event times per row (default 5)");
+  sweep->add_option("--integrator", sweep_settings.simulation.integrator,
+                    "integrator (see `moreau list`; default auto)");
+  sweep->add_option("--set", sweep_assignments, "fixed override: name=value (repeatable)");
+  auto* sweep_tf_option = sweep->add_option("--tf", sweep_tf, "final time");
+  sweep->add_option("--out", sweep_settings.out_directory,
+                    "output directory (default: out/sweep/<scene>)");
+  sweep->add_flag("--no-plot", no_plot, "do not write the summary plots");
+  sweep->add_flag("--quiet", quiet, "no progress bar");
+  tool::IntegratorFlags sweep_flags(sweep);
+
   auto* ocp = app.add_subcommand("ocp", "solve an optimal control problem (see `moreau list`)");
   tool::OcpCommandSettings ocp_settings;
   bool single_shooting = false, no_verify = false;
@@ -314,6 +341,14 @@ int main(int argc, char** argv) {
     if (app.got_subcommand("show")) {
       Show(show_scene);
       return 0;
+    }
+    if (app.got_subcommand("sweep")) {
+      Scene scene = moreau::MakeScene(sweep_scene);
+      ApplySettings(&scene, sweep_assignments, sweep_tf, sweep_tf_option->count() > 0);
+      sweep_settings.simulation.options = sweep_flags.Given();
+      sweep_settings.plot = !no_plot;
+      sweep_settings.quiet = quiet;
+      return tool::RunSweepCommand(scene, sweep_settings);
     }
     if (app.got_subcommand("ocp")) {
       if (single_shooting)

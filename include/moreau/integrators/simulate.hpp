@@ -138,6 +138,11 @@ struct SimulationResult {
   double Stat(const std::string& name) const;
 };
 
+/// Checks the settings for `scene` without simulating: the integrator exists ("auto" is
+/// resolved for the scene) and supports the scene's effects, every option is declared, of the
+/// right type and in range. Throws std::invalid_argument as Simulate would.
+void ValidateSimulationSettings(const Scene& scene, const SimulationSettings& settings);
+
 /// Simulates `scene` with the settings' integrator. Throws std::invalid_argument for an
 /// unknown integrator or option, a value of the wrong type or out of range, an invalid scene
 /// or an unsupported effect; a numerical failure is a result with success = false and the

@@ -1,0 +1,116 @@
+#pragma once
+/// @file
+/// Ensembles: parameter sweeps and Monte Carlo over a scene's named values (the `--set`
+/// names: parameters, "x0.<state>", "tf"), each run through moreau::Simulate, on a thread pool.
+///
+/// A sweep is a list of runs. Grids form a product (the first grid varies slowest); samples
+/// draw `num_samples` values per grid point (a sweep with samples only has `num_samples`
+/// runs). Run i is fully determined by (spec, i): grid values come from i's position in the
+/// product, and sample values from a counter-based generator keyed by (seed, i, sample name)
+/// (SplitMix64 and Box-Muller, written out here so that every machine and thread count
+/// draws the same numbers), so any subset of runs (RunSweep's `indices`) computes rows that
+/// are bit-identical to the same rows of a full sweep, whatever the number of threads,
+/// processes or machines and the order in which runs finish.
+///
+/// Every run yields a row: a numerical failure is the integrator's status and message, and a
+/// drawn value that makes the scene invalid (a negative horizon, x0 outside a moving set) is
+/// the status "invalid_input" with the library's message. No row is ever lost.
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "moreau/integrators/simulate.hpp"
+#include "moreau/model/scene.hpp"
+
+namespace moreau {
+
+/// A grid over one named value: `count` points from `start` to `stop` (inclusive, linear), or
+/// explicit `values` when given.
+struct SweepGrid {
+  std::string name;
+  std::vector<double> values;
+};
+/// Parses "name=start:stop:count" (count >= 1; count 1 means start only). Throws
+/// std::invalid_argument naming the problem.
+SweepGrid ParseSweepGrid(const std::string& text);
+
+/// A sampled named value: normal (mean a, standard deviation b >= 0) or uniform on [a, b).
+struct SweepSample {
+  enum class Distribution { kNormal, kUniform };
+  std::string name;
+  Distribution distribution = Distribution::kUniform;
+  double a = 0.0;
+  double b = 1.0;
+};
+/// Parses "name=normal:mean:std" or "name=uniform:a:b". Throws std::invalid_argument.
+SweepSample ParseSweepSample(const std::string& text);
+
+struct SweepSpec {
+  std::vector<SweepGrid> grids;
+  std::vector<SweepSample> samples;
+  long num_samples = 0;  ///< draws per grid point (>= 1 when samples are given)
+  std::uint64_t seed = 0;
+  /// Event times recorded per row (event_1 ... event_K; NaN where a run has fewer events).
+  int num_event_times = 5;
+
+  /// Number of runs: the product of the grid sizes times max(1, num_samples).
+  long NumRuns() const;
+  /// The varied names in column order: grids, then samples.
+  std::vector<std::string> VariedNames() const;
+  /// The values of the varied names for run `index` (0 <= index < NumRuns()).
+  std::vector<double> ValuesOf(long index) const;
+  /// Throws std::invalid_argument for an empty spec, a name that is not an overridable name
+  /// of `scene`, a name varied twice, samples without num_samples (or the reverse), or a sweep
+  /// of more than kMaxSweepRuns runs.
+  void Validate(const Scene& scene) const;
+};
+
+/// Largest sweep (runs) accepted in one call: a table of this many rows already takes
+/// gigabytes; larger studies are split into calls over index ranges.
+inline constexpr long kMaxSweepRuns = 100'000'000;
+
+/// One row of the result table.
+struct SweepRow {
+  long index = 0;
+  std::vector<double> values;  ///< varied values (SweepSpec::VariedNames order)
+  std::string status;          ///< the integrator's status, or "invalid_input"
+  bool success = false;
+  std::string message;
+  double final_time = 0.0;
+  Vector final_state;  ///< NaN-filled for invalid_input rows
+  long num_events = 0;
+  std::vector<double> event_times;  ///< first num_event_times events, NaN-padded
+  std::vector<double> stats;        ///< the integrator's declared stats (NaN if invalid)
+  double cpu_seconds = 0.0;         ///< thread CPU time of the whole run (setup included)
+};
+
+struct SweepResult {
+  std::string scene;
+  std::string integrator;  ///< resolved ("auto" replaced)
+  std::vector<std::string> varied_names;
+  std::vector<std::string> state_names;
+  std::vector<std::string> stat_names;
+  int num_event_times = 0;
+  std::vector<SweepRow> rows;  ///< in index order
+  double wall_seconds = 0.0;
+  int threads = 1;
+};
+
+/// Called from worker threads after each run with (runs done, runs in all); may be empty.
+using SweepProgress = std::function<void(long done, long total)>;
+
+/// Runs the sweep (or only the runs in `indices`, in that order, if not empty) with `threads`
+/// worker threads (0: all cores). Throws std::invalid_argument for an invalid spec or
+/// settings (checked once, before any run).
+SweepResult RunSweep(const Scene& scene, const SweepSpec& spec, const SimulationSettings& settings,
+                     int threads = 0, const std::vector<long>& indices = {},
+                     const SweepProgress& progress = {});
+
+/// The table as CSV (header: index, varied names, status, success, message, final_time,
+/// x.<state>..., num_events, event_1..K, stats..., cpu_seconds; 17 significant digits).
+void WriteSweepCsv(const SweepResult& result, const std::string& path);
+
+}  // namespace moreau
