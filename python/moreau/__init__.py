@@ -27,6 +27,8 @@ from . import _moreau
 
 __all__ = [
     "Event",
+    "scene_from_data",
+    "sweep",
     "Integrator",
     "Relay",
     "Result",
@@ -84,8 +86,14 @@ class Scene:
     :meth:`set`, exactly as ``--set`` does on the command line.
     """
 
-    def __init__(self, native: "_moreau._Scene"):
+    def __init__(self, native: "_moreau._Scene", source: Optional[Dict[str, Any]] = None,
+                 overrides: Optional[Dict[str, float]] = None):
         self._native = native
+        # What the scene is made from, as data (a built-in name, or scene-file text), and the
+        # overrides applied since: scenes travel to other processes (Dask workers) this way,
+        # never as pickled C++ objects.
+        self._source = source
+        self._overrides: Dict[str, float] = dict(overrides or {})
 
     @property
     def name(self) -> str:
@@ -131,13 +139,26 @@ class Scene:
         ``scene.set(r=0.3, **{"x0.x1": 2})``. Unknown names and non-finite values raise
         ValueError naming the valid ones."""
         for name, value in values.items():
-            self._native.set_value(name, _check_finite(name, value))
+            value = _check_finite(name, value)
+            self._native.set_value(name, value)
+            self._overrides[name] = value
         self._native.validate()
         return self
 
+    def to_data(self) -> Dict[str, Any]:
+        """The scene as plain data (source and overrides), from which :func:`scene_from_data`
+        rebuilds it in any process."""
+        if self._source is None:
+            raise ValueError(f"scene '{self.name}' was not made from a built-in name or a scene "
+                             "file, so it cannot travel as data")
+        return {"source": dict(self._source), "overrides": dict(self._overrides)}
+
+    def __reduce__(self):
+        return (scene_from_data, (self.to_data(),))
+
     def copy(self) -> "Scene":
         """An independent copy."""
-        return Scene(_moreau._Scene(self._native))
+        return Scene(_moreau._Scene(self._native), self._source, self._overrides)
 
     def integrators(self) -> List[str]:
         """The integrators that support every effect of this scene."""
@@ -158,7 +179,22 @@ def scene(name: str) -> Scene:
     """A built-in scene by name (``moreau show NAME``); ValueError lists the valid names."""
     if not isinstance(name, str):
         raise ValueError(f"scene name must be a string, got {type(name).__name__}")
-    return Scene(_moreau._make_scene(name))
+    return Scene(_moreau._make_scene(name), {"kind": "builtin", "name": name})
+
+
+def scene_from_data(data: Dict[str, Any]) -> Scene:
+    """Rebuilds a scene from :meth:`Scene.to_data`."""
+    if not isinstance(data, dict) or "source" not in data:
+        raise ValueError("scene data must be a dict with 'source' and 'overrides'")
+    source = data["source"]
+    kind = source.get("kind")
+    if kind == "builtin":
+        result = scene(source["name"])
+    elif kind == "text":
+        result = parse_scene(source["text"], source.get("name", "<string>"))
+    else:
+        raise ValueError(f"unknown scene source kind {kind!r}")
+    return result.set(**data.get("overrides", {}))
 
 
 def integrators() -> List[Dict[str, Any]]:
@@ -350,3 +386,6 @@ class Integrator:
                 native.set_value(name, _check_finite(name, value))
         return Result(_moreau._simulate(native, self.integrator, self.options,
                                         _progress_arg(progress)))
+
+
+from ._ensemble import sweep  # noqa: E402  (needs Scene and simulate above)

@@ -12,12 +12,14 @@
 
 #include <cmath>
 #include <limits>
+#include <mutex>
 #include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "moreau/core/error.hpp"
+#include "moreau/ensemble/sweep.hpp"
 #include "moreau/integrators/simulate.hpp"
 #include "moreau/model/scene.hpp"
 #include "moreau/scenes/catalog.hpp"
@@ -176,6 +178,102 @@ py::dict IntegratorDict(const IntegratorSpec& spec) {
   return out;
 }
 
+// The sweep table as columns (NumPy arrays and lists) for pandas.
+py::dict SweepColumns(const SweepResult& r) {
+  const auto n = static_cast<py::ssize_t>(r.rows.size());
+  auto matrix = [n](std::size_t columns, auto&& value) {
+    py::array_t<double> array({n, static_cast<py::ssize_t>(columns)});
+    auto out = array.mutable_unchecked<2>();
+    for (py::ssize_t k = 0; k < n; ++k) {
+      for (std::size_t c = 0; c < columns; ++c) {
+        out(k, static_cast<py::ssize_t>(c)) = value(static_cast<std::size_t>(k), c);
+      }
+    }
+    return array;
+  };
+  py::array_t<long> index(n), num_events(n);
+  py::array_t<bool> success(n);
+  py::array_t<double> final_time(n), cpu(n);
+  py::list status, message;
+  for (py::ssize_t k = 0; k < n; ++k) {
+    const SweepRow& row = r.rows[static_cast<std::size_t>(k)];
+    index.mutable_at(k) = row.index;
+    num_events.mutable_at(k) = row.num_events;
+    success.mutable_at(k) = row.success;
+    final_time.mutable_at(k) = row.final_time;
+    cpu.mutable_at(k) = row.cpu_seconds;
+    status.append(row.status);
+    message.append(row.message);
+  }
+  py::dict out;
+  out["index"] = index;
+  out["varied_names"] = r.varied_names;
+  out["varied"] = matrix(r.varied_names.size(),
+                         [&r](std::size_t k, std::size_t c) { return r.rows[k].values[c]; });
+  out["status"] = status;
+  out["success"] = success;
+  out["message"] = message;
+  out["final_time"] = final_time;
+  out["state_names"] = r.state_names;
+  out["final_state"] = matrix(r.state_names.size(), [&r](std::size_t k, std::size_t c) {
+    return r.rows[k].final_state[static_cast<Eigen::Index>(c)];
+  });
+  out["num_events"] = num_events;
+  out["event_times"] =
+      matrix(static_cast<std::size_t>(r.num_event_times),
+             [&r](std::size_t k, std::size_t c) { return r.rows[k].event_times[c]; });
+  out["stat_names"] = r.stat_names;
+  out["stats"] = matrix(r.stat_names.size(),
+                        [&r](std::size_t k, std::size_t c) { return r.rows[k].stats[c]; });
+  out["run_cpu_seconds"] = cpu;
+  out["integrator"] = r.integrator;
+  out["threads"] = r.threads;
+  out["wall_seconds"] = r.wall_seconds;
+  return out;
+}
+
+py::dict RunSweepColumns(const Scene& scene,
+                         const std::vector<std::pair<std::string, std::vector<double>>>& grids,
+                         const std::vector<std::string>& samples, long num_samples,
+                         std::uint64_t seed, int events, const std::string& integrator,
+                         const py::dict& options, int threads, const std::vector<long>& indices,
+                         const py::object& progress) {
+  SweepSpec spec;
+  for (const auto& [name, values] : grids) spec.grids.push_back({name, values});
+  for (const std::string& s : samples) spec.samples.push_back(ParseSweepSample(s));
+  spec.num_samples = num_samples;
+  spec.seed = seed;
+  spec.num_event_times = events;
+  SimulationSettings settings;
+  settings.integrator = integrator;
+  for (const auto& [key, value] : options) {
+    const std::string name = py::str(key).cast<std::string>();
+    settings.options[name] = ToSetting(name, value);
+  }
+  SweepProgress callback;
+  std::optional<py::error_already_set> error;
+  std::mutex mutex;
+  if (!progress.is_none()) {
+    callback = [&progress, &error, &mutex](long done, long total) {
+      std::lock_guard<std::mutex> lock(mutex);
+      if (error) return;
+      py::gil_scoped_acquire acquire;
+      try {
+        progress(done, total);
+      } catch (py::error_already_set& e) {
+        error.emplace(std::move(e));
+      }
+    };
+  }
+  std::optional<SweepResult> result;
+  {
+    py::gil_scoped_release release;
+    result = RunSweep(scene, spec, settings, threads, indices, callback);
+  }
+  if (error) throw std::move(*error);
+  return SweepColumns(*result);
+}
+
 }  // namespace
 }  // namespace moreau::python
 
@@ -319,6 +417,13 @@ PYBIND11_MODULE(_moreau, m) {
         return out;
       });
 
+  m.def("_parse_grid", [](const std::string& text) {
+    const SweepGrid grid = ParseSweepGrid(text);
+    return std::make_pair(grid.name, grid.values);
+  });
+  m.def("_sweep", &RunSweepColumns, py::arg("scene"), py::arg("grids"), py::arg("samples"),
+        py::arg("num_samples"), py::arg("seed"), py::arg("events"), py::arg("integrator"),
+        py::arg("options"), py::arg("threads"), py::arg("indices"), py::arg("progress"));
   m.def("_simulate", &RunSimulation, py::arg("scene"), py::arg("integrator"), py::arg("options"),
         py::arg("progress"));
 }
