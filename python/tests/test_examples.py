@@ -1,0 +1,29 @@
+"""The Python examples run (smoke test: exit code 0 and their key output)."""
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+EXAMPLES = os.path.join(os.environ.get("MOREAU_EXAMPLES", "examples"), "python")
+
+
+@pytest.mark.parametrize("script,expected", [
+    ("s3_sweeping.py", "enter"),
+    ("f1_order_study.py", "observed order"),
+    ("h1_thermostat.py", "relay thermostat"),
+    ("s3_contact_sweep.py", "max |contact time - closed form|"),
+    ("thermostat_period.py", "runs without a periodic regime"),
+])
+def test_example_runs(script, expected, tmp_path):
+    arguments = [sys.executable, os.path.join(EXAMPLES, script)]
+    if script in ("s3_sweeping.py", "h1_thermostat.py", "thermostat_period.py"):
+        arguments.append(str(tmp_path / "plot.png"))
+    env = dict(os.environ, MPLBACKEND="Agg")
+    completed = subprocess.run(arguments, capture_output=True, text=True, env=env, check=False,
+                               timeout=300)
+    assert completed.returncode == 0, completed.stderr
+    assert expected in completed.stdout
+    if len(arguments) == 3:
+        assert (tmp_path / "plot.png").stat().st_size > 0
