@@ -17,6 +17,7 @@
 #include <iostream>
 #include <sstream>
 
+#include "check_command.hpp"
 #include "integrator_flags.hpp"
 #include "moreau/core/error.hpp"
 #include "moreau/integrators/simulate.hpp"
@@ -114,8 +115,7 @@ void List() {
   tool::ListOcpProblems();
 }
 
-void Show(const std::string& name) {
-  const Scene scene = moreau::MakeScene(name);
+void Show(const Scene& scene) {
   constexpr std::size_t kLimit = 12;
   std::printf("%s: %s\n\n", scene.name.c_str(), scene.description.c_str());
   std::printf("states (%d), initial value (override with --set x0.<state>=v):\n",
@@ -249,7 +249,16 @@ int main(int argc, char** argv) {
 
   auto* show = app.add_subcommand("show", "show a scene: states, effects, parameters");
   std::string show_scene;
-  show->add_option("scene", show_scene, "scene name")->required();
+  show->add_option("scene", show_scene, "scene name or scene file (.toml)")->required();
+
+  auto* check = app.add_subcommand(
+      "check", "validate a scene or scene file and print its lowered sizes, without simulating");
+  std::string check_scene;
+  std::vector<std::string> check_assignments;
+  int check_stages = 3;
+  check->add_option("scene", check_scene, "scene name or scene file (.toml)")->required();
+  check->add_option("--set", check_assignments, "override a scene value: name=value");
+  check->add_option("--stages", check_stages, "Radau IIA stages for the FESD sizes (default 3)");
 
   auto* run = app.add_subcommand("run", "simulate a scene");
   std::string run_scene = moreau::DefaultSceneName();
@@ -258,7 +267,8 @@ int main(int argc, char** argv) {
   std::string out_directory;
   double tf = 0.0;
   bool no_plot = false, quiet = false, numerical_time = false;
-  run->add_option("scene", run_scene, "scene name (default: " + run_scene + ")");
+  run->add_option("scene", run_scene,
+                  "scene name or scene file (.toml; default: " + run_scene + ")");
   run->add_option("--integrator", settings.integrator,
                   "integrator (see `moreau list`; default auto: radau without effects, alpha "
                   "for path constraints, fesd otherwise)");
@@ -280,7 +290,7 @@ int main(int argc, char** argv) {
   tool::SweepCommandSettings sweep_settings;
   std::vector<std::string> sweep_assignments;
   double sweep_tf = 0.0;
-  sweep->add_option("scene", sweep_scene, "scene name")->required();
+  sweep->add_option("scene", sweep_scene, "scene name or scene file (.toml)")->required();
   sweep->add_option("--grid", sweep_settings.grids,
                     "vary a named value over a grid: name=start:stop:count (several: product)");
   sweep->add_option("--sample", sweep_settings.samples,
@@ -339,11 +349,17 @@ int main(int argc, char** argv) {
       return 0;
     }
     if (app.got_subcommand("show")) {
-      Show(show_scene);
+      Show(tool::ResolveScene(show_scene));
+      return 0;
+    }
+    if (app.got_subcommand("check")) {
+      Scene scene = tool::ResolveScene(check_scene);
+      ApplySettings(&scene, check_assignments, 0.0, false);
+      tool::CheckScene(scene, check_stages);
       return 0;
     }
     if (app.got_subcommand("sweep")) {
-      Scene scene = moreau::MakeScene(sweep_scene);
+      Scene scene = tool::ResolveScene(sweep_scene);
       ApplySettings(&scene, sweep_assignments, sweep_tf, sweep_tf_option->count() > 0);
       sweep_settings.simulation.options = sweep_flags.Given();
       sweep_settings.plot = !no_plot;
@@ -361,7 +377,7 @@ int main(int argc, char** argv) {
       return tool::RunOcpCommand(ocp_settings);
     }
     settings.options = integrator_flags.Given();
-    Scene scene = moreau::MakeScene(run_scene);
+    Scene scene = tool::ResolveScene(run_scene);
     ApplySettings(&scene, assignments, tf, tf_option->count() > 0);
     if (out_directory.empty()) out_directory = "out/" + scene.name;
     // The command line records FESD's stage points (stages.csv) unless told otherwise.

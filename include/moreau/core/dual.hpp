@@ -293,6 +293,12 @@ Dual<T> atan2(double y, const Dual<T>& x) {
   return atan2(Dual<T>(y), x);
 }
 template <class T>
+Dual<T> hypot(const Dual<T>& a, const Dual<T>& b) {
+  using std::hypot;
+  const T h = hypot(a.value(), b.value());
+  return internal::Combine<T>(h, a, a.value() / h, b, b.value() / h);
+}
+template <class T>
 Dual<T> sinh(const Dual<T>& a) {
   using std::cosh;
   using std::sinh;
