@@ -27,6 +27,9 @@ from . import _moreau
 
 __all__ = [
     "Event",
+    "load_scene",
+    "parse_scene",
+    "scene_from_dict",
     "scene_from_data",
     "sweep",
     "Integrator",
@@ -180,6 +183,47 @@ def scene(name: str) -> Scene:
     if not isinstance(name, str):
         raise ValueError(f"scene name must be a string, got {type(name).__name__}")
     return Scene(_moreau._make_scene(name), {"kind": "builtin", "name": name})
+
+
+def parse_scene(text: str, name: str = "<string>") -> Scene:
+    """A scene from scene-file text (docs/scene-files.md); ``name`` names it in messages."""
+    if not isinstance(text, str):
+        raise ValueError(f"scene text must be a string, got {type(text).__name__}")
+    return Scene(_moreau._parse_scene(text, name), {"kind": "text", "text": text, "name": name})
+
+
+def load_scene(path: str) -> Scene:
+    """A scene file (``.toml``, docs/scene-files.md); errors name file:line:column."""
+    import os
+
+    if not isinstance(path, (str, os.PathLike)):
+        raise ValueError(f"path must be a string, got {type(path).__name__}")
+    path = os.fspath(path)
+    try:
+        with open(path, encoding="utf-8") as f:
+            text = f.read()
+    except OSError as error:
+        raise ValueError(f"cannot read scene file '{path}': {error.strerror}") from None
+    return parse_scene(text, path)
+
+
+def scene_from_dict(data: Dict[str, Any] = None, **keywords: Any) -> Scene:
+    """A scene from a dict (or keywords) with the keys of a scene file and expression strings:
+
+        moreau.scene_from_dict(name="S3", states=["x1", "x2"], x0=["sqrt(2)", "sqrt(2)"],
+                               tf="11*pi/12 + sqrt(3)", dynamics=["x2", "-x1"],
+                               parameters={"floor": -1.0},
+                               effects=[{"kind": "moving_set", "name": "floor",
+                                         "constraints": ["x2 - floor"]}])
+
+    ``parameters`` may be a list of {"name", "value", "description"} or {name: value};
+    ``inputs`` a list of tables or {name: value} for constant controls. Errors name the key
+    path (``effects[0].constraints[0]``)."""
+    from ._scene_data import to_toml
+
+    merged = dict(data or {})
+    merged.update(keywords)
+    return parse_scene(to_toml(merged), "<dict>")
 
 
 def scene_from_data(data: Dict[str, Any]) -> Scene:

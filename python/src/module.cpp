@@ -22,6 +22,7 @@
 #include "moreau/ensemble/sweep.hpp"
 #include "moreau/integrators/simulate.hpp"
 #include "moreau/model/scene.hpp"
+#include "moreau/model/scene_file.hpp"
 #include "moreau/scenes/catalog.hpp"
 
 namespace py = pybind11;
@@ -331,6 +332,9 @@ PYBIND11_MODULE(_moreau, m) {
     return out;
   });
   m.def("_make_scene", [](const std::string& name) { return MakeScene(name); });
+  m.def("_parse_scene", [](const std::string& text, const std::string& source) {
+    return ParseScene(text, source);
+  });
   m.def("_integrators", [] {
     py::list out;
     for (const IntegratorSpec& spec : Integrators()) out.append(IntegratorDict(spec));

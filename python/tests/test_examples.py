@@ -15,6 +15,7 @@ EXAMPLES = os.path.join(os.environ.get("MOREAU_EXAMPLES", "examples"), "python")
     ("h1_thermostat.py", "relay thermostat"),
     ("s3_contact_sweep.py", "max |contact time - closed form|"),
     ("thermostat_period.py", "runs without a periodic regime"),
+    ("shooting_stewart_anitescu.py", "closed form -1.427572232083"),
 ])
 def test_example_runs(script, expected, tmp_path):
     arguments = [sys.executable, os.path.join(EXAMPLES, script)]
