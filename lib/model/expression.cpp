@@ -694,7 +694,8 @@ std::string ClosestName(const std::string& name, const std::vector<std::string>&
     }
     const std::size_t distance = row[candidate.size()];
     const std::size_t limit = std::max<std::size_t>(1, std::max(name.size(), candidate.size()) / 3);
-    if (distance <= limit && distance < best_distance) {
+    // Close, and not a complete replacement (a one-letter name has no close alternative).
+    if (distance <= limit && distance < name.size() && distance < best_distance) {
       best_distance = distance;
       best = candidate;
     }

@@ -259,3 +259,50 @@ TEST(CliTest, OcpSolvesWritesItsFilesAndNamesBadInput) {
 }
 
 }  // namespace
+
+namespace {
+
+// Scene files wherever scene names go: run (with --set, exactly as on built-in scenes), show,
+// check (lowered sizes, no simulation), sweep; bad files exit 2 with file:line:column.
+TEST(CliTest, SceneFilesRunShowCheckAndSweep) {
+  const std::string s3 = std::string(MOREAU_EXAMPLES_DIR) + "/scenes/S3.toml";
+  const std::filesystem::path directory =
+      std::filesystem::temp_directory_path() / "moreau_cli_test_files";
+  std::filesystem::remove_all(directory);
+  const Outcome file = RunCli("run " + s3 + " --set floor=-0.5 --no-plot --quiet --out " +
+                              (directory / "file").string());
+  const Outcome builtin = RunCli("run S3 --set floor=-0.5 --no-plot --quiet --out " +
+                                 (directory / "builtin").string());
+  ASSERT_EQ(file.exit_code, 0) << file.output;
+  ASSERT_EQ(builtin.exit_code, 0) << builtin.output;
+  std::ifstream a(directory / "file" / "summary.json"), b(directory / "builtin" / "summary.json");
+  const nlohmann::json sa = nlohmann::json::parse(a), sb = nlohmann::json::parse(b);
+  EXPECT_EQ(sa["x_final"], sb["x_final"]);
+  EXPECT_EQ(sa["events"], sb["events"]);
+
+  const Outcome show = RunCli("show " + s3);
+  EXPECT_EQ(show.exit_code, 0) << show.output;
+  EXPECT_NE(show.output.find("moving set 'floor'"), std::string::npos) << show.output;
+
+  const Outcome check = RunCli("check " + s3 + " --stages 2");
+  EXPECT_EQ(check.exit_code, 0) << check.output;
+  // S3: y = (x1, x2, clock), z = (lambda): s (n_y + n_z) = 2 * 4 unknowns per element.
+  EXPECT_NE(check.output.find("3 states y"), std::string::npos) << check.output;
+  EXPECT_NE(check.output.find("1 complementarity pairs"), std::string::npos) << check.output;
+  EXPECT_NE(check.output.find("8 unknowns per element (s = 2"), std::string::npos)
+      << check.output;
+
+  const Outcome sweep = RunCli("sweep " + s3 + " --grid floor=-1:-0.5:3 --no-plot --quiet --out " +
+                               (directory / "sweep").string());
+  EXPECT_EQ(sweep.exit_code, 0) << sweep.output;
+  EXPECT_NE(sweep.output.find("runs        3"), std::string::npos) << sweep.output;
+
+  const std::filesystem::path bad = directory / "bad.toml";
+  std::ofstream(bad) << "name = \"bad\"\nstates = [\"x\"]\nx0 = [1.0]\ntf = 1.0\n"
+                        "dynamics = [\"-k*x\"]\n";
+  ExpectUsageError("check " + bad.string(), bad.string() + ":5:15 (dynamics[0]): unknown name 'k' in '-k*x'");
+  ExpectUsageError("run " + bad.string(), "unknown name 'k'");
+  ExpectUsageError("check nope.toml", "cannot read scene file 'nope.toml'");
+}
+
+}  // namespace
