@@ -42,6 +42,16 @@ void BM_FesdOneElementSimulate(benchmark::State& state) {
 }
 BENCHMARK(BM_FesdOneElementSimulate)->Unit(benchmark::kMicrosecond);
 
+void BM_FesdOneElementSimulator(benchmark::State& state) {
+  moreau::Simulator simulator(OneElementScene(), {"fesd", {{"h", 0.05}, {"fe", 1L}}});
+  for (auto _ : state) {
+    const moreau::SimulationResult result = simulator.Run();
+    if (!result.success) state.SkipWithError(result.message.c_str());
+    benchmark::DoNotOptimize(result.final_state.data());
+  }
+}
+BENCHMARK(BM_FesdOneElementSimulator)->Unit(benchmark::kMicrosecond);
+
 }  // namespace
 
 BENCHMARK_MAIN();

@@ -154,6 +154,10 @@ struct IntegratorEntry {
                                  const ProgressCallback&)>
       run;
   std::function<void(const std::map<std::string, SettingValue>&)> check;
+  // Settings checked and (where the integrator can) the scene prepared once; the returned
+  // function runs the scene with other values (Simulator).
+  using Prepared = std::function<SimulationResult(const Scene& values, const ProgressCallback&)>;
+  std::function<Prepared(const Scene&, const std::map<std::string, SettingValue>&)> prepare;
 };
 
 // Builds an entry from an integrator's bindings. `simulate` runs the integrator on the
@@ -167,7 +171,12 @@ IntegratorEntry MakeEntry(
     std::vector<StatBinding<decltype(Result::stats)>> stats,
     std::function<Result(const Scene&, const Options&, const ProgressCallback&)> simulate,
     std::function<void(const Scene&, const Result&, SimulationResult*)> convert,
-    std::function<void(const std::map<std::string, SettingValue>&, Options*)> adjust = {}) {
+    std::function<void(const std::map<std::string, SettingValue>&, Options*)> adjust = {},
+    // Optional reuse: given the scene and options once, a function that runs other values of
+    // the scene (FESD: lowered once). Absent: each run simulates the values from scratch.
+    std::function<std::function<Result(const Scene&, const ProgressCallback&)>(const Scene&,
+                                                                               const Options&)>
+        reuse = {}) {
   const Options defaults;
   for (OptionBinding<Options>& binding : options) {
     binding.spec.default_value = binding.get(defaults);
@@ -193,15 +202,14 @@ IntegratorEntry MakeEntry(
   IntegratorEntry entry;
   entry.spec = spec;
   entry.check = [build](const std::map<std::string, SettingValue>& given) { build(given); };
-  entry.run = [spec, options, stats, simulate, convert, build](
-                  const Scene& scene, const std::map<std::string, SettingValue>& given,
-                  const ProgressCallback& progress) {
-    const Options built = build(given);
-    const Result result = simulate(scene, built, progress);
+  // The common result of a run with options `built`.
+  auto common = [spec, options, stats, convert](const Scene& scene, const Options& built,
+                                                const Result& result) {
     SimulationResult out;
     out.integrator = spec.name;
-    for (const auto& binding : options)
+    for (const auto& binding : options) {
       out.options.emplace_back(binding.spec.name, binding.get(built));
+    }
     out.status = ToString(result.status);
     out.success = result.status == decltype(result.status)::kSuccess;
     out.message = result.message;
@@ -213,7 +221,30 @@ IntegratorEntry MakeEntry(
     out.stats_summary = result.stats.Summary();
     out.cpu_seconds = result.stats.cpu_seconds;
     convert(scene, result, &out);
+    out.scene = scene.name;
+    out.state_names = scene.state_names;
     return out;
+  };
+  entry.run = [simulate, build, common](const Scene& scene,
+                                        const std::map<std::string, SettingValue>& given,
+                                        const ProgressCallback& progress) {
+    const Options built = build(given);
+    return common(scene, built, simulate(scene, built, progress));
+  };
+  entry.prepare = [simulate, build, common, reuse](
+                      const Scene& scene, const std::map<std::string, SettingValue>& given) {
+    const Options built = build(given);
+    if (reuse) {
+      auto run = reuse(scene, built);
+      return IntegratorEntry::Prepared(
+          [run, built, common](const Scene& values, const ProgressCallback& progress) mutable {
+            return common(values, built, run(values, progress));
+          });
+    }
+    return IntegratorEntry::Prepared(
+        [simulate, built, common](const Scene& values, const ProgressCallback& progress) {
+          return common(values, built, simulate(values, built, progress));
+        });
   };
   return entry;
 }

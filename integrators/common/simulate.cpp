@@ -274,4 +274,42 @@ SimulationResult Simulate(const Scene& scene, const SimulationSettings& settings
   return result;
 }
 
+struct Simulator::Impl {
+  Scene base;     // the scene as given
+  Scene working;  // base with this run's values
+  std::string integrator;
+  internal::IntegratorEntry::Prepared run;
+};
+
+Simulator::Simulator(const Scene& scene, const SimulationSettings& settings)
+    : impl_(std::make_unique<Impl>()) {
+  ValidateScene(scene);
+  impl_->integrator =
+      settings.integrator == "auto" ? AutomaticIntegrator(scene) : settings.integrator;
+  const internal::IntegratorEntry& entry = internal::FindEntry(impl_->integrator);
+  RequireSupportedEffects(scene, impl_->integrator);
+  impl_->base = scene;
+  impl_->working = scene;
+  impl_->run = entry.prepare(scene, settings.options);
+}
+
+Simulator::~Simulator() = default;
+
+SimulationResult Simulator::Run(const std::vector<std::pair<std::string, double>>& values,
+                                const ProgressCallback& progress) {
+  Scene& working = impl_->working;
+  const Scene& base = impl_->base;
+  // Back to the scene's own values (cheap: no model function is copied), then this run's.
+  working.initial_state = base.initial_state;
+  working.final_time = base.final_time;
+  for (std::size_t i = 0; i < base.parameters.size(); ++i) {
+    working.parameters[i].value = base.parameters[i].value;
+  }
+  for (const auto& [name, value] : values) SetSceneValue(&working, name, value);
+  return impl_->run(working, progress);
+}
+
+const std::string& Simulator::integrator() const { return impl_->integrator; }
+const Scene& Simulator::scene() const { return impl_->base; }
+
 }  // namespace moreau

@@ -1,17 +1,18 @@
 #include "moreau/integrators/fesd.hpp"
-#include "moreau/integrators/simulate.hpp"
 
 #include <Eigen/Dense>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <sstream>
 
 #include "../common/smooth_collocation.hpp"
 #include "group_system.hpp"
 #include "moreau/complementarity/ncp_function.hpp"
 #include "moreau/core/error.hpp"
+#include "moreau/integrators/simulate.hpp"
 #include "moreau/model/projection.hpp"
 
 namespace moreau {
@@ -118,9 +119,19 @@ struct SolveRecord {
 class FesdRun {
  public:
   FesdRun(const Scene& scene, const FesdOptions& options, const ProgressCallback& progress)
+      : FesdRun(nullptr, scene, options, progress) {}
+  // Runs on an existing lowered system (FesdIntegrator: lowered once, run many times).
+  FesdRun(LoweredSystem* system, const FesdOptions& options, const ProgressCallback& progress)
+      : FesdRun(system, system->scene(), options, progress) {}
+
+ private:
+  FesdRun(LoweredSystem* external, const Scene& scene, const FesdOptions& options,
+          const ProgressCallback& progress)
       : options_(options),
         progress_(progress),
-        system_(scene, Lowering(options)),
+        owned_(external ? std::nullopt
+                        : std::make_optional<LoweredSystem>(scene, Lowering(options))),
+        system_(external ? *external : *owned_),
         group_(&system_, options.stages),
         newton_(NewtonOptions(options)),
         tableau_(RadauIIA(options.stages)),
@@ -135,6 +146,7 @@ class FesdRun {
     }
   }
 
+ public:
   FesdResult Run() {
     const auto start = std::chrono::steady_clock::now();
     const Scene& scene = system_.scene();
@@ -987,7 +999,8 @@ class FesdRun {
 
   FesdOptions options_;
   ProgressCallback progress_;
-  LoweredSystem system_;
+  std::optional<LoweredSystem> owned_;  // empty when running on an external system
+  LoweredSystem& system_;
   GroupSystem group_;
   SemismoothNewton newton_;
   const RadauTableau& tableau_;
@@ -1019,6 +1032,23 @@ FesdResult SimulateFesd(const Scene& scene, const FesdOptions& options,
   options.Validate();
   RequireSupportedEffects(scene, "fesd");
   FesdRun run(scene, options, progress);
+  return run.Run();
+}
+
+FesdIntegrator::FesdIntegrator(const Scene& scene, const FesdOptions& options) : options_(options) {
+  options_.Validate();
+  RequireSupportedEffects(scene, "fesd");
+  LoweringOptions lowering;
+  lowering.switching_form = options_.switching_form;
+  system_ = std::make_unique<LoweredSystem>(scene, lowering);
+}
+
+FesdIntegrator::~FesdIntegrator() = default;
+
+FesdResult FesdIntegrator::Simulate(const Scene& values, const ProgressCallback& progress) {
+  ValidateScene(values);  // as SimulateFesd (x0 in the moving sets, finite values, ...)
+  system_->UpdateValues(values);
+  FesdRun run(system_.get(), options_, progress);
   return run.Run();
 }
 

@@ -75,6 +75,15 @@ IntegratorEntry FesdEntry() {
         s.inputs = result.sensitivities.inputs;
         s.segment_starts = result.sensitivities.segment_starts;
         out->sensitivities = s;
+      },
+      {},
+      // Lowered once, run many times (Simulator, Python's moreau.Integrator).
+      [](const Scene& scene, const O& built) {
+        auto integrator = std::make_shared<FesdIntegrator>(scene, built);
+        return std::function<FesdResult(const Scene&, const ProgressCallback&)>(
+            [integrator](const Scene& values, const ProgressCallback& progress) {
+              return integrator->Simulate(values, progress);
+            });
       });
 }
 

@@ -194,6 +194,28 @@ void LoweredSystem::SetParameters(const Vector& p) {
   parameters_ = p;
 }
 
+void LoweredSystem::UpdateValues(const Scene& scene) {
+  RequireArgument(scene.num_states() == scene_.num_states() &&
+                      scene.num_parameters() == scene_.num_parameters() &&
+                      scene.num_inputs() == scene_.num_inputs() &&
+                      scene.effects.size() == scene_.effects.size() &&
+                      scene.time_scale_input == scene_.time_scale_input,
+                  "scene '", scene.name, "' does not have the structure of the lowered scene '",
+                  scene_.name, "' (states, parameters, inputs, effects)");
+  scene_.initial_state = scene.initial_state;
+  scene_.initial_time = scene.initial_time;
+  scene_.final_time = scene.final_time;
+  for (std::size_t i = 0; i < scene.parameters.size(); ++i) {
+    scene_.parameters[i].value = scene.parameters[i].value;
+  }
+  for (std::size_t i = 0; i < scene.inputs.size(); ++i) {
+    scene_.inputs[i].signal = scene.inputs[i].signal;
+    scene_.inputs[i].initial_guess = scene.inputs[i].initial_guess;
+  }
+  inputs_ = scene_.InputValues(scene_.initial_time);
+  parameters_ = scene_.ParameterValues();
+}
+
 double LoweredSystem::EstimatedNonzerosFy() const { return nonzeros_fy_; }
 
 std::vector<Event> LoweredSystem::StatusEvents(double t, const std::vector<bool>& before,

@@ -391,45 +391,39 @@ class Integrator:
     """An integrator bound to one scene and one set of options, for many runs (shooting
     codes): each :meth:`simulate` call may change the initial state and parameters.
 
-    The integrator and options are checked once here (a first run is not needed); each call
-    then costs what the C++ run costs plus the conversion of the result.
+    The integrator and options are checked once here, and FESD lowers the scene once and reuses
+    the lowered system for every call (``moreau::Simulator``); the other integrators set up each
+    run anew. A call costs what the C++ run costs plus the conversion of the result.
     """
 
     def __init__(self, scene: Scene, integrator: str = "auto", **options: Any):
         if not isinstance(scene, Scene):
             raise ValueError(f"scene must be a moreau.Scene, got {type(scene).__name__}")
+        if not isinstance(integrator, str):
+            raise ValueError(f"integrator must be a string, got {type(integrator).__name__}")
         self.scene = scene.copy()
-        self.integrator = (self.scene._native.automatic_integrator() if integrator == "auto"
-                           else integrator)
-        known = {spec["name"]: spec for spec in integrators()}
-        if self.integrator not in known:
-            raise ValueError(f"unknown integrator '{self.integrator}'; available: auto, "
-                             + ", ".join(known))
-        declared = {o["name"] for o in known[self.integrator]["options"]}
-        for name in options:
-            if name not in declared:
-                raise ValueError(f"option '{name}' does not apply to integrator "
-                                 f"'{self.integrator}'")
+        self._native = _moreau._Simulator(self.scene._native, integrator, options)
+        self.integrator: str = self._native.integrator
         self.options = dict(options)
 
     def simulate(self, x0: Optional[Sequence[float]] = None,
                  parameters: Optional[Dict[str, float]] = None,
                  progress: Optional[Callable[[float], Any]] = None) -> Result:
         """Runs from ``x0`` (default: the scene's) with ``parameters`` overridden by name."""
-        native = self.scene._native
-        if x0 is not None or parameters:
-            native = _moreau._Scene(native)
-            if x0 is not None:
-                x0 = np.asarray(x0, dtype=float)
-                names = self.scene.state_names
-                if x0.shape != (len(names),):
-                    raise ValueError(f"x0 must have shape ({len(names)},), got {x0.shape}")
-                for name, value in zip(names, x0):
-                    native.set_value("x0." + name, _check_finite("x0." + name, value))
-            for name, value in (parameters or {}).items():
-                native.set_value(name, _check_finite(name, value))
-        return Result(_moreau._simulate(native, self.integrator, self.options,
-                                        _progress_arg(progress)))
+        values = []
+        if x0 is not None:
+            x0 = np.asarray(x0, dtype=float)
+            names = self.scene.state_names
+            if x0.shape != (len(names),):
+                raise ValueError(f"x0 must have shape ({len(names)},), got {x0.shape}")
+            values += [("x0." + name, _check_finite("x0." + name, value))
+                       for name, value in zip(names, x0)]
+        if parameters is not None:
+            if not isinstance(parameters, dict):
+                raise ValueError(f"parameters must be a dict name -> value, got "
+                                 f"{type(parameters).__name__}")
+            values += [(name, _check_finite(name, value)) for name, value in parameters.items()]
+        return Result(self._native.run(values, _progress_arg(progress)))
 
 
 from ._ensemble import sweep  # noqa: E402  (needs Scene and simulate above)

@@ -428,6 +428,33 @@ PYBIND11_MODULE(_moreau, m) {
   m.def("_sweep", &RunSweepColumns, py::arg("scene"), py::arg("grids"), py::arg("samples"),
         py::arg("num_samples"), py::arg("seed"), py::arg("events"), py::arg("integrator"),
         py::arg("options"), py::arg("threads"), py::arg("indices"), py::arg("progress"));
+  py::class_<Simulator>(m, "_Simulator")
+      .def(py::init([](const Scene& scene, const std::string& integrator, const py::dict& options) {
+        SimulationSettings settings;
+        settings.integrator = integrator;
+        for (const auto& [key, value] : options) {
+          const std::string name = py::str(key).cast<std::string>();
+          settings.options[name] = ToSetting(name, value);
+        }
+        return std::make_unique<Simulator>(scene, settings);
+      }))
+      .def_property_readonly("integrator", &Simulator::integrator)
+      .def("run",
+           [](Simulator& simulator, const std::vector<std::pair<std::string, double>>& values,
+              const py::object& progress) {
+             ProgressBridge bridge(progress);
+             const ProgressCallback callback = bridge.Callback();
+             std::optional<SimulationResult> result;
+             try {
+               py::gil_scoped_release release;
+               result = simulator.Run(values, callback);
+             } catch (const std::runtime_error&) {
+               bridge.Rethrow();
+               throw;
+             }
+             return std::move(*result);
+           });
+
   m.def("_simulate", &RunSimulation, py::arg("scene"), py::arg("integrator"), py::arg("options"),
         py::arg("progress"));
 }

@@ -53,6 +53,7 @@
 /// speed of time the horizon stays in numerical time (fixed steps; the clock is free), which
 /// is what a time-optimal control problem needs.
 
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -183,5 +184,24 @@ struct FesdResult {
 /// invalid scene or an unsupported effect (naming it).
 FesdResult SimulateFesd(const Scene& scene, const FesdOptions& options,
                         const ProgressCallback& progress = {});
+
+/// FESD on one scene, many times (shooting codes, sweeps of initial states and parameters):
+/// the options are validated and the scene is lowered once; each Simulate call takes the
+/// values of `values` — the same scene with another initial state, horizon, parameter values
+/// or input signals (e.g. after SetSceneValue) — and runs exactly as SimulateFesd would on it.
+/// Not thread-safe (one object per thread).
+class FesdIntegrator {
+ public:
+  FesdIntegrator(const Scene& scene, const FesdOptions& options);
+  ~FesdIntegrator();
+  FesdIntegrator(const FesdIntegrator&) = delete;
+  FesdIntegrator& operator=(const FesdIntegrator&) = delete;
+  /// Throws std::invalid_argument if `values` has another structure than the scene.
+  FesdResult Simulate(const Scene& values, const ProgressCallback& progress = {});
+
+ private:
+  FesdOptions options_;
+  std::unique_ptr<LoweredSystem> system_;
+};
 
 }  // namespace moreau

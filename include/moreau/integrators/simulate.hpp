@@ -18,6 +18,7 @@
 /// message naming the option, what it expects and what it got.
 
 #include <map>
+#include <memory>
 #include <optional>
 #include <string>
 #include <utility>
@@ -149,5 +150,26 @@ void ValidateSimulationSettings(const Scene& scene, const SimulationSettings& se
 /// integrator's status and message.
 SimulationResult Simulate(const Scene& scene, const SimulationSettings& settings,
                           const ProgressCallback& progress = {});
+
+/// One scene and one set of settings simulated many times with other named values (shooting
+/// codes, Python's moreau.Integrator): the integrator and options are resolved and checked
+/// once, and integrators that can (FESD) lower the scene once and reuse it. Each Run gives
+/// the result Simulate would give for the scene with the values set (SetSceneValue names:
+/// "x0.<state>", parameters, "tf"); values not given keep the scene's own. Not thread-safe.
+class Simulator {
+ public:
+  Simulator(const Scene& scene, const SimulationSettings& settings);
+  ~Simulator();
+  Simulator(const Simulator&) = delete;
+  Simulator& operator=(const Simulator&) = delete;
+  SimulationResult Run(const std::vector<std::pair<std::string, double>>& values = {},
+                       const ProgressCallback& progress = {});
+  const std::string& integrator() const;
+  const Scene& scene() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
 
 }  // namespace moreau

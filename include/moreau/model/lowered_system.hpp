@@ -192,6 +192,12 @@ class LoweredSystem {
   const Vector& inputs() const { return inputs_; }
   /// Sets the parameter values p (defaults: the scene's).
   void SetParameters(const Vector& p);
+  /// Takes the values of `scene` — initial state and time, final time, parameter values and
+  /// input signals — without lowering again: `scene` must be this system's scene with other
+  /// values (the same states, parameters, inputs and effects; the model functions are not
+  /// compared). Used by integrators that run one lowered system many times (shooting).
+  /// Throws std::invalid_argument if the structure differs.
+  void UpdateValues(const Scene& scene);
   const Vector& parameters() const { return parameters_; }
 
   /// Evaluates F, G, A, B (and derivatives) at (y, z). Not thread-safe (see SmoothFunction).
