@@ -117,3 +117,13 @@ def test_bad_specifications_raise_value_error():
         moreau.sweep(s3, grid={"floor": (-1.0, -0.5, 2)}, integrator="fesd", rho=0.5)
     with pytest.raises(ValueError, match="n_samples must be a non-negative integer"):
         moreau.sweep(s3, grid={"floor": (-1.0, -0.5, 2)}, n_samples=-1)
+
+
+def test_table_round_trips_through_hdf5(tmp_path):
+    # HDF5 is the Debian-packaged binary table format (pandas with python3-tables; Debian 12
+    # has no Parquet writer): the table comes back identical.
+    pytest.importorskip("tables")
+    table = moreau.sweep(moreau.scene("S3"), grid={"floor": (-1.0, -0.5, 3)}, integrator="fesd")
+    path = tmp_path / "sweep.h5"
+    table.to_hdf(path, key="sweep", format="table")
+    assert pd.read_hdf(path, "sweep").equals(table)
