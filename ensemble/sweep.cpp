@@ -88,6 +88,20 @@ double ThreadCpuSeconds() {
 
 }  // namespace
 
+namespace {
+// A run that produced no simulation result: status and message, NaN elsewhere.
+void FailedRow(const char* status, const char* message, const Scene& scene,
+               const SweepResult& result, SweepRow* row) {
+  row->status = status;
+  row->success = false;
+  row->message = message;
+  row->final_time = kNaN;
+  row->final_state = Vector::Constant(scene.num_states(), kNaN);
+  row->stats.assign(result.stat_names.size(), kNaN);
+  row->num_events = 0;
+}
+}  // namespace
+
 SweepGrid ParseSweepGrid(const std::string& text) {
   const auto [name, rest] = SplitAssignment(text, "--grid", "name=start:stop:count");
   const std::vector<std::string> parts = Split(rest, ':');
@@ -255,12 +269,11 @@ SweepResult RunSweep(const Scene& scene, const SweepSpec& spec, const Simulation
         for (const auto& [name, value] : run.stats) row.stats.push_back(value);
       } catch (const std::invalid_argument& error) {
         // A drawn value the scene does not accept: a row, never a lost run.
-        row.status = "invalid_input";
-        row.success = false;
-        row.message = error.what();
-        row.final_time = kNaN;
-        row.final_state = Vector::Constant(scene.num_states(), kNaN);
-        row.stats.assign(result.stat_names.size(), kNaN);
+        FailedRow("invalid_input", error.what(), scene, result, &row);
+      } catch (const std::exception& error) {
+        // Anything else (out of memory, ...) must not escape a worker thread (std::terminate):
+        // it is a row too.
+        FailedRow("error", error.what(), scene, result, &row);
       }
       row.cpu_seconds = ThreadCpuSeconds() - cpu_start;
       const long finished = ++done;

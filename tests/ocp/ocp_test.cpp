@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <random>
 
+#include "moreau/model/scene_file.hpp"
 #include "moreau/ocp/catalog.hpp"
 
 namespace moreau {
@@ -49,6 +50,18 @@ TEST(Ocp, StewartAnitescuFindsTheClosedFormOptimumBeyondTheSwitch) {
   ASSERT_EQ(result.events.size(), 1u);
   EXPECT_NEAR(result.events[0].t, -kStewartAnitescuOptimum / 3.0, kOptimumTolerance);
   ASSERT_TRUE(result.verified) << result.verification_message;
+}
+
+// The OCP layer takes scenes from files unchanged: F4 from examples/scenes/F4.toml gives the
+// same optimum as the compiled F4.
+TEST(Ocp, StewartAnitescuOnTheSceneFile) {
+  OcpProblem problem = MakeOcpProblem("stewart_anitescu");
+  problem.scene = LoadScene(std::string(MOREAU_EXAMPLES_DIR) + "/scenes/F4.toml");
+  problem.scene.initial_state[0] = -1.0;  // the problem's initial guess of x0
+  const OcpResult result = SolveOcp(problem);
+  ASSERT_EQ(result.status, OcpStatus::kSolved) << result.message;
+  EXPECT_NEAR(result.initial_state[0], kStewartAnitescuOptimum, kOptimumTolerance);
+  EXPECT_NEAR(result.objective, StewartAnitescuCost(kStewartAnitescuOptimum), kCostTolerance);
 }
 
 TEST(Ocp, StewartAnitescuSingleShootingAgrees) {

@@ -14,7 +14,8 @@
 ///
 /// Every run yields a row: a numerical failure is the integrator's status and message, and a
 /// drawn value that makes the scene invalid (a negative horizon, x0 outside a moving set) is
-/// the status "invalid_input" with the library's message. No row is ever lost.
+/// the status "invalid_input" with the library's message; any other exception in a run (out of
+/// memory, ...) is the status "error" with its message. No row is ever lost.
 
 #include <atomic>
 #include <cstdint>
