@@ -107,9 +107,11 @@ void List() {
               "radau without effects, alpha for path constraints, fesd otherwise");
   for (const moreau::IntegratorSpec& spec : moreau::Integrators()) {
     std::string effects;
-    for (const std::string& kind : spec.supported_effects) effects += "; " + kind + "s";
-    std::printf("  %-12s %s%s\n", spec.name.c_str(), spec.description.c_str(),
-                effects.empty() ? "; no effects" : effects.c_str());
+    for (const std::string& kind : spec.supported_effects) {
+      effects += (effects.empty() ? "" : ", ") + kind;
+    }
+    std::printf("  %-12s %s (effects: %s)\n", spec.name.c_str(), spec.description.c_str(),
+                effects.empty() ? "none" : effects.c_str());
   }
   std::printf("\noptimal control problems (moreau ocp PROBLEM):\n");
   tool::ListOcpProblems();
