@@ -11,8 +11,21 @@
 #include "moreau/core/error.hpp"
 #include "moreau/model/expression.hpp"
 
-// toml++ (Debian libtomlplusplus-dev), header-only, private to this file.
+// toml++ (Debian libtomlplusplus-dev), header-only, private to this file. Its internal
+// assertions are compiled as in release builds in every build type: toml++ 3.3 asserts (and so
+// aborts a debug build) on some malformed input that it otherwise rejects with a parse error
+// (found by tests/model/scene_file_test.cpp's robustness run; e.g. a key position holding a
+// character that is neither a key character nor a quote). The robustness run checks under
+// AddressSanitizer and UndefinedBehaviorSanitizer that the parser stays memory-safe there.
+#ifndef NDEBUG
+#define NDEBUG
+#define MOREAU_RESTORE_NDEBUG
+#endif
 #include <toml++/toml.h>
+#ifdef MOREAU_RESTORE_NDEBUG
+#undef NDEBUG
+#undef MOREAU_RESTORE_NDEBUG
+#endif
 
 namespace moreau {
 namespace {
