@@ -1,0 +1,324 @@
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+#include "fesd_run.hpp"
+#include "moreau/complementarity/ncp_function.hpp"
+#include "moreau/core/error.hpp"
+#include "moreau/integrators/simulate.hpp"
+#include "moreau/model/projection.hpp"
+
+namespace moreau::internal {
+
+// Advances from tau_ towards step_end with `remaining` nominal elements: a trial pass of
+// fixed-length elements; if a free side turns negative, a group solve of equal elements that
+// ends on the switch. Returns true if a switch ended the advance.
+bool FesdRun::Advance(double step_end, int* remaining) {
+  const double rest = step_end - tau_;
+  const double h_trial = rest / *remaining;
+  const Vector y_start = y_;
+  // Indicator scales, and the pairs that start at zero (just switched): their indicators
+  // are divided by tau^2 so that h -> 0 is not a root (zero-length elements are excluded).
+  IndicatorEvaluation start;
+  system_.EvaluateEventIndicators(y_start, v_, a_zero_, Derivatives::kNone, &start);
+  Vector scales(np_);
+  std::vector<int> powers(static_cast<std::size_t>(np_), 0);
+  for (int k = 0; k < np_; ++k) {
+    scales[k] = std::max(1.0, std::fabs(start.values[k]));
+    if (std::fabs(start.values[k]) <= options_.event_tolerance) {
+      powers[static_cast<std::size_t>(k)] = 2;
+    }
+  }
+
+  // Trial pass: Radau IIA elements of length h_trial with the current statuses.
+  std::vector<SolveRecord> records;
+  std::vector<Vector> trial_w;
+  Vector y = y_start;
+  Vector v_end = v_;
+  Violation violation;
+  std::string trial_failure;  // why the trial pass suspected a switch, if not by signs
+  for (int e = 0; e < *remaining; ++e) {
+    GroupSetup setup;
+    setup.y_start = y;
+    setup.a_zero = a_zero_;
+    setup.h_fixed = h_trial;
+    group_.Configure(setup);
+    const Vector* previous = trial_w.empty() ? last_w_ptr() : &trial_w.back();
+    const Vector guess = group_.element(0).InitialGuess(
+        y, h_trial, previous, previous != nullptr ? h_trial : 0.0, z_guess_);
+    const SemismoothNewtonResult solved = newton_.Solve(group_, guess);
+    CountNewton(solved);
+    if (!solved.converged()) {
+      // A fixed-status element that does not converge: look for a switch inside it.
+      trial_failure = "element " + std::to_string(e) +
+                      " with the current statuses did not converge (" + ToString(solved.status) +
+                      ": " + solved.message + "), so a switch was assumed";
+      violation = {true, e, 0.5};
+      break;
+    }
+    violation = StageViolation(group_.element(0), scales, e);
+    const Vector y_next = group_.EndState(solved.solution);
+    if (!violation.found) violation = EndViolation(group_.element(0), y_next, scales, e, &v_end);
+    trial_w.push_back(solved.solution);
+    if (violation.found) break;
+    const Vector& a0 = records.empty() ? boundary_a_ : records.back().a_last;
+    const Vector& b0 = records.empty() ? boundary_b_ : records.back().b_last;
+    records.push_back(Record(solved.solution, h_trial, false, solved, *remaining - e, a0, b0));
+    y = y_next;
+  }
+
+  if (!violation.found) {
+    for (const SolveRecord& record : records) Commit(record);
+    last_w_ = trial_w.back();
+    have_last_w_ = true;
+    last_h_ = h_trial;
+    *remaining = 0;
+    tau_ = step_end;  // exact step end
+    v_ = v_end;
+    z_guess_ = z_last_;
+    return DecideAtBoundary();
+  }
+
+  // A switch inside trial element `violation.element`: re-solve the first m elements as a
+  // group of equal length ending on it (equilibration); if the switch is not confirmed the
+  // group covers the rest of the step.
+  const int e = violation.element;
+  int m = (violation.fraction >= 0.5 || e == 0) ? e + 1 : e;
+  double h_guess = (e + violation.fraction) * h_trial / m;
+  for (int attempt = 0; attempt <= options_.max_event_retries; ++attempt) {
+    if (attempt > 0) ++result_.stats.num_event_retries;
+    GroupSetup setup;
+    setup.y_start = y_start;
+    setup.a_zero = a_zero_;
+    setup.elements = m;
+    setup.with_event = true;
+    setup.h_max = rest / m;
+    setup.h_reference = h_trial;
+    setup.indicator_weights = scales.cwiseInverse();
+    setup.indicator_power = powers;
+    group_.Configure(setup);
+    const Vector guess = GroupGuess(trial_w, y_start, h_trial, m, h_guess, v_end);
+    const SemismoothNewtonResult solved = newton_.Solve(group_, guess);
+    CountNewton(solved);
+    ++result_.stats.num_groups;
+    if (!solved.converged()) {
+      // Other element counts and shorter guesses, alternately.
+      if (attempt % 2 == 0 && m > 1) {
+        --m;
+      } else {
+        h_guess *= 0.5;
+      }
+      continue;
+    }
+    const Vector& w = solved.solution;
+    const double h = group_.H(w);
+    // Cross complementarity inside the group: no continuous free side negative at a stage,
+    // no indicator negative at an interior element boundary.
+    Violation inner;
+    Vector v_inner = w.segment(group_.v_offset(), nz_);
+    for (int k = 0; k < m && !inner.found; ++k) {
+      inner = StageViolation(group_.element(k), scales, k);
+      if (!inner.found && k + 1 < m) {
+        inner = EndViolation(group_.element(k), group_.ElementStart(w, k + 1), scales, k, &v_inner);
+      }
+    }
+    if (inner.found) {
+      // An earlier switch inside the group: aim at it.
+      const double offset = (inner.element + inner.fraction) * h;
+      m = std::clamp(static_cast<int>(std::lround(offset / h_trial)), 1, e + 1);
+      h_guess = offset / m;
+      continue;
+    }
+    const bool switched = h < setup.h_max * (1.0 - 1e-12);
+    Commit(Record(w, h, switched, solved, *remaining, boundary_a_, boundary_b_));
+    last_w_ = w.segment(group_.element_offset(m - 1), group_.element_size());
+    have_last_w_ = true;
+    last_h_ = h;
+    v_ = w.segment(group_.v_offset(), nz_);
+    if (!switched) {
+      *remaining = 0;
+      tau_ = step_end;
+      z_guess_ = z_last_;
+      return DecideAtBoundary();
+    }
+    ++result_.stats.num_switches;
+    *remaining = std::max(1, *remaining - m);
+    const std::vector<bool> previous = a_zero_;
+    if (!Decide(y_[system_.clock_index()], &previous)) return true;
+    z_guess_ = ConsistentGuess(y_, v_);
+    have_last_w_ = false;  // no extrapolation across a switch
+    return true;
+  }
+  Fail(FesdStatus::kEventLocationFailure, y_start[system_.clock_index()],
+       (trial_failure.empty() ? std::string("a switch was detected") : trial_failure) +
+           " within the next " + std::to_string(rest) +
+           " but no group of equal elements ending on it converged in " +
+           std::to_string(options_.max_event_retries) + " retries");
+  return true;
+}
+
+// A system without algebraic unknowns (no effects) and no sensitivities cannot switch: every
+// element is a plain Radau IIA step, solved by the same kernel as the smooth Radau IIA
+// integrator (stage increments extrapolated from the previous element's collocation
+// polynomial), and committed at once.
+void FesdRun::AdvanceSmooth(double step_end, int remaining) {
+  internal::SmoothCollocationSolver::Stopping stopping;
+  stopping.tolerance = options_.newton.tolerance;
+  stopping.max_iterations = options_.newton.max_iterations;
+  const double h = (step_end - tau_) / remaining;
+  for (int e = 0; e < remaining && !failed(); ++e) {
+    if (have_last_w_ && last_h_ > 0.0) {
+      ExtrapolatedIncrements(h, &smooth_z_);
+    } else {
+      smooth_z_.setZero(ny_, s_);
+    }
+    const long factorizations = smooth_->num_factorizations();
+    int iterations = 0;
+    const auto outcome = smooth_->Solve(h, y_, stopping, &smooth_z_, &iterations);
+    result_.stats.num_newton_iterations += iterations;
+    factorizations_ += smooth_->num_factorizations() - factorizations;
+    if (outcome != internal::SmoothCollocationSolver::Outcome::kConverged) {
+      Fail(FesdStatus::kNewtonFailure, y_[system_.clock_index()],
+           "Newton on the collocation equations of an element of length " + std::to_string(h) +
+               " did not converge");
+      return;
+    }
+    if (options_.record_stages) {
+      for (int i = 0; i < s_; ++i) {
+        const Vector yi = y_ + smooth_z_.col(i);
+        result_.stage_trajectory.Append(yi[system_.clock_index()], yi.head(nx_), Vector(), h);
+      }
+    }
+    y_ += smooth_z_.col(s_ - 1);
+    FesdElement element;
+    element.t_start = tau_;
+    element.length = h;
+    element.newton_iterations = iterations;
+    result_.elements.push_back(element);
+    result_.stats.min_element_length = std::min(result_.stats.min_element_length, h);
+    ++result_.stats.num_elements;
+    tau_ += h;
+    last_z_matrix_ = smooth_z_;
+    last_h_ = h;
+    have_last_w_ = true;
+    if (options_.record_trajectory) {
+      result_.trajectory.Append(y_[system_.clock_index()], y_.head(nx_), Vector(), h);
+    }
+    if (progress_) progress_(y_[system_.clock_index()]);
+  }
+  tau_ = step_end;
+}
+
+// Stage increments from the previous element's collocation polynomial (weights cached for
+// the step-length ratio).
+void FesdRun::ExtrapolatedIncrements(double h, Matrix* z) {
+  const double ratio = h / last_h_;
+  if (ratio != extrapolation_ratio_) {
+    extrapolation_ratio_ = ratio;
+    extrapolation_.resize(s_, s_);
+    for (int i = 0; i < s_; ++i) {
+      extrapolation_.col(i) = tableau_.InterpolationWeights(1.0 + tableau_.c[i] * ratio);
+      extrapolation_(s_ - 1, i) -= 1.0;  // minus Z_s: increments from the new start
+    }
+  }
+  z->noalias() = last_z_matrix_ * extrapolation_;
+}
+
+// Guess of a group of m elements of length h_guess from the trial elements.
+Vector FesdRun::GroupGuess(const std::vector<Vector>& trial_w, const Vector& y_start,
+                           double h_trial, int m, double h_guess, const Vector& v_end) {
+  Vector w = Vector::Zero(group_.num_unknowns());
+  const internal::CollocationStages& stages = group_.element(0);
+  for (int e = 0; e < m; ++e) {
+    Vector element;
+    if (e < static_cast<int>(trial_w.size())) {
+      element = trial_w[static_cast<std::size_t>(e)];
+      // Stage increments scale with the element length to first order.
+      for (int i = 0; i < s_; ++i)
+        element.segment(stages.state_offset(i), ny_) *= h_guess / h_trial;
+    } else {
+      element = stages.InitialGuess(y_start, h_guess, nullptr, 0.0, z_guess_);
+    }
+    w.segment(group_.element_offset(e), group_.element_size()) = element;
+  }
+  w.segment(group_.v_offset(), nz_) = v_end;
+  w[group_.h_index()] = h_guess;
+  return w;
+}
+
+// True if pair k's free side (the side its status does not keep at zero) is a jump variable
+// (an active constraint's multiplier, a sliding mode's theta or alpha). Stage values of those
+// are order-s approximations of the consistent (velocity-level) values; they are never
+// used for sign decisions.
+bool FesdRun::FreeSideIsJump(int k) const {
+  const bool continuous_a =
+      system_.pairs()[static_cast<std::size_t>(k)].continuous == ContinuousSide::kA;
+  return a_zero_[static_cast<std::size_t>(k)] == continuous_a;
+}
+
+// The first stage at which a continuous free side is negative beyond tolerance, with the
+// crossing fraction (jump free sides are checked at element ends, see EndViolation).
+Violation FesdRun::StageViolation(const internal::CollocationStages& stages, const Vector& scales,
+                                  int element) const {
+  Violation first;
+  for (int k = 0; k < np_; ++k) {
+    if (FreeSideIsJump(k)) continue;
+    const bool a_zero = a_zero_[static_cast<std::size_t>(k)];
+    double previous_value = std::numeric_limits<double>::quiet_NaN();
+    double previous_c = 0.0;
+    for (int i = 0; i < s_; ++i) {
+      const double free = a_zero ? stages.stage(i).B[k] : stages.stage(i).A[k];
+      if (free < -options_.event_tolerance * scales[k]) {
+        double fraction = tableau_.c[i];
+        if (std::isfinite(previous_value) && previous_value > free) {
+          fraction =
+              previous_c + (tableau_.c[i] - previous_c) * previous_value / (previous_value - free);
+        }
+        fraction = std::clamp(fraction, 1e-3, 1.0);
+        if (!first.found || fraction < first.fraction) first = {true, element, fraction};
+        break;
+      }
+      previous_value = free;
+      previous_c = tableau_.c[i];
+    }
+  }
+  return first;
+}
+
+// Event indicators at the end state y of an element (velocity-level values solved from v,
+// which is updated): the first negative one beyond tolerance is a switch in the element.
+Violation FesdRun::EndViolation(const internal::CollocationStages& stages, const Vector& y,
+                                const Vector& scales, int element, Vector* v) const {
+  Violation violation;
+  Vector solved;
+  if (np_ == 0 || !system_.SolveVelocityLevel(y, a_zero_, *v, &solved)) return violation;
+  *v = solved;
+  IndicatorEvaluation end;
+  system_.EvaluateEventIndicators(y, solved, a_zero_, Derivatives::kNone, &end);
+  for (int k = 0; k < np_ && !violation.found; ++k) {
+    if (end.values[k] < -options_.event_tolerance * scales[k]) {
+      violation = {true, element, FreeSideIsJump(k) ? 1.0 : EndCrossing(stages, k, end.values[k])};
+    }
+  }
+  return violation;
+}
+
+// Crossing fraction of pair k between the second-to-last stage and a negative end value.
+double FesdRun::EndCrossing(const internal::CollocationStages& stages, int k,
+                            double end_value) const {
+  if (s_ < 2) return 1.0;
+  const bool a_zero = a_zero_[static_cast<std::size_t>(k)];
+  const double before = a_zero ? stages.stage(s_ - 2).B[k] : stages.stage(s_ - 2).A[k];
+  if (before <= end_value) return 1.0;
+  const double c0 = tableau_.c[s_ - 2];
+  return std::clamp(c0 + (1.0 - c0) * before / (before - end_value), 1e-3, 1.0);
+}
+
+void FesdRun::CountNewton(const SemismoothNewtonResult& solved) {
+  result_.stats.num_newton_iterations += solved.stats.iterations;
+  factorizations_ += solved.stats.factorizations;
+}
+
+}  // namespace moreau::internal

@@ -1,0 +1,161 @@
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+#include "fesd_run.hpp"
+#include "moreau/complementarity/ncp_function.hpp"
+#include "moreau/core/error.hpp"
+#include "moreau/integrators/simulate.hpp"
+#include "moreau/model/projection.hpp"
+
+namespace moreau::internal {
+
+// Captures the elements of the system just solved (group_ holds its stage data and Newton
+// its factorization). a0, b0: pair sides at the last stage before it (boundary values).
+// `remaining` is the element count that fixed the lengths (h = rest / remaining).
+SolveRecord FesdRun::Record(const Vector& w, double h, bool ends_at_switch,
+                            const SemismoothNewtonResult& solved, int remaining, const Vector& a0,
+                            const Vector& b0) {
+  const GroupSetup& setup = group_.setup();
+  const int m = setup.elements;
+  SolveRecord record;
+  record.frozen = system_.TimeFrozen(a_zero_);
+  if (options_.sensitivities) record.transfer = LocalTransfer(w, m, remaining);
+  Vector y0 = setup.y_start;
+  Vector a_previous = a0, b_previous = b0;
+  for (int e = 0; e < m; ++e) {
+    const internal::CollocationStages& stages = group_.element(e);
+    const auto w_e = w.segment(group_.element_offset(e), group_.element_size());
+    FesdElement element;
+    element.length = h;
+    element.physical_start = y0[system_.clock_index()];
+    element.frozen = record.frozen;
+    element.ends_at_switch = ends_at_switch && e + 1 == m;
+    element.newton_iterations = static_cast<int>(solved.stats.iterations);
+    element.newton_residual = solved.residual_norm;
+    Certificates(stages, y0, w_e, a_previous, b_previous, &element);
+    record.elements.push_back(element);
+    if (options_.record_stages && !record.frozen) {
+      for (int i = 0; i < s_; ++i) {
+        const Vector yi = y0 + w_e.segment(stages.state_offset(i), ny_);
+        record.stage_points.Append(yi[system_.clock_index()], yi.head(nx_),
+                                   stages.Algebraic(w_e, i), h);
+      }
+    }
+    y0 = stages.EndState(y0, w_e);
+    a_previous = stages.stage(s_ - 1).A;
+    b_previous = stages.stage(s_ - 1).B;
+    record.z_last = stages.Algebraic(w_e, s_ - 1);
+    if (options_.record_trajectory && e + 1 < m) {
+      record.ends.push_back(y0);
+      record.algebraic.push_back(record.z_last);
+    }
+    record.length += h;
+  }
+  record.y_end = y0;
+  record.a_last = a_previous;
+  record.b_last = b_previous;
+  return record;
+}
+
+void FesdRun::Commit(const SolveRecord& record) {
+  for (std::size_t e = 0; e < record.elements.size(); ++e) {
+    FesdElement element = record.elements[e];
+    element.t_start = tau_;
+    tau_ += element.length;
+    if (record.frozen) result_.stats.frozen_time += element.length;
+    result_.elements.push_back(element);
+    result_.stats.max_cross_complementarity =
+        std::max(result_.stats.max_cross_complementarity, element.cross_complementarity);
+    result_.stats.max_complementarity =
+        std::max(result_.stats.max_complementarity, element.complementarity);
+    result_.stats.min_element_length = std::min(result_.stats.min_element_length, element.length);
+    ++result_.stats.num_elements;
+    if (options_.record_trajectory) {
+      // Interior ends of a group were stored; the last end is the record's y_end. Frozen
+      // elements leave the physical trajectory (x and the clock do not move).
+      const bool last = e + 1 == record.elements.size();
+      const Vector& y = last ? record.y_end : record.ends[e];
+      const Vector& z = last ? record.z_last : record.algebraic[e];
+      if (!record.frozen) {
+        result_.trajectory.Append(y[system_.clock_index()], y.head(nx_), z, element.length);
+      }
+      if (system_.time_freezing()) {
+        result_.numerical_trajectory.Append(tau_, y, z, element.length);
+      }
+    }
+  }
+  for (std::size_t i = 0; i < record.stage_points.size(); ++i) {
+    result_.stage_trajectory.Append(record.stage_points.t[i], record.stage_points.x[i],
+                                    record.stage_points.algebraic[i], record.stage_points.step[i]);
+  }
+  y_ = record.y_end;
+  z_last_ = record.z_last;
+  boundary_a_ = record.a_last;
+  boundary_b_ = record.b_last;
+  if (options_.sensitivities) ApplyTransfer(record.transfer);
+  if (progress_) progress_(y_[system_.clock_index()]);
+}
+
+// Free side of every pair at a stage state: continuous sides from the stage values, jump
+// sides consistent with the stage state (velocity level), see FreeSideIsJump.
+Vector FesdRun::ConsistentFreeSides(const Vector& y, const PointEvaluation& stage,
+                                    const Vector& z) const {
+  Vector free(np_);
+  bool jump = false;
+  for (int k = 0; k < np_; ++k) {
+    free[k] = a_zero_[static_cast<std::size_t>(k)] ? stage.B[k] : stage.A[k];
+    jump |= FreeSideIsJump(k);
+  }
+  if (!jump) return free;
+  Vector v;
+  if (!system_.SolveVelocityLevel(y, a_zero_, z, &v)) {
+    free.setConstant(-std::numeric_limits<double>::infinity());  // no consistent value
+    return free;
+  }
+  IndicatorEvaluation indicators;
+  system_.EvaluateEventIndicators(y, v, a_zero_, Derivatives::kNone, &indicators);
+  for (int k = 0; k < np_; ++k) {
+    if (FreeSideIsJump(k)) free[k] = indicators.values[k];
+  }
+  return free;
+}
+
+// Certificates of an element (see FesdElement): the enforced side of every pair at the
+// stages and at the start boundary (its continuous side) against the consistent free sides.
+void FesdRun::Certificates(const internal::CollocationStages& stages, const Vector& y0,
+                           const ConstVectorRef& w_e, const Vector& a0, const Vector& b0,
+                           FesdElement* element) const {
+  double cross = 0.0, stage_residual = 0.0;
+  std::vector<Vector> free(static_cast<std::size_t>(s_));
+  for (int i = 0; i < s_; ++i) {
+    const Vector yi = y0 + w_e.segment(stages.state_offset(i), ny_);
+    free[static_cast<std::size_t>(i)] =
+        ConsistentFreeSides(yi, stages.stage(i), stages.Algebraic(w_e, i));
+  }
+  for (int k = 0; k < np_; ++k) {
+    const bool a_zero = a_zero_[static_cast<std::size_t>(k)];
+    const bool continuous_a =
+        system_.pairs()[static_cast<std::size_t>(k)].continuous == ContinuousSide::kA;
+    const double boundary = continuous_a ? a0[k] : b0[k];
+    for (int j = 0; j < s_; ++j) {
+      const PointEvaluation& sj = stages.stage(j);
+      const double free_j = free[static_cast<std::size_t>(j)][k];
+      const double enforced_j = a_zero ? sj.A[k] : sj.B[k];
+      stage_residual = std::max(stage_residual, ComplementarityResidual(enforced_j, free_j));
+      // The jump side at stage j: enforced (zero) or free (consistent value).
+      const double jump_j = FreeSideIsJump(k) ? free_j : enforced_j;
+      cross = std::max(cross, ComplementarityResidual(boundary, jump_j));
+      for (int i = 0; i < s_; ++i) {
+        const double enforced_i = a_zero ? stages.stage(i).A[k] : stages.stage(i).B[k];
+        cross = std::max(cross, ComplementarityResidual(enforced_i, free_j));
+      }
+    }
+  }
+  element->cross_complementarity = cross;
+  element->complementarity = stage_residual;
+}
+
+}  // namespace moreau::internal

@@ -1,0 +1,242 @@
+#pragma once
+// The state of one FESD run (docs/fesd-formulation.md, section 5) and the steps of its
+// solution procedure. Private to moreau::integrators; split by concern:
+//   fesd.cpp               options, the run loop over steps and segments, the result
+//   fesd_advance.cpp       one advance: trial elements, switch detection, group solves
+//   fesd_switches.cpp      status decisions at t0, at switches and at step boundaries
+//   fesd_record.cpp        committing solved elements: trajectories and certificates
+//   fesd_sensitivities.cpp implicit-function-theorem transfers and saltation
+
+#include <chrono>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "../common/smooth_collocation.hpp"
+#include "group_system.hpp"
+#include "moreau/integrators/fesd.hpp"
+#include "moreau/newton/semismooth_newton.hpp"
+
+namespace moreau::internal {
+
+// Where a free side first turned negative in a solved element: the fraction of the element at
+// which it crossed zero (linear interpolation between the last nonnegative sample and the first
+// negative one).
+struct Violation {
+  bool found = false;
+  int element = 0;
+  double fraction = 1.0;
+};
+
+// The local transfer of one solved element or group: [dy_end; dtau_end] as a linear map of
+// [dy_start; dtau_start] (state), of dp and of du (implicit function theorem).
+struct Transfer {
+  Matrix state;       // (n_y + 1) x (n_y + 1)
+  Matrix parameters;  // (n_y + 1) x n_p
+  Matrix inputs;      // (n_y + 1) x n_u
+};
+
+// Everything a solved element or group contributes to the result, captured while its stage
+// data and Newton factorization are available; committed if the solution is kept.
+struct SolveRecord {
+  std::vector<FesdElement> elements;
+  std::vector<Vector> ends;       // state y at every element end (with record_trajectory)
+  std::vector<Vector> algebraic;  // last-stage algebraic values of every element (idem)
+  Trajectory stage_points;        // every stage (with record_stages)
+  Vector y_end;
+  Vector z_last;
+  Vector a_last, b_last;  // pair sides at the last stage (next boundary values)
+  double length = 0.0;    // total integration time covered
+  bool frozen = false;    // physical time frozen (a relay jumping): not in physical outputs
+  Transfer transfer;
+};
+
+class FesdRun {
+ public:
+  FesdRun(const Scene& scene, const FesdOptions& options, const ProgressCallback& progress)
+      : FesdRun(nullptr, scene, options, progress) {}
+  // Runs on an existing lowered system (FesdIntegrator: lowered once, run many times).
+  FesdRun(LoweredSystem* system, const FesdOptions& options, const ProgressCallback& progress)
+      : FesdRun(system, system->scene(), options, progress) {}
+
+ private:
+  FesdRun(LoweredSystem* external, const Scene& scene, const FesdOptions& options,
+          const ProgressCallback& progress)
+      : options_(options),
+        progress_(progress),
+        owned_(external ? std::nullopt
+                        : std::make_optional<LoweredSystem>(scene, Lowering(options))),
+        system_(external ? *external : *owned_),
+        group_(&system_, options.stages),
+        newton_(NewtonOptions(options)),
+        tableau_(RadauIIA(options.stages)),
+        s_(options.stages),
+        nx_(scene.num_states()),
+        ny_(system_.num_states()),
+        nz_(system_.num_algebraic()),
+        np_(system_.num_pairs()) {
+    if (nz_ == 0 && !options.sensitivities) {
+      smooth_ = std::make_unique<internal::SmoothCollocationSolver>(&system_, options.stages,
+                                                                    options.newton.linear_solver);
+    }
+  }
+
+ public:
+  FesdResult Run();
+
+ private:
+  static SemismoothNewtonOptions NewtonOptions(const FesdOptions& options);
+
+  static LoweringOptions Lowering(const FesdOptions& options);
+
+  bool failed() const { return result_.status != FesdStatus::kSuccess; }
+
+  void Integrate();
+
+  // Time-freezing (hysteresis relays): the integration variable is numerical time tau and the
+  // clock runs at rate 1, or 0 while a relay jumps. A step that starts while physical time
+  // runs has length (target - clock)/n, n = ceil((target - clock)/H), so that the clock lands
+  // on the next control breakpoint (or tf) unless something switches; a step that starts
+  // frozen has length H (the clock stands still). After a switch a new step starts from the
+  // current clock. Sensitivities: row n_y of sensitivity_ tracks tau - step_end, whose
+  // derivative at a step start is d(clock)/n (running) or 0 (frozen).
+  void IntegrateTimeFreezing();
+
+  // The clock counts as having reached a target within this relative distance (it lands on
+  // it up to the Newton tolerance times the step length).
+  static constexpr double kClockTolerance = 1e-11;
+
+  FesdResult Finish(std::chrono::steady_clock::time_point start);
+
+  void Fail(FesdStatus status, double t, const std::string& reason);
+
+  // Decides the statuses at y_ (the slow solution) and records the events against `previous`
+  // (null at t0). Returns false, with the status set, if no continuation exists.
+  bool Decide(double t, const std::vector<bool>* previous);
+
+  // A given initial state outside the moving sets jumps onto them (the sweeping process's
+  // projection at t0); with sensitivities the transfer of the projection (implicit function
+  // theorem on its complementarity system) starts the chain. Returns false on failure.
+  bool ProjectInitialState();
+
+  // Index in y of a relay's memory state (relays follow the scene states in order).
+  int RelayMemoryIndex(const RelaySignal& signal) const;
+
+  // Algebraic guess at y: consistent values of the continuous variables from y, jump
+  // variables (theta, alpha, multipliers) from the velocity-level values v.
+  Vector ConsistentGuess(const Vector& y, const Vector& v) const;
+
+  // Advances from tau_ towards step_end with `remaining` nominal elements: a trial pass of
+  // fixed-length elements; if a free side turns negative, a group solve of equal elements that
+  // ends on the switch. Returns true if a switch ended the advance.
+  bool Advance(double step_end, int* remaining);
+
+  const Vector* last_w_ptr() const { return have_last_w_ ? &last_w_ : nullptr; }
+
+  // A system without algebraic unknowns (no effects) and no sensitivities cannot switch: every
+  // element is a plain Radau IIA step, solved by the same kernel as the smooth Radau IIA
+  // integrator (stage increments extrapolated from the previous element's collocation
+  // polynomial), and committed at once.
+  void AdvanceSmooth(double step_end, int remaining);
+
+  // Stage increments from the previous element's collocation polynomial (weights cached for
+  // the step-length ratio).
+  void ExtrapolatedIncrements(double h, Matrix* z);
+
+  // After a stretch without a switch: a free side that is zero at its end (a switch exactly
+  // on a step boundary, or at the final time) is decided there.
+  bool DecideAtBoundary();
+
+  // A switch found exactly on a step boundary was not located by an event equation, so the
+  // local transfers miss how its time moves with the data. The saltation matrix restores it:
+  // with iota the indicator of pair k under the old statuses (its total derivative includes
+  // the velocity-level values, v = v(y, p, u) from E(y, v, p, u) = 0), the switch time moves by
+  // dtau_s = -(diota)/(diota/dtau), diota/dtau = iota_y F_-, and the state at the boundary by
+  // (F_- - F_+) dtau_s, F_-/F_+ the fields before and after the switch.
+  void ApplySaltation(const std::vector<bool>& before, const Vector& v_before, int k);
+
+  // Guess of a group of m elements of length h_guess from the trial elements.
+  Vector GroupGuess(const std::vector<Vector>& trial_w, const Vector& y_start, double h_trial,
+                    int m, double h_guess, const Vector& v_end);
+
+  // True if pair k's free side (the side its status does not keep at zero) is a jump variable
+  // (an active constraint's multiplier, a sliding mode's theta or alpha). Stage values of those
+  // are order-s approximations of the consistent (velocity-level) values; they are never
+  // used for sign decisions.
+  bool FreeSideIsJump(int k) const;
+
+  // The first stage at which a continuous free side is negative beyond tolerance, with the
+  // crossing fraction (jump free sides are checked at element ends, see EndViolation).
+  Violation StageViolation(const internal::CollocationStages& stages, const Vector& scales,
+                           int element) const;
+
+  // Event indicators at the end state y of an element (velocity-level values solved from v,
+  // which is updated): the first negative one beyond tolerance is a switch in the element.
+  Violation EndViolation(const internal::CollocationStages& stages, const Vector& y,
+                         const Vector& scales, int element, Vector* v) const;
+
+  // Crossing fraction of pair k between the second-to-last stage and a negative end value.
+  double EndCrossing(const internal::CollocationStages& stages, int k, double end_value) const;
+
+  void CountNewton(const SemismoothNewtonResult& solved);
+
+  // Captures the elements of the system just solved (group_ holds its stage data and Newton
+  // its factorization). a0, b0: pair sides at the last stage before it (boundary values).
+  // `remaining` is the element count that fixed the lengths (h = rest / remaining).
+  SolveRecord Record(const Vector& w, double h, bool ends_at_switch,
+                     const SemismoothNewtonResult& solved, int remaining, const Vector& a0,
+                     const Vector& b0);
+
+  void Commit(const SolveRecord& record);
+
+  // Free side of every pair at a stage state: continuous sides from the stage values, jump
+  // sides consistent with the stage state (velocity level), see FreeSideIsJump.
+  Vector ConsistentFreeSides(const Vector& y, const PointEvaluation& stage, const Vector& z) const;
+
+  // Certificates of an element (see FesdElement): the enforced side of every pair at the
+  // stages and at the start boundary (its continuous side) against the consistent free sides.
+  void Certificates(const internal::CollocationStages& stages, const Vector& y0,
+                    const ConstVectorRef& w_e, const Vector& a0, const Vector& b0,
+                    FesdElement* element) const;
+
+  // --- sensitivities ------------------------------------------------------------------------
+  void InitializeSensitivities();
+
+  // Implicit function theorem on the converged system R(w; y_start, tau_start, p, u) = 0:
+  // dw = -R_w^{-1} (R_y dy_start + R_tau dtau_start + R_p dp + R_u du), with R_w the generalized
+  // Jacobian that Newton factorized at the solution. The element lengths depend on tau_start
+  // through h = rest / count (fixed elements), h_max = rest / m and h_ref = rest / remaining.
+  Transfer LocalTransfer(const Vector& w, int group_elements, int remaining);
+
+  void ApplyTransfer(const Transfer& transfer);
+
+  FesdOptions options_;
+  ProgressCallback progress_;
+  std::optional<LoweredSystem> owned_;  // empty when running on an external system
+  LoweredSystem& system_;
+  GroupSystem group_;
+  SemismoothNewton newton_;
+  const RadauTableau& tableau_;
+  int s_, nx_, ny_, nz_, np_;
+  FesdResult result_;
+  Vector y_;
+  double tau_ = 0.0;
+  std::vector<bool> a_zero_;
+  Vector v_;
+  Vector z_guess_;  // algebraic guess for the next element
+  Vector z_last_;
+  Vector boundary_a_, boundary_b_;  // pair sides at the last stage of the previous element
+  Vector last_w_;                   // last committed element (for extrapolated guesses)
+  bool have_last_w_ = false;
+  double last_h_ = 0.0;
+  std::vector<double> segment_ends_;
+  int segment_ = 0;
+  long factorizations_ = 0;
+  Matrix sensitivity_;                                         // d(y, tau) / d(x0, p, u)
+  std::unique_ptr<internal::SmoothCollocationSolver> smooth_;  // elements without pairs
+  Matrix smooth_z_, last_z_matrix_, extrapolation_;
+  double extrapolation_ratio_ = -1.0;
+};
+
+}  // namespace moreau::internal
