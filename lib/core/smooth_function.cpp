@@ -207,6 +207,65 @@ void SmoothFunction::WeightedHessian(const ConstVectorRef& x, const ConstVectorR
   impl_->WeightedHessian(x, u, t, p, wrt, weights, hess);
 }
 
+void SmoothFunction::SparseJacobian(const ConstVectorRef& x, const ConstVectorRef& u, double t,
+                                    const ConstVectorRef& p, Wrt wrt, Vector* out,
+                                    SparseMatrix* jac, const std::vector<int>* rows) const {
+  RequireNonEmpty(*this);
+  impl_->SparseJacobian(x, u, t, p, wrt, out, jac, rows);
+}
+
+void SmoothFunction::SparseWeightedHessian(const ConstVectorRef& x, const ConstVectorRef& u,
+                                           double t, const ConstVectorRef& p, Wrt wrt,
+                                           const ConstVectorRef& weights, SparseMatrix* hess,
+                                           const std::vector<int>* rows) const {
+  RequireNonEmpty(*this);
+  RequireArgument(weights.size() == impl_->num_outputs(), "function '", impl_->name(),
+                  "': Hessian weights need ", impl_->num_outputs(), " entries, got ",
+                  weights.size());
+  impl_->SparseWeightedHessian(x, u, t, p, wrt, weights, hess, rows);
+}
+
+// Reference implementation from the dense derivatives: every entry of the selected rows is
+// stored (a dense pattern, trivially the same at every point). Implementations that detect
+// the sparsity of the function override it.
+void SmoothFunction::Concept::SparseJacobian(const ConstVectorRef& x, const ConstVectorRef& u,
+                                             double t, const ConstVectorRef& p, Wrt wrt,
+                                             Vector* out, SparseMatrix* jac,
+                                             const std::vector<int>* rows) {
+  Matrix dense;
+  Jacobian(x, u, t, p, wrt, out, &dense);
+  std::vector<Eigen::Triplet<double, int>> entries;
+  for (int j = 0; j < dense.cols(); ++j) {
+    if (rows == nullptr) {
+      for (int i = 0; i < dense.rows(); ++i) entries.emplace_back(i, j, dense(i, j));
+    } else {
+      for (int i : *rows) entries.emplace_back(i, j, dense(i, j));
+    }
+  }
+  jac->resize(dense.rows(), dense.cols());
+  jac->setFromTriplets(entries.begin(), entries.end());
+  jac->makeCompressed();
+}
+
+void SmoothFunction::Concept::SparseWeightedHessian(
+    const ConstVectorRef& x, const ConstVectorRef& u, double t, const ConstVectorRef& p, Wrt wrt,
+    const ConstVectorRef& weights, SparseMatrix* hess, const std::vector<int>* rows) {
+  Vector selected = weights;
+  if (rows != nullptr) {
+    selected.setZero();
+    for (int k : *rows) selected[k] = weights[k];
+  }
+  Matrix dense;
+  WeightedHessian(x, u, t, p, wrt, selected, &dense);
+  hess->resize(dense.rows(), dense.cols());
+  std::vector<Eigen::Triplet<double, int>> entries;
+  for (int j = 0; j < dense.cols(); ++j) {
+    for (int i = 0; i < dense.rows(); ++i) entries.emplace_back(i, j, dense(i, j));
+  }
+  hess->setFromTriplets(entries.begin(), entries.end());
+  hess->makeCompressed();
+}
+
 bool SmoothFunction::has_sparse_state_jacobian() const {
   return impl_ && impl_->has_sparse_state_jacobian();
 }
@@ -252,6 +311,31 @@ class SparseStateFunction final : public SmoothFunction::Concept {
     ThrowInvalidArgument("function '", name_,
                          "' has a hand-written Jacobian only; second derivatives are not "
                          "available (write it as a generic lambda instead)");
+  }
+  // The hand-written dg/dx in the x columns; u, t and p columns are empty (g depends on x only).
+  void SparseJacobian(const ConstVectorRef& x, const ConstVectorRef& u, double t,
+                      const ConstVectorRef& p, Wrt wrt, Vector* out, SparseMatrix* jac,
+                      const std::vector<int>* rows) override {
+    SparseMatrix jx;
+    SparseStateJacobian(x, u, t, p, out, &jx);
+    const int nx = static_cast<int>(x.size());
+    jac->resize(num_outputs_,
+                wrt.Columns(nx, static_cast<int>(u.size()), static_cast<int>(p.size())));
+    std::vector<char> keep(static_cast<std::size_t>(num_outputs_), rows == nullptr ? 1 : 0);
+    if (rows != nullptr) {
+      for (int k : *rows) keep[static_cast<std::size_t>(k)] = 1;
+    }
+    std::vector<Eigen::Triplet<double, int>> entries;
+    if (wrt.x) {
+      for (int j = 0; j < jx.outerSize(); ++j) {
+        for (SparseMatrix::InnerIterator it(jx, j); it; ++it) {
+          if (keep[static_cast<std::size_t>(it.row())])
+            entries.emplace_back(it.row(), j, it.value());
+        }
+      }
+    }
+    jac->setFromTriplets(entries.begin(), entries.end());
+    jac->makeCompressed();
   }
   bool has_sparse_state_jacobian() const override { return true; }
   void SparseStateJacobian(const ConstVectorRef& x, const ConstVectorRef& u, double t,

@@ -132,6 +132,26 @@ class SmoothFunction {
   void WeightedHessian(const ConstVectorRef& x, const ConstVectorRef& u, double t,
                        const ConstVectorRef& p, Wrt wrt, const ConstVectorRef& weights,
                        Matrix* hess) const;
+  /// Sparse exact derivatives, for large models (docs/sparse-derivatives.md).
+  ///
+  /// out = g(x, u, t, p) (all outputs) and jac = dg/d(selected blocks) as a compressed
+  /// column-major sparse matrix (num_outputs() rows; columns ordered as in Wrt). Only the rows
+  /// listed in `rows` (sorted, unique; nullptr: every row) are computed; the other rows of jac
+  /// are empty. The stored entries are the structurally nonzero ones of those rows (entries
+  /// that happen to vanish at this point are stored as zeros), so the pattern of jac is the
+  /// same at every point for the same (wrt, rows): a sparse factorization's symbolic analysis
+  /// can be reused.
+  void SparseJacobian(const ConstVectorRef& x, const ConstVectorRef& u, double t,
+                      const ConstVectorRef& p, Wrt wrt, Vector* out, SparseMatrix* jac,
+                      const std::vector<int>* rows = nullptr) const;
+  /// hess = sum over k in `rows` (nullptr: all outputs) of weights_k d^2 g_k / d(selected)^2,
+  /// symmetric with both triangles stored, as a compressed column-major sparse matrix whose
+  /// pattern is the union of the second-derivative patterns of the outputs in `rows`
+  /// (independent of the weights and of the point). Outputs with weight zero cost no
+  /// derivative work.
+  void SparseWeightedHessian(const ConstVectorRef& x, const ConstVectorRef& u, double t,
+                             const ConstVectorRef& p, Wrt wrt, const ConstVectorRef& weights,
+                             SparseMatrix* hess, const std::vector<int>* rows = nullptr) const;
   /// True for functions made by MakeSparseStateFunction (hand-written sparse dg/dx).
   bool has_sparse_state_jacobian() const;
   /// out = g and jac_x = dg/dx as a sparse matrix (only if has_sparse_state_jacobian()).
@@ -155,6 +175,13 @@ class SmoothFunction {
     virtual void WeightedHessian(const ConstVectorRef& x, const ConstVectorRef& u, double t,
                                  const ConstVectorRef& p, Wrt wrt, const ConstVectorRef& weights,
                                  Matrix* hess) = 0;
+    virtual void SparseJacobian(const ConstVectorRef& x, const ConstVectorRef& u, double t,
+                                const ConstVectorRef& p, Wrt wrt, Vector* out, SparseMatrix* jac,
+                                const std::vector<int>* rows);
+    virtual void SparseWeightedHessian(const ConstVectorRef& x, const ConstVectorRef& u, double t,
+                                       const ConstVectorRef& p, Wrt wrt,
+                                       const ConstVectorRef& weights, SparseMatrix* hess,
+                                       const std::vector<int>* rows);
     virtual bool has_sparse_state_jacobian() const { return false; }
     virtual void SparseStateJacobian(const ConstVectorRef& /*x*/, const ConstVectorRef& /*u*/,
                                      double /*t*/, const ConstVectorRef& /*p*/, Vector* /*out*/,
