@@ -199,7 +199,8 @@ void ValidatePathConstraints(const Scene& scene, const PathConstraints& dai) {
 // product of the row norms) count as zero: round-off of an exactly singular minor.
 constexpr double kMinorRelativeTolerance = 1e-12;
 
-void ValidateComplementarity(const Scene& scene, const Complementarity& effect) {
+void ValidateComplementarity(const Scene& scene, const Complementarity& effect,
+                             bool check_feasibility) {
   const std::string what = "complementarity system '" + effect.name + "'";
   RequireArgument(!effect.pair_names.empty(), scene.name, ": ", what,
                   " has no pairs (pair_names is empty)");
@@ -208,7 +209,7 @@ void ValidateComplementarity(const Scene& scene, const Complementarity& effect) 
   const int nx = scene.num_states();
   RequireArgument(m <= kMaxComplementarityPairs, scene.name, ": ", what, " has ", m,
                   " pairs; at most ", kMaxComplementarityPairs, " per effect");
-  EvaluateAtStart(scene, effect.output, what + " output g", m);
+  const Vector g = EvaluateAtStart(scene, effect.output, what + " output g", m);
   RequireArgument(!effect.input_matrix.empty(), scene.name, ": ", what,
                   " input matrix B is missing");
   RequireArgument(effect.input_matrix.num_outputs() == nx * m, scene.name, ": ", what,
@@ -216,7 +217,18 @@ void ValidateComplementarity(const Scene& scene, const Complementarity& effect) 
                   " * ", m, " = ", nx * m, " outputs (row-major), got ",
                   effect.input_matrix.num_outputs());
   EvaluateAtStart(scene, effect.input_matrix, what + " input matrix B", nx * m);
-  if (effect.feedthrough.empty()) return;  // D = 0: the index-2 form
+  if (effect.feedthrough.empty()) {
+    // D = 0 (index 2): w = g(x, t) must start nonnegative, as a moving set's c.
+    const double tolerance =
+        kInitialFeasibilityTolerance * std::max(1.0, scene.initial_state.lpNorm<Eigen::Infinity>());
+    for (int k = 0; check_feasibility && k < m; ++k) {
+      RequireArgument(g[k] >= -tolerance, scene.name, ": infeasible initial state: pair '",
+                      effect.pair_names[static_cast<std::size_t>(k)], "' of ", what,
+                      " has w = g = ", g[k], " < 0 at t0 = ", scene.initial_time,
+                      " (without D, w = g(x0, t0) must be >= 0)");
+    }
+    return;
+  }
   RequireArgument(effect.feedthrough.num_outputs() == m * m, scene.name, ": ", what,
                   " feedthrough D ('", effect.feedthrough.name(), "') must have m * m = ", m, " * ",
                   m, " = ", m * m, " outputs (row-major), got ", effect.feedthrough.num_outputs());
@@ -364,7 +376,9 @@ void ValidateScene(const Scene& scene, bool check_initial_feasibility) {
           if constexpr (std::is_same_v<E, SwitchingSurfaces>) ValidateSwitching(scene, e);
           if constexpr (std::is_same_v<E, HysteresisRelay>) ValidateRelay(scene, e);
           if constexpr (std::is_same_v<E, PathConstraints>) ValidatePathConstraints(scene, e);
-          if constexpr (std::is_same_v<E, Complementarity>) ValidateComplementarity(scene, e);
+          if constexpr (std::is_same_v<E, Complementarity>) {
+            ValidateComplementarity(scene, e, check_initial_feasibility);
+          }
         },
         effect);
   }
