@@ -222,13 +222,16 @@ SceneCase Rectifier() {
   // h = t1 / (m 2^k + c) put the first switch at the same fraction of its step on every grid
   // (the later ones follow at pi/omega0 and pi/omega_d, not commensurate with it).
   // Time-stepping: its total error is the state error in volts (its switch times, resolved
-  // to the step, are seconds: 1e-6 against errors of 1e-4 V and more).
+  // to the step, are seconds: 1e-6 against errors of 1e-4 V and more), and the right-hand
+  // side of this index-1 system is continuous at the switches.
+  c.continuous_at_switches = true;
   const double t1 = c.switch_times.front();
-  c.grid = MakeGrid({{t1, 8, 0.3, 5},
+  c.grid = MakeGrid({{t1, 16, 0.3, 5},
                      {{"FESD s=1", {t1, 15, 0.25, 5}},
                       {"FESD s=2", {t1, 8, 0.25, 5}},
                       {"FESD s=3", {t1, 8, 0.25, 4}},
-                      {"FESD s=4", {t1, 2, 0.25, 4}}}});
+                      {"FESD s=4", {t1, 2, 0.25, 4}},
+                      {"time-stepping s=3", {t1, 8, 0.3, 5}}}});
   return c;
 }
 

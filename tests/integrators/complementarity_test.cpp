@@ -75,7 +75,7 @@ TEST(RectifierTest, SwitchTimesMatchTheClosedFormWithFesd) {
     EXPECT_EQ(result.events[k].kind, k % 2 == 0 ? EventKind::kLeave : EventKind::kEnter) << k;
     EXPECT_EQ(result.events[k].what, "diode.D");
   }
-  // The final state too (FESD s = 3 with h = 1e-5 measured 3e-9 V; order 5).
+  // The final state too (FESD s = 3 with h = 1e-5 measured 1.3e-9 V; order 5).
   EXPECT_LE((result.final_state - exact.State(horizon)).lpNorm<Eigen::Infinity>(), 1e-7);
 }
 
@@ -167,7 +167,7 @@ TEST(RectifierTest, IdaMatchesTheClosedForm) {
   const IdaResult result = SimulateIda(RectifierUntil(horizon), IdaOptions::Reference());
   ASSERT_EQ(result.status, IdaStatus::kSuccess) << result.message;
   ASSERT_EQ(result.events.size(), switches.size());
-  // IDA at rtol 1e-12 (measured 4e-15 s for the switches, 4e-10 V for the state).
+  // IDA at rtol 1e-12 (measured 3.1e-15 s for the switches, 6.0e-10 V for the state).
   for (std::size_t k = 0; k < switches.size(); ++k) {
     EXPECT_NEAR(result.events[k].t, switches[k], 1e-9 * exact.Period()) << k;
   }
@@ -242,7 +242,8 @@ TEST(DiodeBridgeTest, CertificatesAndPairedSwitches) {
   const ReferenceSolution reference = ComputeReference(scene, {}, ida);
   ASSERT_EQ(reference.events.size(), result.events.size());
   for (std::size_t k = 0; k < result.events.size(); ++k) {
-    // FESD s = 3, h = 2e-4 (100 steps per source period) against IDA at rtol 1e-12.
+    // FESD s = 3, h = 2e-4 (100 steps per source period) against IDA at rtol 1e-12
+    // (measured: 1.4e-11 s, and 1.6e-9 V for v_L(T)).
     EXPECT_NEAR(result.events[k].t, reference.events[k].t, 1e-8) << k;
   }
   EXPECT_NEAR(result.final_state[0], reference.final_state[0], 1e-7);
@@ -271,7 +272,8 @@ TEST(BuckConverterTest, FesdAgreesWithIdaAcrossControlBreakpoints) {
   ASSERT_GE(result.events.size(), 20u);
   for (std::size_t k = 0; k < result.events.size(); ++k) {
     EXPECT_EQ(result.events[k].kind, reference.events[k].kind) << k;
-    // FESD s = 3 with four steps per PWM period against IDA at rtol 1e-12.
+    // FESD s = 3 with four steps per PWM period against IDA at rtol 1e-12 (measured 8.4e-15 s;
+    // 1.9e-9 V for v_C(T)).
     EXPECT_NEAR(result.events[k].t, reference.events[k].t, 1e-10) << k;
   }
   EXPECT_LE((result.final_state - reference.final_state).lpNorm<Eigen::Infinity>(), 1e-7);
