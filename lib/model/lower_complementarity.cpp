@@ -81,7 +81,7 @@ class ComplementarityBlock final : public LoweredBlock {
     // values, since v holds their rates there.
     const bool consistent = index_one_ && context.velocity_roles != nullptr;
     if (consistent) {
-      ConsistentValues(context, y, Roles(*context.velocity_roles), derivatives);
+      ConsistentValues(Roles(*context.velocity_roles), derivatives);
       lambda_ = lambda_bar_;
     } else {
       lambda_ = z.segment(z0, m_);
@@ -163,7 +163,7 @@ class ComplementarityBlock final : public LoweredBlock {
     MOREAU_ASSERT(context.velocity_roles != nullptr && context.velocity != nullptr,
                   "complementarity curvature terms need the velocity-level roles and values");
     EvaluateFunctions(context, y, derivatives);
-    ConsistentValues(context, y, Roles(*context.velocity_roles), derivatives);
+    ConsistentValues(Roles(*context.velocity_roles), derivatives);
     // (a) second derivatives of (D(y) l)_k along d, l = lambda_bar held.
     Vector weights = Vector::Zero(m_ * m_);
     for (int k = 0; k < m_; ++k) {
@@ -217,7 +217,7 @@ class ComplementarityBlock final : public LoweredBlock {
       roles[static_cast<std::size_t>(k)] =
           a_zero[static_cast<std::size_t>(k0 + k)] ? PairRole::kAZero : PairRole::kBZero;
     }
-    ConsistentValues(context, y, roles, derivatives);
+    ConsistentValues(roles, derivatives);
     const Matrix d = RowMajor(d_values_, m_, m_);
     const Vector w = g_ + d * lambda_bar_;
     Matrix w_jacobian;
@@ -373,8 +373,7 @@ class ComplementarityBlock final : public LoweredBlock {
   // [p]) = -D_SS^{-1} [J_g + J_(D l)]_S with l = lambda_bar held (implicit differentiation of
   // g_S + D_SS lambda_S = 0). A singular D_SS gives NaN (the solver then reports failure).
   // Expects EvaluateFunctions at the same point and derivative level.
-  void ConsistentValues(const BlockContext& context, const ConstVectorRef& /*y*/,
-                        const std::vector<PairRole>& roles, Derivatives derivatives) {
+  void ConsistentValues(const std::vector<PairRole>& roles, Derivatives derivatives) {
     std::vector<int> s;
     for (int k = 0; k < m_; ++k) {
       if (roles[static_cast<std::size_t>(k)] == PairRole::kAZero) s.push_back(k);
@@ -406,7 +405,6 @@ class ComplementarityBlock final : public LoweredBlock {
     for (int i = 0; i < n; ++i) partial_s.row(i) = partial.row(s[static_cast<std::size_t>(i)]);
     const Matrix d_solved = -lu.solve(partial_s);
     for (int i = 0; i < n; ++i) d_lambda_bar_.row(s[static_cast<std::size_t>(i)]) = d_solved.row(i);
-    (void)context;
   }
 
   // Round-off allowance (relative to |g|) when checking a guessed active set.
