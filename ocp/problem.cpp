@@ -168,6 +168,12 @@ AugmentedScene Augment(const OcpProblem& problem) {
       } else if (auto* relay = std::get_if<HysteresisRelay>(&effect)) {
         relay->mode_a = Extend(relay->mode_a);
         relay->mode_b = Extend(relay->mode_b);
+      } else if (auto* complementarity = std::get_if<Complementarity>(&effect)) {
+        // B gains a zero row for q (row-major: m more outputs at the end).
+        const int m = static_cast<int>(complementarity->pair_names.size());
+        complementarity->input_matrix =
+            MakeStackedFunction(complementarity->input_matrix.name() + "+cost",
+                                {complementarity->input_matrix, MakeZeroFunction("cost.zero", m)});
       } else if (auto* set = std::get_if<MovingSet>(&effect)) {
         // The constraints do not depend on q, so E = I leaves it alone; an explicit basis
         // gets a zero row for it.

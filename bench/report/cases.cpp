@@ -214,13 +214,35 @@ SceneCase Hopf() {
   return c;
 }
 
+SceneCase Rectifier() {
+  SceneCase c =
+      FromProblem(testing::RectifierProblem(),
+                  "rectifier: half-wave rectifier, six diode switches in three periods (SI units)");
+  // FESD s = 4 levels off at 1e-14-5e-14 (states of size 10 V): the default floor. Steps
+  // h = t1 / (m 2^k + c) put the first switch at the same fraction of its step on every grid
+  // (the later ones follow at pi/omega0 and pi/omega_d, not commensurate with it).
+  // Time-stepping: its total error is the state error in volts (its switch times, resolved
+  // to the step, are seconds: 1e-6 against errors of 1e-4 V and more), and the right-hand
+  // side of this index-1 system is continuous at the switches.
+  c.continuous_at_switches = true;
+  const double t1 = c.switch_times.front();
+  c.grid = MakeGrid({{t1, 16, 0.3, 5},
+                     {{"FESD s=1", {t1, 15, 0.25, 5}},
+                      {"FESD s=2", {t1, 8, 0.25, 5}},
+                      {"FESD s=3", {t1, 8, 0.25, 4}},
+                      {"FESD s=4", {t1, 2, 0.25, 4}},
+                      {"time-stepping s=3", {t1, 8, 0.3, 5}}}});
+  return c;
+}
+
 struct Entry {
   const char* name;
   SceneCase (*make)();
 };
-const Entry kEntries[] = {{"F1", F1},    {"S2", S2}, {"S3", S3},
-                          {"S4", S4},    {"H1", H1}, {"dai_index2", DaiIndex2},
-                          {"hopf", Hopf}};
+const Entry kEntries[] = {{"F1", F1},     {"S2", S2},
+                          {"S3", S3},     {"S4", S4},
+                          {"H1", H1},     {"dai_index2", DaiIndex2},
+                          {"hopf", Hopf}, {"rectifier", Rectifier}};
 
 }  // namespace
 

@@ -91,6 +91,10 @@ ExpectedOrder Expect(const Method& method, const SceneCase& scene) {
       if (scene.switch_times.empty()) {
         return around(radau, "no switches: 2s-1 = " + std::to_string(radau));
       }
+      if (scene.continuous_at_switches) {
+        const int capped = std::min(radau, 2);
+        return around(capped, "kinks only: min(2s-1, 2) = " + std::to_string(capped));
+      }
       return {1.0, kFirstOrderLow, kFirstOrderHigh,
               "about 1 " + Band(kFirstOrderLow, kFirstOrderHigh)};
     case OrderTheory::kSecondOrder:

@@ -68,6 +68,10 @@ struct SceneCase {
   // Errors at or below this are excluded from order fits (FitOrder's floor), with the reason.
   double floor = 0.0;
   std::string floor_reason;
+  // True where the right-hand side stays continuous across switches (index-1 complementarity:
+  // only its derivative jumps). Time-stepping then loses O(h^2) per switch instead of O(h):
+  // its expected order is min(2s - 1, 2) rather than about 1 (docs/complementarity.md).
+  bool continuous_at_switches = false;
   // Order fits use only step sizes up to this (the asymptotic range), with the reason;
   // tolerance-driven methods are not restricted.
   double fit_max_step = std::numeric_limits<double>::infinity();

@@ -40,6 +40,11 @@ Scene MakeDaiIndex2();
 Scene MakeD2();
 Scene MakeD3();
 
+// Circuits with ideal diodes: complementarity systems (circuits.cpp).
+Scene MakeRectifier();
+Scene MakeDiodeBridge();
+Scene MakeBuckConverter();
+
 // Hard cases: degenerate contacts, separated time scales, Zeno-like switching (hard.cpp).
 Scene MakeHardGrazing();
 Scene MakeHardSimultaneous();

@@ -151,6 +151,7 @@ void FesdRun::Integrate() {
   for (std::size_t segment = 0; segment + 1 < segment_ends_.size() && !failed(); ++segment) {
     segment_ = static_cast<int>(segment);
     system_.SetInputs(scene.InputValues(segment_ends_[segment]));
+    if (segment > 0 && !smooth_ && !DecideAtBreakpoint()) break;
     const std::vector<double> grid =
         FixedStepGrid(segment_ends_[segment], segment_ends_[segment + 1], options_.step_size);
     for (std::size_t index = 1; index < grid.size() && !failed(); ++index) {

@@ -253,8 +253,9 @@ Vector FesdRun::GroupGuess(const std::vector<Vector>& trial_w, const Vector& y_s
 // are order-s approximations of the consistent (velocity-level) values; they are never
 // used for sign decisions.
 bool FesdRun::FreeSideIsJump(int k) const {
-  const bool continuous_a =
-      system_.pairs()[static_cast<std::size_t>(k)].continuous == ContinuousSide::kA;
+  const ContinuousSide side = system_.pairs()[static_cast<std::size_t>(k)].continuous;
+  if (side == ContinuousSide::kBoth) return false;  // index-1 pairs: both sides continuous
+  const bool continuous_a = side == ContinuousSide::kA;
   return a_zero_[static_cast<std::size_t>(k)] == continuous_a;
 }
 

@@ -11,7 +11,8 @@ IntegratorEntry FesdEntry() {
   spec.name = "fesd";
   spec.title = "the FESD integrator";
   spec.description = "FESD Radau IIA: switches on element boundaries, order 2s-1 across switches";
-  spec.supported_effects = {"moving set", "switching surfaces", "hysteresis relay"};
+  spec.supported_effects = {"moving set", "switching surfaces", "hysteresis relay",
+                            "complementarity system"};
   spec.supports_time_scale = true;
   spec.step_unit = "element";
   spec.iteration_unit = "Newton";

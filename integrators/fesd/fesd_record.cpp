@@ -137,17 +137,26 @@ void FesdRun::Certificates(const internal::CollocationStages& stages, const Vect
   }
   for (int k = 0; k < np_; ++k) {
     const bool a_zero = a_zero_[static_cast<std::size_t>(k)];
-    const bool continuous_a =
-        system_.pairs()[static_cast<std::size_t>(k)].continuous == ContinuousSide::kA;
+    const ContinuousSide side = system_.pairs()[static_cast<std::size_t>(k)].continuous;
+    const bool continuous_a = side == ContinuousSide::kA;
     const double boundary = continuous_a ? a0[k] : b0[k];
     for (int j = 0; j < s_; ++j) {
       const PointEvaluation& sj = stages.stage(j);
       const double free_j = free[static_cast<std::size_t>(j)][k];
       const double enforced_j = a_zero ? sj.A[k] : sj.B[k];
       stage_residual = std::max(stage_residual, ComplementarityResidual(enforced_j, free_j));
-      // The jump side at stage j: enforced (zero) or free (consistent value).
-      const double jump_j = FreeSideIsJump(k) ? free_j : enforced_j;
-      cross = std::max(cross, ComplementarityResidual(boundary, jump_j));
+      if (side == ContinuousSide::kBoth) {
+        // Both sides continuous (index-1 pairs): each side at the start against the other
+        // side at stage j.
+        const double a_j = a_zero ? enforced_j : free_j;
+        const double b_j = a_zero ? free_j : enforced_j;
+        cross = std::max(cross, ComplementarityResidual(a0[k], b_j));
+        cross = std::max(cross, ComplementarityResidual(b0[k], a_j));
+      } else {
+        // The jump side at stage j: enforced (zero) or free (consistent value).
+        const double jump_j = FreeSideIsJump(k) ? free_j : enforced_j;
+        cross = std::max(cross, ComplementarityResidual(boundary, jump_j));
+      }
       for (int i = 0; i < s_; ++i) {
         const double enforced_i = a_zero ? stages.stage(i).A[k] : stages.stage(i).B[k];
         cross = std::max(cross, ComplementarityResidual(enforced_i, free_j));

@@ -148,6 +148,12 @@ class FesdRun {
   // on a step boundary, or at the final time) is decided there.
   bool DecideAtBoundary();
 
+  // At a control breakpoint, with the new input values set: consistent velocity-level values,
+  // and new statuses where a free side is zero or negative under the new inputs (an external
+  // switch commutating a diode). The switch time is the breakpoint itself, which does not
+  // move with the data: no saltation. Returns false on failure (status set).
+  bool DecideAtBreakpoint();
+
   // A switch found exactly on a step boundary was not located by an event equation, so the
   // local transfers miss how its time moves with the data. The saltation matrix restores it:
   // with iota the indicator of pair k under the old statuses (its total derivative includes

@@ -66,6 +66,36 @@ bool FesdRun::DecideAtBoundary() {
   return false;
 }
 
+bool FesdRun::DecideAtBreakpoint() {
+  if (np_ == 0) return true;
+  Vector v;
+  bool consistent = system_.SolveVelocityLevel(y_, a_zero_, v_, &v);
+  if (consistent) {
+    IndicatorEvaluation indicators;
+    system_.EvaluateEventIndicators(y_, v, a_zero_, Derivatives::kNone, &indicators);
+    for (int k = 0; k < np_; ++k) {
+      consistent &= indicators.values[k] >
+                    options_.event_tolerance * std::max(1.0, std::fabs(indicators.values[k]));
+    }
+  }
+  if (consistent) {
+    v_ = v;
+    return true;
+  }
+  const std::vector<bool> previous = a_zero_;
+  if (!Decide(y_[system_.clock_index()], &previous)) return false;
+  if (previous == a_zero_) return true;
+  ++result_.stats.num_switches;
+  // Continuous values and the start boundary of the next element under the new statuses.
+  z_guess_ = ConsistentGuess(y_, v_);
+  have_last_w_ = false;
+  PointEvaluation point;
+  system_.Evaluate(y_, z_guess_, Derivatives::kNone, &point);
+  boundary_a_ = point.A;
+  boundary_b_ = point.B;
+  return true;
+}
+
 // A given initial state outside the moving sets jumps onto them (the sweeping process's
 // projection at t0); with sensitivities the transfer of the projection (implicit function
 // theorem on its complementarity system) starts the chain. Returns false on failure.

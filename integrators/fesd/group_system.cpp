@@ -27,6 +27,19 @@ void GroupSystem::Configure(const GroupSetup& setup) {
     elements_.emplace_back(system_, s_);
     value_elements_.emplace_back(system_, s_);
   }
+  if (setup.with_event && nz_ > 0) {
+    VelocityLevelEvaluation free;
+    system_->EvaluateVelocityLevel(setup.y_start, Vector::Zero(nz_),
+                                   LoweredSystem::RolesFor(setup.a_zero), Derivatives::kNone,
+                                   &free);
+    velocity_scale_.setOnes(nz_);
+    for (int k = 0; k < np_; ++k) {
+      const auto info = static_cast<std::size_t>(k);
+      if (system_->pairs()[info].continuous != ContinuousSide::kBoth) continue;
+      const double size = std::fabs(free.equations[ng_ + k]);
+      if (std::isfinite(size)) velocity_scale_[ng_ + k] = 1.0 / std::max(1.0, size);
+    }
+  }
   da_status_.resize(s_ * np_);
   db_status_.resize(s_ * np_);
   for (int i = 0; i < s_; ++i) {
@@ -186,6 +199,9 @@ void GroupSystem::ResidualScale(const Vector& /*w*/, Vector* scale) {
             1.0 / (1.0 + std::fabs(setup_.y_start[k]));
       }
     }
+  }
+  if (setup_.with_event && nz_ > 0) {
+    scale->segment(setup_.elements * element_rows_, nz_) = velocity_scale_;
   }
 }
 

@@ -83,6 +83,13 @@ class GroupSystem final : public MixedComplementaritySystem {
   std::vector<CollocationStages> value_elements_;  // values-only (line search)
   Vector da_status_, db_status_;                   // status rows: (1, 0) or (0, 1)
   Vector pair_a_, pair_b_;                         // scratch: stage pair sides
+  // Scales of the velocity-level rows: 1 / max(1, |row at v = 0|) at y_start for the rows of
+  // index-1 pairs (ContinuousSide::kBoth), 1 for the others. Those rows are affine in v with
+  // terms of the size of the free rates, which a fast time scale (circuits in seconds: rates
+  // ~1e5) makes too large for an absolute 1e-12; their v (lambda') is read by nothing else in
+  // the group (index-1 indicators come from the state), so a relative tolerance costs no
+  // accuracy. Other rows keep their absolute scale (their v locates switches).
+  Vector velocity_scale_;
   Vector start_scratch_;                           // scratch: element start state
   VelocityLevelEvaluation velocity_;
   IndicatorEvaluation indicators_;

@@ -126,6 +126,16 @@ class IdaRun {
     }
     nc_ = static_cast<int>(continuous_.size());
     n_ = ny_ + nc_ + nz_;
+    // Index-1 pairs (both sides continuous): their multiplier b = z_j is an IDA algebraic
+    // component determined by the kept side at position level (docs/complementarity.md).
+    position_pair_.assign(static_cast<std::size_t>(nc_), -1);
+    for (int k = 0; k < np_; ++k) {
+      const PairInfo& info = system_.pairs()[static_cast<std::size_t>(k)];
+      if (info.continuous != ContinuousSide::kBoth) continue;
+      const auto it = std::find(continuous_.begin(), continuous_.end(), info.b_unknown);
+      MOREAU_ASSERT(it != continuous_.end(), "an index-1 pair's b must be a continuous unknown");
+      position_pair_[static_cast<std::size_t>(it - continuous_.begin())] = k;
+    }
     const bool sparse_dynamics = scene.dynamics.has_sparse_state_jacobian();
     sparse_ = options.linear_solver == LinearSolverKind::kSparseLu ||
               (options.linear_solver == LinearSolverKind::kAutomatic &&
@@ -243,6 +253,9 @@ class IdaRun {
     SerialVector id(n_, context_.context);
     View(id.vector).head(ny_ + nc_).setOnes();
     View(id.vector).tail(nz_).setZero();
+    for (int c = 0; c < nc_; ++c) {
+      if (position_pair_[static_cast<std::size_t>(c)] >= 0) View(id.vector)[ny_ + c] = 0.0;
+    }
     Check(IDASetId(memory_, id.vector), "IDASetId");
     // The velocity-level values are functions of the differential components (index 1):
     // the local error test applies to y and z_c only.
@@ -500,14 +513,14 @@ class IdaRun {
       }
     }
     for (int k = 0; k < np_; ++k) {
-      const bool continuous_a =
-          system_.pairs()[static_cast<std::size_t>(k)].continuous == ContinuousSide::kA;
+      const ContinuousSide side = system_.pairs()[static_cast<std::size_t>(k)].continuous;
       const bool keeps_a = a_zero_[static_cast<std::size_t>(k)];
-      if (keeps_a != continuous_a) continue;  // the kept side is a jump variable
-      (*p)[ng_ + k] = continuous_a ? point.A[k] : point.B[k];
+      // Only continuous kept sides have a position-level condition (kBoth: both are).
+      if (side != ContinuousSide::kBoth && keeps_a != (side == ContinuousSide::kA)) continue;
+      (*p)[ng_ + k] = keeps_a ? point.A[k] : point.B[k];
       if (with_jacobian) {
-        p_y->row(ng_ + k) = continuous_a ? point.A_y.row(k) : point.B_y.row(k);
-        p_z->row(ng_ + k) = continuous_a ? point.A_z.row(k) : point.B_z.row(k);
+        p_y->row(ng_ + k) = keeps_a ? point.A_y.row(k) : point.B_y.row(k);
+        p_z->row(ng_ + k) = keeps_a ? point.A_z.row(k) : point.B_z.row(k);
       }
     }
   }
@@ -521,7 +534,8 @@ class IdaRun {
     for (int c = 0; c < nc_; ++c) (*z)[continuous_[static_cast<std::size_t>(c)]] = all[ny_ + c];
   }
 
-  // R = [y' - F(y, z); z_c' - v_c; V(y, v) + kappa P(y, z)].
+  // R = [y' - F(y, z); z_c' - v_c; V(y, v) + kappa P(y, z)]; for the multiplier of an
+  // index-1 pair the z_c row is its kept side at position level instead (P_k = 0).
   int Residual(N_Vector Y, N_Vector Yp, N_Vector R) {
     Vector y, z, v;
     Unpack(Y, &y, &z, &v);
@@ -529,13 +543,14 @@ class IdaRun {
     auto r = View(R);
     system_.Evaluate(y, z, Derivatives::kNone, &point_);
     r.head(ny_) = yp.head(ny_) - point_.F;
+    Vector p;
+    if (nz_ > 0) PositionLevel(point_, false, &p, nullptr, nullptr);
     for (int c = 0; c < nc_; ++c) {
-      r[ny_ + c] = yp[ny_ + c] - v[continuous_[static_cast<std::size_t>(c)]];
+      const int k = position_pair_[static_cast<std::size_t>(c)];
+      r[ny_ + c] = k >= 0 ? p[ng_ + k] : yp[ny_ + c] - v[continuous_[static_cast<std::size_t>(c)]];
     }
     if (nz_ > 0) {
       system_.EvaluateVelocityLevel(y, v, roles_, Derivatives::kNone, &velocity_);
-      Vector p;
-      PositionLevel(point_, false, &p, nullptr, nullptr);
       r.tail(nz_) = velocity_.equations + options_.drift_rate * p;
     }
     return r.allFinite() ? 0 : 1;  // non-finite: recoverable, IDA retries a smaller step
@@ -563,6 +578,17 @@ class IdaRun {
       Vector p;
       Matrix p_y, p_z;
       PositionLevel(point_, true, &p, &p_y, &p_z);
+      for (int c = 0; c < nc_; ++c) {
+        const int k = position_pair_[static_cast<std::size_t>(c)];
+        if (k < 0) continue;
+        // Index-1 multiplier: the row is P_k(y, z) (no z_c' term).
+        jac.row(ny_ + c).setZero();
+        jac.block(ny_ + c, 0, 1, ny_) = p_y.row(ng_ + k);
+        for (int c2 = 0; c2 < nc_; ++c2) {
+          jac(ny_ + c, ny_ + c2) = p_z(ng_ + k, continuous_[static_cast<std::size_t>(c2)]);
+        }
+        for (int i : jump_) jac(ny_ + c, ny_ + nc_ + i) = p_z(ng_ + k, i);
+      }
       const double kappa = options_.drift_rate;
       const int row = ny_ + nc_;
       jac.block(row, 0, nz_, ny_) = velocity_.equations_y + kappa * p_y;
@@ -705,6 +731,8 @@ class IdaRun {
   LoweredSystem system_;
   int ny_ = 0, nx_ = 0, nz_ = 0, ng_ = 0, np_ = 0, nr_ = 0, nc_ = 0, n_ = 0;
   std::vector<int> continuous_, jump_;  // indices in z of continuous and jump variables
+  // Per continuous variable: the index-1 pair whose multiplier it is (position-level row), or -1.
+  std::vector<int> position_pair_;
   bool sparse_ = false;
   SundialsContext context_;
   void* memory_ = nullptr;

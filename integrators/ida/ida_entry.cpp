@@ -11,7 +11,8 @@ IntegratorEntry IdaEntry() {
   spec.name = "ida";
   spec.title = "the IDA integrator";
   spec.description = "SUNDIALS IDA (adaptive BDF) between located events; the reference integrator";
-  spec.supported_effects = {"moving set", "switching surfaces", "hysteresis relay"};
+  spec.supported_effects = {"moving set", "switching surfaces", "hysteresis relay",
+                            "complementarity system"};
   spec.step_unit = "step";
   spec.iteration_unit = "nonlinear";
   std::vector<OptionBinding<O>> options = {

@@ -13,7 +13,7 @@ IntegratorEntry TimeSteppingEntry() {
   spec.description =
       "fixed-step Radau IIA with stage complementarity (first-order baseline, no switch "
       "detection)";
-  spec.supported_effects = {"moving set", "switching surfaces"};
+  spec.supported_effects = {"moving set", "switching surfaces", "complementarity system"};
   spec.step_unit = "step";
   spec.iteration_unit = "Newton";
   std::vector<OptionBinding<O>> options = {

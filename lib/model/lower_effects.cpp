@@ -10,6 +10,9 @@ std::unique_ptr<LoweredBlock> LowerEffect(const Scene& scene, const Effect& effe
     return options.switching_form == SwitchingForm::kStewart ? LowerStewart(scene, *switching)
                                                              : LowerHeaviside(scene, *switching);
   }
+  if (const auto* complementarity = std::get_if<Complementarity>(&effect)) {
+    return LowerComplementarity(scene, *complementarity);
+  }
   // Path constraints belong to the DAI stepper; hysteresis relays are lowered together, by
   // LowerHysteresis, because their clock rates multiply.
   MOREAU_ASSERT(std::holds_alternative<PathConstraints>(effect) ||

@@ -25,6 +25,12 @@ struct BlockContext {
   int clock_index = 0;
   const Vector* inputs = nullptr;
   const Vector* parameters = nullptr;
+  // Set only while EvaluateVelocityLevel evaluates (null at collocation points): the pair
+  // roles and the velocity-level values v. Blocks whose contribution to F depends on
+  // continuous algebraic unknowns (index-1 complementarity systems) evaluate F there at the
+  // consistent values for these roles, because v holds the rates of such unknowns.
+  const std::vector<PairRole>* velocity_roles = nullptr;
+  const ConstVectorRef* velocity = nullptr;
 };
 
 class LoweredBlock {
@@ -134,6 +140,8 @@ void AddHessianDirection(const BlockContext& context, const SmoothFunction& func
 std::unique_ptr<LoweredBlock> LowerMovingSet(const Scene& scene, const MovingSet& set);
 std::unique_ptr<LoweredBlock> LowerStewart(const Scene& scene, const SwitchingSurfaces& effect);
 std::unique_ptr<LoweredBlock> LowerHeaviside(const Scene& scene, const SwitchingSurfaces& effect);
+std::unique_ptr<LoweredBlock> LowerComplementarity(const Scene& scene,
+                                                   const Complementarity& effect);
 // All hysteresis relays of a scene in one time-freezing block (their clock rates multiply).
 std::unique_ptr<LoweredBlock> LowerHysteresis(const Scene& scene,
                                               const std::vector<HysteresisRelay>& relays);

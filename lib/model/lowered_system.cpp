@@ -232,8 +232,10 @@ std::vector<Event> LoweredSystem::StatusEvents(double t, const std::vector<bool>
   return events;
 }
 
-void LoweredSystem::Evaluate(const ConstVectorRef& y, const ConstVectorRef& z,
-                             Derivatives derivatives, PointEvaluation* out) const {
+void LoweredSystem::EvaluatePoint(const ConstVectorRef& y, const ConstVectorRef& z,
+                                  Derivatives derivatives,
+                                  const std::vector<PairRole>* velocity_roles,
+                                  PointEvaluation* out) const {
   MOREAU_ASSERT(y.size() == num_states_ && z.size() == num_algebraic_,
                 "LoweredSystem::Evaluate: wrong point size");
   const int nx = scene_.num_states();
@@ -308,6 +310,10 @@ void LoweredSystem::Evaluate(const ConstVectorRef& y, const ConstVectorRef& z,
   }
 
   internal::BlockContext context{nx, clock, &inputs_, &parameters_};
+  if (velocity_roles != nullptr) {
+    context.velocity_roles = velocity_roles;
+    context.velocity = &z;
+  }
   const int speed = scene_.time_scale_input;
   if (clock_rate_block_ < 0 && speed < 0) {
     for (const auto& block : blocks_) block->Evaluate(context, y, z, derivatives, out);

@@ -2,8 +2,11 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <limits>
 #include <set>
+#include <sstream>
 
 #include "moreau/core/error.hpp"
 
@@ -21,6 +24,7 @@ std::string EffectKind(const Effect& effect) {
     std::string operator()(const SwitchingSurfaces&) const { return "switching surfaces"; }
     std::string operator()(const HysteresisRelay&) const { return "hysteresis relay"; }
     std::string operator()(const PathConstraints&) const { return "path constraints"; }
+    std::string operator()(const Complementarity&) const { return "complementarity system"; }
   };
   return std::visit(Visitor{}, effect);
 }
@@ -191,7 +195,99 @@ void ValidatePathConstraints(const Scene& scene, const PathConstraints& dai) {
   }
 }
 
+// Principal minors of D whose determinant is below this fraction of Hadamard's bound (the
+// product of the row norms) count as zero: round-off of an exactly singular minor.
+constexpr double kMinorRelativeTolerance = 1e-12;
+
+void ValidateComplementarity(const Scene& scene, const Complementarity& effect,
+                             bool check_feasibility) {
+  const std::string what = "complementarity system '" + effect.name + "'";
+  RequireArgument(!effect.pair_names.empty(), scene.name, ": ", what,
+                  " has no pairs (pair_names is empty)");
+  RequireUniqueNames(effect.pair_names, scene.name + ": " + what + " pairs");
+  const int m = static_cast<int>(effect.pair_names.size());
+  const int nx = scene.num_states();
+  RequireArgument(m <= kMaxComplementarityPairs, scene.name, ": ", what, " has ", m,
+                  " pairs; at most ", kMaxComplementarityPairs, " per effect");
+  const Vector g = EvaluateAtStart(scene, effect.output, what + " output g", m);
+  RequireArgument(!effect.input_matrix.empty(), scene.name, ": ", what,
+                  " input matrix B is missing");
+  RequireArgument(effect.input_matrix.num_outputs() == nx * m, scene.name, ": ", what,
+                  " input matrix B ('", effect.input_matrix.name(), "') must have n_x * m = ", nx,
+                  " * ", m, " = ", nx * m, " outputs (row-major), got ",
+                  effect.input_matrix.num_outputs());
+  EvaluateAtStart(scene, effect.input_matrix, what + " input matrix B", nx * m);
+  if (effect.feedthrough.empty()) {
+    // D = 0 (index 2): w = g(x, t) must start nonnegative, as a moving set's c.
+    const double tolerance =
+        kInitialFeasibilityTolerance * std::max(1.0, scene.initial_state.lpNorm<Eigen::Infinity>());
+    for (int k = 0; check_feasibility && k < m; ++k) {
+      RequireArgument(g[k] >= -tolerance, scene.name, ": infeasible initial state: pair '",
+                      effect.pair_names[static_cast<std::size_t>(k)], "' of ", what,
+                      " has w = g = ", g[k], " < 0 at t0 = ", scene.initial_time,
+                      " (without D, w = g(x0, t0) must be >= 0)");
+    }
+    return;
+  }
+  RequireArgument(effect.feedthrough.num_outputs() == m * m, scene.name, ": ", what,
+                  " feedthrough D ('", effect.feedthrough.name(), "') must have m * m = ", m, " * ",
+                  m, " = ", m * m, " outputs (row-major), got ", effect.feedthrough.num_outputs());
+  const Vector values = EvaluateAtStart(scene, effect.feedthrough, what + " feedthrough D", m * m);
+  const Matrix d =
+      Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(
+          values.data(), m, m);
+  const std::string violation = PMatrixViolation(d);
+  RequireArgument(violation.empty(), scene.name, ": ", what,
+                  ": the feedthrough D must be a P-matrix (all principal minors positive) for "
+                  "the complementarity problem to have a unique solution at every state; at "
+                  "the initial point ",
+                  violation, ". For D = 0 leave D out (index-2 form); see docs/complementarity.md");
+}
+
 }  // namespace
+
+std::string PMatrixViolation(const Matrix& d) {
+  RequireArgument(d.rows() == d.cols(), "PMatrixViolation: D must be square, got ", d.rows(), " x ",
+                  d.cols());
+  const int m = static_cast<int>(d.rows());
+  if (!d.allFinite()) return "D is not finite";
+  if (m == 0) return "";
+  // A positive definite symmetric part is sufficient (and cheap).
+  const Matrix symmetric = 0.5 * (d + d.transpose());
+  const double smallest =
+      Eigen::SelfAdjointEigenSolver<Matrix>(symmetric, Eigen::EigenvaluesOnly).eigenvalues()[0];
+  if (smallest > kMinorRelativeTolerance * symmetric.lpNorm<Eigen::Infinity>()) return "";
+  RequireArgument(m <= kMaxEnumeratedPMatrixSize, "PMatrixViolation: D is ", m, " x ", m,
+                  " and its symmetric part is not positive definite; checking all principal "
+                  "minors is limited to ",
+                  kMaxEnumeratedPMatrixSize, " x ", kMaxEnumeratedPMatrixSize);
+  // Every principal minor, smallest index sets first (the first failure is the simplest).
+  std::vector<unsigned> subsets;
+  for (unsigned mask = 1; mask < (1u << m); ++mask) subsets.push_back(mask);
+  std::stable_sort(subsets.begin(), subsets.end(),
+                   [](unsigned a, unsigned b) { return std::popcount(a) < std::popcount(b); });
+  for (unsigned mask : subsets) {
+    std::vector<int> rows;
+    for (int i = 0; i < m; ++i) {
+      if ((mask >> i) & 1u) rows.push_back(i);
+    }
+    const int k = static_cast<int>(rows.size());
+    Matrix minor(k, k);
+    double hadamard = 1.0;
+    for (int i = 0; i < k; ++i) {
+      for (int j = 0; j < k; ++j) minor(i, j) = d(rows[i], rows[j]);
+      hadamard *= std::max(minor.row(i).norm(), std::numeric_limits<double>::min());
+    }
+    const double det = minor.fullPivLu().determinant();
+    if (det > kMinorRelativeTolerance * hadamard) continue;
+    std::ostringstream s;
+    s << "the principal minor of rows and columns {";
+    for (int i = 0; i < k; ++i) s << (i ? ", " : "") << rows[i] + 1;
+    s << "} is " << det << " (must be > 0)";
+    return s.str();
+  }
+  return "";
+}
 
 void ValidateScene(const Scene& scene, bool check_initial_feasibility) {
   RequireArgument(!scene.name.empty(), "scene name must not be empty");
@@ -280,6 +376,9 @@ void ValidateScene(const Scene& scene, bool check_initial_feasibility) {
           if constexpr (std::is_same_v<E, SwitchingSurfaces>) ValidateSwitching(scene, e);
           if constexpr (std::is_same_v<E, HysteresisRelay>) ValidateRelay(scene, e);
           if constexpr (std::is_same_v<E, PathConstraints>) ValidatePathConstraints(scene, e);
+          if constexpr (std::is_same_v<E, Complementarity>) {
+            ValidateComplementarity(scene, e, check_initial_feasibility);
+          }
         },
         effect);
   }

@@ -235,6 +235,11 @@ class SceneReader {
   void ReadSwitching(const toml::table& table, const std::string& path, Scene* scene);
   void ReadHysteresis(const toml::table& table, const std::string& path, Scene* scene);
   void ReadPathConstraints(const toml::table& table, const std::string& path, Scene* scene);
+  void ReadComplementarity(const toml::table& table, const std::string& path, Scene* scene);
+  // A matrix of expressions given as `rows` arrays of `cols` entries, row-major.
+  SmoothFunction MatrixFunction(const toml::node& node, const std::string& path,
+                                const std::string& name, std::size_t rows, std::size_t cols,
+                                const std::string& what);
   std::vector<std::string> ConstraintNames(const toml::table& table, const std::string& path,
                                            std::size_t count, const std::string& prefix) const;
 
@@ -517,21 +522,64 @@ void SceneReader::ReadPathConstraints(const toml::table& table, const std::strin
   scene->effects.push_back(dai);
 }
 
+SmoothFunction SceneReader::MatrixFunction(const toml::node& node, const std::string& path,
+                                           const std::string& name, std::size_t rows,
+                                           std::size_t cols, const std::string& what) {
+  const toml::array& list = Array(node, path, what);
+  RequireLength(list, path, rows, what);
+  std::vector<std::string> texts;
+  std::vector<ExpressionOrigin> origins;
+  for (std::size_t i = 0; i < rows; ++i) {
+    const toml::array& row = Array(*list.get(i), Index(path, i), "a row of " + what);
+    RequireLength(row, Index(path, i), cols, "one entry per pair");
+    for (std::size_t j = 0; j < cols; ++j) {
+      auto [text, origin] = Expression(*row.get(j), Index(Index(path, i), j));
+      texts.push_back(text);
+      origins.push_back(origin);
+    }
+  }
+  return model_->Function(name, texts, origins);
+}
+
+void SceneReader::ReadComplementarity(const toml::table& table, const std::string& path,
+                                      Scene* scene) {
+  CheckKeys(table, path, {"kind", "name", "pair_names", "output", "input_matrix", "feedthrough"});
+  Complementarity lcs;
+  lcs.name = String(Require(table, "name", path, "the effect's name"), Join(path, "name"));
+  const toml::node& output = Require(table, "output", path, "g(x, t), one per pair");
+  lcs.output = Functions(output, Join(path, "output"), lcs.name + ".g", std::string::npos,
+                         "g(x, t), one expression per pair");
+  const std::size_t m = static_cast<std::size_t>(lcs.output.num_outputs());
+  lcs.pair_names = ConstraintNames(table, path, m, "pair_names");
+  const std::size_t nx = static_cast<std::size_t>(scene->num_states());
+  lcs.input_matrix =
+      MatrixFunction(Require(table, "input_matrix", path, "B(x, t): n_x rows of m entries"),
+                     Join(path, "input_matrix"), lcs.name + ".B", nx, m,
+                     "B: one row per state, one entry per pair");
+  if (const toml::node* d = table.get("feedthrough")) {
+    lcs.feedthrough = MatrixFunction(*d, Join(path, "feedthrough"), lcs.name + ".D", m, m,
+                                     "D: one row per pair, one entry per pair");
+  }
+  scene->effects.push_back(lcs);
+}
+
 void SceneReader::ReadEffect(const toml::table& table, const std::string& path, Scene* scene) {
   const toml::node& kind_node =
-      Require(table, "kind", path, "moving_set, switching, hysteresis or path_constraints");
+      Require(table, "kind", path,
+              "moving_set, switching, hysteresis, path_constraints or complementarity");
   const std::string kind = String(kind_node, Join(path, "kind"));
   // One reader per effect kind.
   if (kind == "moving_set") return ReadMovingSet(table, path, scene);
   if (kind == "switching") return ReadSwitching(table, path, scene);
   if (kind == "hysteresis") return ReadHysteresis(table, path, scene);
   if (kind == "path_constraints") return ReadPathConstraints(table, path, scene);
+  if (kind == "complementarity") return ReadComplementarity(table, path, scene);
   const std::vector<std::string> kinds = {"moving_set", "switching", "hysteresis",
-                                          "path_constraints"};
+                                          "path_constraints", "complementarity"};
   const std::string closest = ClosestName(kind, kinds);
   Fail(kind_node, Join(path, "kind"), "unknown effect kind '", kind, "'",
        closest.empty() ? std::string() : "; did you mean '" + closest + "'?",
-       " (kinds: moving_set, switching, hysteresis, path_constraints)");
+       " (kinds: moving_set, switching, hysteresis, path_constraints, complementarity)");
 }
 
 Scene SceneReader::Read(const std::string& text) {

@@ -4,6 +4,7 @@
 
 #include <Eigen/Dense>
 #include <cmath>
+#include <limits>
 #include <sstream>
 
 #include "lowered_block.hpp"
@@ -62,7 +63,7 @@ void LoweredSystem::EvaluateVelocityLevel(const ConstVectorRef& y, const ConstVe
   const bool with_y = derivatives != Derivatives::kNone;
   const bool all = derivatives == Derivatives::kAll;
   PointEvaluation e;
-  Evaluate(y, v, all ? Derivatives::kAll : Derivatives::kStates, &e);
+  EvaluatePoint(y, v, all ? Derivatives::kAll : Derivatives::kStates, &roles, &e);
 
   // Rates of continuous variables sit in v's continuous slots; jump variables are values.
   Vector mask(nz);
@@ -78,6 +79,8 @@ void LoweredSystem::EvaluateVelocityLevel(const ConstVectorRef& y, const ConstVe
     curvature.pair_p.setZero(num_pairs_, np);
     curvature.equation_p.setZero(ng, np);
     internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
+    context.velocity_roles = &roles;
+    context.velocity = &v;
     for (const auto& block : blocks_) block->AddCurvature(context, y, e.F, derivatives, &curvature);
   }
 
@@ -165,9 +168,12 @@ void LoweredSystem::EvaluateVelocityLevel(const ConstVectorRef& y, const ConstVe
   }
   int equation_row = ng, complementary_row = 0;
   for (int k = 0; k < num_pairs_; ++k) {
-    const bool continuous_a = pairs_[static_cast<std::size_t>(k)].continuous == ContinuousSide::kA;
+    const ContinuousSide side = pairs_[static_cast<std::size_t>(k)].continuous;
+    const bool continuous_a = side != ContinuousSide::kB;
     // Continuous side X and jump side J of pair k. The rate X_y F + X_z v_c depends on u and
-    // p only through X_y (curvature terms) and F; X_z is constant in our lowerings.
+    // p through X_y (curvature terms) and F; blocks whose X_z is not constant add its
+    // derivatives to the curvature terms. With both sides continuous (kBoth) the "jump" row is
+    // the rate of b, an algebraic unknown: its slot v_j.
     const Matrix& x_y = continuous_a ? e.A_y : e.B_y;
     const Matrix& x_z = continuous_a ? e.A_z : e.B_z;
     const Vector& j_value = continuous_a ? e.B : e.A;
@@ -178,9 +184,11 @@ void LoweredSystem::EvaluateVelocityLevel(const ConstVectorRef& y, const ConstVe
              with_y ? Eigen::RowVectorXd(curvature.pair_u.row(k)) : zero_u,
              with_y ? Eigen::RowVectorXd(curvature.pair_p.row(k)) : zero_p, zero_u, zero_p);
     const Row jump =
-        value(j_value[k], j_y.row(k), j_z.row(k),
-              all ? Eigen::RowVectorXd((continuous_a ? e.B_u : e.A_u).row(k)) : zero_u,
-              all ? Eigen::RowVectorXd((continuous_a ? e.B_p : e.A_p).row(k)) : zero_p);
+        side == ContinuousSide::kBoth
+            ? rate(e.B_y.row(k), e.B_z.row(k), zero_y, zero_u, zero_p, zero_u, zero_p)
+            : value(j_value[k], j_y.row(k), j_z.row(k),
+                    all ? Eigen::RowVectorXd((continuous_a ? e.B_u : e.A_u).row(k)) : zero_u,
+                    all ? Eigen::RowVectorXd((continuous_a ? e.B_p : e.A_p).row(k)) : zero_p);
     const PairRole role = roles[static_cast<std::size_t>(k)];
     if (role == PairRole::kComplementary) {
       write(jump, complementary_row, &out->a, &out->a_v, &out->a_y, &out->a_u, &out->a_p);
@@ -306,18 +314,26 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
   std::vector<PairRole> roles(static_cast<std::size_t>(num_pairs_));
   std::vector<int> candidates;
   for (int k = 0; k < num_pairs_; ++k) {
-    const bool continuous_a = pairs_[static_cast<std::size_t>(k)].continuous == ContinuousSide::kA;
+    const ContinuousSide side = pairs_[static_cast<std::size_t>(k)].continuous;
+    const bool continuous_a = side != ContinuousSide::kB;
     const double continuous_value = continuous_a ? at_y.A[k] : at_y.B[k];
-    if (continuous_value < -candidate_tolerance) {
+    // kBoth: b is continuous too (an index-1 multiplier, a function of the state).
+    const double other_value =
+        side == ContinuousSide::kBoth ? at_y.B[k] : std::numeric_limits<double>::infinity();
+    if (std::min(continuous_value, other_value) < -candidate_tolerance) {
       std::ostringstream s;
       s << "pair '" << pairs_[static_cast<std::size_t>(k)].name
-        << "' is violated at this state (continuous side " << continuous_value << " < 0)";
+        << "' is violated at this state (continuous side "
+        << std::min(continuous_value, other_value) << " < 0)";
       decision.message = s.str();
       return decision;
     }
     if (continuous_value > candidate_tolerance) {
       // The continuous side is positive: the jump side stays at zero.
       roles[static_cast<std::size_t>(k)] = continuous_a ? PairRole::kBZero : PairRole::kAZero;
+    } else if (other_value > candidate_tolerance && side == ContinuousSide::kBoth) {
+      // b is positive and continuous: it stays free, a stays at zero.
+      roles[static_cast<std::size_t>(k)] = PairRole::kAZero;
     } else {
       roles[static_cast<std::size_t>(k)] = PairRole::kComplementary;
       candidates.push_back(k);
@@ -343,7 +359,7 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
     for (std::size_t i = 0; i < candidates.size(); ++i) {
       // Jump side zero: the continuous side is free to leave zero.
       const bool continuous_a =
-          pairs_[static_cast<std::size_t>(candidates[i])].continuous == ContinuousSide::kA;
+          pairs_[static_cast<std::size_t>(candidates[i])].continuous != ContinuousSide::kB;
       const bool jump_zero = e.a[static_cast<Eigen::Index>(i)] <= e.b[static_cast<Eigen::Index>(i)];
       decision.a_zero[static_cast<std::size_t>(candidates[i])] = jump_zero != continuous_a;
     }
@@ -367,7 +383,7 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
     for (std::size_t i = 0; i < candidates.size(); ++i) {
       const int k = candidates[i];
       const bool continuous_a =
-          pairs_[static_cast<std::size_t>(k)].continuous == ContinuousSide::kA;
+          pairs_[static_cast<std::size_t>(k)].continuous != ContinuousSide::kB;
       const bool jump_zero = (mask >> i) & 1u;
       leaving += jump_zero ? 1 : 0;
       // Keeping the jump side zero means keeping the side that is not continuous.
@@ -397,7 +413,7 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
     }
     if (!ok) continue;
     PointEvaluation point;
-    Evaluate(y, result.solution, Derivatives::kNone, &point);
+    EvaluatePoint(y, result.solution, Derivatives::kNone, &trial, &point);
     valid.push_back({trial, result.solution, point.F.head(nx), leaving});
   }
   if (valid.empty()) {

@@ -33,6 +33,13 @@ H1_DICT = dict(
               "lower_threshold": "x_on", "upper_threshold": "x_off",
               "mode_a": ["-decay*x + heat"], "mode_b": ["-decay*x"], "initial_memory": 0}])
 
+# The half-wave rectifier (docs/complementarity.md): a complementarity system with D = R.
+RECTIFIER_DICT = dict(
+    name="rectifier", states=["v_C", "i_L"], x0=[10.0, 0.0], tf=2e-3,
+    dynamics=["-i_L/C", "v_C/L"], parameters={"L": 1e-2, "C": 1e-6, "R": 1e3},
+    effects=[{"kind": "complementarity", "name": "diode", "pair_names": ["D"],
+              "output": ["-v_C"], "input_matrix": [["-1/C"], ["0"]], "feedthrough": [["R"]]}])
+
 
 def _same(a, b):
     assert a.status == b.status == "success"
@@ -85,3 +92,13 @@ def test_errors_name_the_location():
         moreau.parse_scene('name = "s"\nstates = ["x"\n', "bad.toml")
     with pytest.raises(ValueError, match="expected a number, string, bool, list or dict"):
         moreau.scene_from_dict(dict(S3_DICT, tf=object()))
+
+
+def test_complementarity_dict_runs_as_the_compiled_rectifier():
+    options = dict(integrator="fesd", stages=3, h=1e-5)
+    compiled = moreau.simulate(moreau.scene("rectifier"), **options)
+    _same(compiled, moreau.simulate(moreau.scene_from_dict(RECTIFIER_DICT), **options))
+    assert [e.kind for e in compiled.events] == ["leave", "enter"] * 3
+    bad = dict(RECTIFIER_DICT, effects=[dict(RECTIFIER_DICT["effects"][0], feedthrough=[["-R"]])])
+    with pytest.raises(ValueError, match="the feedthrough D must be a P-matrix"):
+        moreau.scene_from_dict(bad)

@@ -197,4 +197,80 @@ inline Thermostat H1() { return {}; }
 // H3: room a as H1; room b: x' = -0.3 x + 7 (on), off at 21, on at 19, x(0) = 22, heater off.
 inline Thermostat H3RoomB() { return {0.3, 7.0, 19.0, 21.0, 22.0, 1}; }
 
+// The half-wave rectifier (scene "rectifier", docs/complementarity.md): an LC oscillator with
+// a resistor R and an ideal diode in parallel, x = (v_C, i_L), from v_C(0) = v0 > 0 (the diode
+// conducts). Conducting: the damped parallel RLC v'' + 2 alpha v' + omega0^2 v = 0,
+// alpha = 1/(2RC), omega0 = 1/sqrt(LC), omega_d = sqrt(omega0^2 - alpha^2), until v_C falls
+// to 0; blocking: the LC oscillator, v_C = -(i/(C omega0)) sin(omega0 tau) <= 0, for exactly
+// pi/omega0; then conducting again from v_C = 0 for exactly pi/omega_d, and so on. The first
+// phase ends at theta1/omega_d, theta1 = atan2(v0, -b) in (0, pi), b = (-i0/C - alpha v0)/omega_d.
+struct Rectifier {
+  double L = 1e-2, C = 1e-6, R = 1e3, v0 = 10.0, i0 = 0.0;
+
+  double Omega0() const { return 1.0 / std::sqrt(L * C); }
+  double Alpha() const { return 1.0 / (2.0 * R * C); }
+  double OmegaD() const { return std::sqrt(Omega0() * Omega0() - Alpha() * Alpha()); }
+  double Period() const { return 2.0 * std::numbers::pi / Omega0(); }
+
+  struct Phase {
+    double start;     // time the phase starts
+    bool conducting;  // diode state
+    double v, i;      // state at its start
+  };
+  // Conducting phase from (v, i): v(tau) = e^{-alpha tau}(v cos + b sin)(omega_d tau), and
+  // i = -C (v' + 2 alpha v); blocking from (0, i): v = -(i/(C omega0)) sin, i cos.
+  Vector Evolve(const Phase& phase, double tau) const {
+    if (!phase.conducting) {
+      const double w = Omega0();
+      return Vector{{-phase.i / (C * w) * std::sin(w * tau), phase.i * std::cos(w * tau)}};
+    }
+    const double a = Alpha(), w = OmegaD();
+    const double b = (-phase.i / C - a * phase.v) / w;
+    const double e = std::exp(-a * tau), c = std::cos(w * tau), s = std::sin(w * tau);
+    const double v = e * (phase.v * c + b * s);
+    const double dv = e * ((-a * phase.v + w * b) * c + (-a * b - w * phase.v) * s);
+    return Vector{{v, -C * (dv + 2.0 * a * v)}};
+  }
+  // The phases up to tf (the first starts at 0).
+  std::vector<Phase> Phases(double tf) const {
+    std::vector<Phase> phases{{0.0, true, v0, i0}};
+    const double b = (-i0 / C - Alpha() * v0) / OmegaD();
+    double length = std::atan2(v0, -b) / OmegaD();
+    while (phases.back().start + length <= tf) {
+      const Phase& last = phases.back();
+      const double end = last.start + length;
+      const Vector x = Evolve(last, length);
+      phases.push_back({end, !last.conducting, 0.0, x[1]});  // v_C = 0 at every switch
+      length = phases.back().conducting ? std::numbers::pi / OmegaD() : std::numbers::pi / Omega0();
+    }
+    return phases;
+  }
+  std::vector<double> SwitchTimes(double tf) const {
+    std::vector<double> times;
+    for (const Phase& phase : Phases(tf)) {
+      if (phase.start > 0.0) times.push_back(phase.start);
+    }
+    return times;
+  }
+  Vector State(double t) const {
+    const std::vector<Phase> phases = Phases(t);
+    return Evolve(phases.back(), t - phases.back().start);
+  }
+  // Closed-form reference for the catalog scene (its parameters and x0).
+  static Rectifier OfScene() {
+    const Scene scene = MakeScene("rectifier");
+    auto parameter = [&scene](const char* name) {
+      return scene.parameters[static_cast<std::size_t>(scene.FindParameter(name))].value;
+    };
+    return {parameter("L"), parameter("C"), parameter("R"), scene.initial_state[0],
+            scene.initial_state[1]};
+  }
+};
+
+inline ReferenceProblem RectifierProblem() {
+  const Rectifier r = Rectifier::OfScene();
+  return {"rectifier", r.SwitchTimes(MakeScene("rectifier").final_time),
+          [r](double t) { return r.State(t); }};
+}
+
 }  // namespace moreau::testing

@@ -134,4 +134,91 @@ inline Scene MixedHysteresisScene(bool speed = false) {
   return scene;
 }
 
+// Complementarity systems in both forms, every function depending on x, u, t and p: an
+// index-1 effect with two pairs and a state-dependent P-matrix D, an index-2 effect (no D)
+// with one pair, and (with `relay`) a hysteresis relay, whose time-freezing scales the index-1
+// contribution by the clock rate and leaves the index-2 multiplier alone.
+inline Scene ComplementarityScene(bool relay = false) {
+  Scene scene;
+  scene.name = relay ? "complementarity_relay" : "complementarity";
+  scene.state_names = {"a", "b", "c"};
+  scene.initial_state = Vector{{0.4, -0.3, 0.2}};
+  scene.final_time = 1.0;
+  const int k = scene.AddParameter("k", 1.3, "coefficient");
+  const int low = scene.AddParameter("low", -0.5, "relay lower threshold");
+  const int high = scene.AddParameter("high", 0.8, "relay upper threshold");
+  InputSpec input;
+  input.name = "u";
+  input.signal.values = {0.6};
+  scene.inputs.push_back(input);
+  scene.dynamics = MakeSmoothFunction(
+      "f", 3, [k](const auto& x, const auto& u, const auto& t, const auto& p, auto& out) {
+        using std::sin;
+        out[0] = -p[k] * x[0] + u[0] * sin(t) * x[1];
+        out[1] = x[0] * x[2] - 0.3 * x[1] * x[1];
+        out[2] = -x[2] + 0.5 * x[0];
+      });
+  Complementarity index_one;
+  index_one.name = "diodes";
+  index_one.pair_names = {"d1", "d2"};
+  index_one.output = MakeSmoothFunction(
+      "diodes.g", 2, [k](const auto& x, const auto& u, const auto& t, const auto& p, auto& out) {
+        using std::sin;
+        out[0] = x[0] - 0.3 * sin(t) + p[k] * u[0] * x[1] * x[1];
+        out[1] = x[1] + x[0] * x[2] * p[k];
+      });
+  index_one.input_matrix = MakeSmoothFunction(
+      "diodes.B", 6, [k](const auto& x, const auto& u, const auto& t, const auto& p, auto& out) {
+        using std::cos;
+        out[0] = 1.0 + 0.1 * x[1];
+        out[1] = 0.2 * x[0];
+        out[2] = -0.5 * t;
+        out[3] = cos(x[2]);
+        out[4] = p[k] * x[0] * x[1];
+        out[5] = u[0];
+      });
+  index_one.feedthrough = MakeSmoothFunction(
+      "diodes.D", 4, [k](const auto& x, const auto& u, const auto& t, const auto& p, auto& out) {
+        using std::sin;
+        out[0] = 2.0 + 0.1 * x[0] * x[0] + 0.1 * u[0];
+        out[1] = 0.3 * sin(x[1]);
+        out[2] = -0.2 * x[2] * t;
+        out[3] = 1.5 + 0.1 * p[k] * x[1] * x[1];
+      });
+  scene.effects.push_back(index_one);
+  Complementarity index_two;
+  index_two.name = "wall";
+  index_two.pair_names = {"w"};
+  index_two.output = MakeSmoothFunction(
+      "wall.g", 1, [k](const auto& x, const auto&, const auto& t, const auto& p, auto& out) {
+        using std::cos;
+        out[0] = 2.0 - x[0] * x[0] - 0.1 * p[k] * x[1] * x[2] + 0.2 * cos(t);
+      });
+  index_two.input_matrix = MakeSmoothFunction(
+      "wall.B", 3, [k](const auto& x, const auto& u, const auto&, const auto& p, auto& out) {
+        out[0] = -x[0] * p[k];
+        out[1] = 0.3 * u[0];
+        out[2] = x[1];
+      });
+  scene.effects.push_back(index_two);
+  if (relay) {
+    HysteresisRelay r;
+    r.name = "relay";
+    r.input = MakeSmoothFunction(
+        "relay.input", 1,
+        [](const auto& x, const auto&, const auto&, const auto&, auto& out) { out[0] = x[2]; });
+    r.lower_threshold = low;
+    r.upper_threshold = high;
+    r.mode_a = MakeSmoothFunction(
+        "relay.A", 3, [k](const auto& x, const auto&, const auto&, const auto& p, auto& out) {
+          out[2] = p[k] * x[0];
+        });
+    r.mode_b = MakeSmoothFunction(
+        "relay.B", 3,
+        [](const auto& x, const auto&, const auto&, const auto&, auto& out) { out[2] = -x[1]; });
+    scene.effects.push_back(r);
+  }
+  return scene;
+}
+
 }  // namespace moreau::testing

@@ -161,6 +161,10 @@ void Show(const Scene& scene) {
                   relay->initial_memory);
     } else if (const auto* dai = std::get_if<moreau::PathConstraints>(&effect)) {
       std::printf(": %s <= 0", Join(dai->constraint_names, kLimit).c_str());
+    } else if (const auto* lcs = std::get_if<moreau::Complementarity>(&effect)) {
+      std::printf(": pairs %s; %s", Join(lcs->pair_names, kLimit).c_str(),
+                  lcs->feedthrough.empty() ? "D = 0 (index 2: lambda jumps)"
+                                           : "D given (index 1: lambda continuous)");
     }
     std::printf("\n");
   }

@@ -8,8 +8,10 @@ namespace moreau {
 
 /// What happened at an event.
 enum class EventKind {
-  kEnter,        ///< a constraint of a moving set (or a path constraint) became active
-  kLeave,        ///< a constraint of a moving set (or a path constraint) became inactive
+  kEnter,        ///< a constraint of a moving set (or a path constraint) became active, or a
+                 ///< complementarity pair's w = 0 (a diode starts conducting)
+  kLeave,        ///< a constraint of a moving set (or a path constraint) became inactive, or a
+                 ///< complementarity pair's lambda = 0 (a diode blocks)
   kModeSwitch,   ///< the Filippov mode changed by crossing a switching surface
   kSlideStart,   ///< a sliding mode started on a switching surface
   kSlideEnd,     ///< a sliding mode ended

@@ -80,7 +80,15 @@ struct PointEvaluation {
 };
 
 /// Which side of a complementarity pair is continuous in time along solutions.
-enum class ContinuousSide { kA, kB };
+enum class ContinuousSide {
+  kA,
+  kB,
+  /// Both sides (index-1 pairs: an index-1 complementarity system's lambda and w). b must be an
+  /// algebraic unknown itself (b = z_j), so that its velocity-level slot is its rate: the pair
+  /// then reads 0 <= b' ⟂ a' >= 0 at velocity level, and both free sides are functions of the
+  /// state (event indicators, certificates, IDA's position-level conditions).
+  kBoth,
+};
 
 /// Description of one complementarity pair (for events and cross complementarity).
 struct PairInfo {
@@ -88,6 +96,8 @@ struct PairInfo {
   std::string name;    ///< e.g. "wall.c1" or "circle.theta[outside]"
   ContinuousSide continuous = ContinuousSide::kA;
   int block = 0;  ///< index of the lowered effect (see block_names())
+  /// ContinuousSide::kBoth: the index in z of the algebraic unknown that b is; -1 otherwise.
+  int b_unknown = -1;
 };
 
 /// Second-derivative terms of the velocity-level rows (see LoweredSystem::EvaluateVelocityLevel):
@@ -202,7 +212,9 @@ class LoweredSystem {
 
   /// Evaluates F, G, A, B (and derivatives) at (y, z). Not thread-safe (see SmoothFunction).
   void Evaluate(const ConstVectorRef& y, const ConstVectorRef& z, Derivatives derivatives,
-                PointEvaluation* out) const;
+                PointEvaluation* out) const {
+    EvaluatePoint(y, z, derivatives, nullptr, out);
+  }
 
   /// Velocity-level structure: continuous algebraic unknowns (rates at velocity level) and
   /// differentiated equations (see EvaluateVelocityLevel).
@@ -256,6 +268,10 @@ class LoweredSystem {
 
  private:
   void Build();
+  // Evaluate; with `velocity_roles` (EvaluateVelocityLevel, z = v) blocks see the roles and v
+  // in their context (BlockContext::velocity_roles).
+  void EvaluatePoint(const ConstVectorRef& y, const ConstVectorRef& z, Derivatives derivatives,
+                     const std::vector<PairRole>* velocity_roles, PointEvaluation* out) const;
 
   Scene scene_;
   LoweringOptions options_;

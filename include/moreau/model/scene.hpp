@@ -12,7 +12,10 @@
 ///                        f + f_B (w = 1), A -> B when psi reaches its upper threshold,
 ///                        B -> A when psi falls to its lower threshold;
 ///  - PathConstraints:    differential-algebraic inequalities phi(x, u, t) <= 0 with
-///                        algebraic inputs u and bounds (alpha-method DAI stepper).
+///                        algebraic inputs u and bounds (alpha-method DAI stepper);
+///  - Complementarity:    complementarity system x' = f + B(x, t) lambda,
+///                        0 <= lambda ⟂ w = g(x, t) + D lambda >= 0 (circuits with ideal
+///                        diodes, linear and nonlinear complementarity systems).
 /// Effects compose additively: x' = f(x, u, t, p) + (sum of effect contributions). An effect
 /// reaches an integrator's equations only if the scene declares it: a scene without effects
 /// adds no complementarity unknowns or equations. An integrator handed an effect it does
@@ -115,7 +118,34 @@ struct PathConstraints {
   Vector state_upper;                         ///< empty or n_x entries (+inf allowed)
 };
 
-using Effect = std::variant<MovingSet, SwitchingSurfaces, HysteresisRelay, PathConstraints>;
+/// Complementarity system (docs/complementarity.md): m pairs with multipliers lambda (e.g.
+/// diode currents) and outputs w (e.g. diode reverse voltages),
+///
+///   x' = f + B(x, u, t, p) lambda,   0 <= lambda ⟂ w = g(x, u, t, p) + D(x, u, t, p) lambda >= 0.
+///
+/// Two forms, chosen by whether D is given:
+///  - D given (index 1): D must be a P-matrix (checked at the initial point; ValidateScene).
+///    Then lambda is the unique solution of an LCP at every state, a Lipschitz function of
+///    (x, t): lambda and w are continuous in time and the system is an ODE with a piecewise
+///    smooth right-hand side. Example: a resistor in series with an ideal diode (D = R).
+///  - D absent (D = 0, index 2): w = g(x, t) is continuous and lambda jumps where the active
+///    set changes (like a moving set's multiplier). Well posed where g_x B is a P-matrix on the
+///    active pairs; where it is not, integrators report a status (no unique continuation).
+/// Effects that couple through D must be one effect; pairs without D coupling may be split
+/// into an index-1 and an index-2 effect.
+struct Complementarity {
+  std::string name;
+  std::vector<std::string> pair_names;  ///< m names, one per pair (e.g. the diodes)
+  /// B: n_x x m, row-major: out[i * m + j] = B_ij (state i, pair j).
+  SmoothFunction input_matrix;
+  /// g: m outputs.
+  SmoothFunction output;
+  /// D: m x m, row-major (out[k * m + j] = D_kj), or empty for D = 0 (index-2 form).
+  SmoothFunction feedthrough;
+};
+
+using Effect =
+    std::variant<MovingSet, SwitchingSurfaces, HysteresisRelay, PathConstraints, Complementarity>;
 
 /// The kind of an effect as used in messages ("moving set", "switching surfaces", ...).
 std::string EffectKind(const Effect& effect);
@@ -171,11 +201,27 @@ inline constexpr double kInitialFeasibilityTolerance = 1e-12;
 
 /// Throws std::invalid_argument naming the first problem found: empty or duplicate names,
 /// dimension mismatches (initial state, function outputs, projection basis, number of
-/// modes), non-finite values, a non-positive horizon, out-of-range function arguments,
+/// modes, complementarity matrices), a complementarity feedthrough D that is not a P-matrix at
+/// the initial point, non-finite values, a non-positive horizon, out-of-range function arguments,
 /// non-finite function values at the initial point, and initial states outside the moving
 /// sets (x0 not in C(t0)). `check_initial_feasibility = false` skips the last check, for
 /// integrators that start elsewhere and project (FesdOptions::initial_state).
 void ValidateScene(const Scene& scene, bool check_initial_feasibility = true);
+
+/// Most pairs one Complementarity effect may have (validation; the status decision enumerates
+/// the pairs that are zero on both sides at a switch).
+inline constexpr int kMaxComplementarityPairs = 64;
+/// Largest D whose principal minors PMatrixViolation enumerates (2^m - 1 determinants) when
+/// its symmetric part is not positive definite.
+inline constexpr int kMaxEnumeratedPMatrixSize = 16;
+
+/// Empty if D is a P-matrix (every principal minor positive: a positive definite symmetric
+/// part suffices, otherwise all 2^m - 1 minors are checked, m <= kMaxEnumeratedPMatrixSize),
+/// else the first failing principal minor ("the principal minor of rows and columns {1, 3} is
+/// 0 (must be > 0)", 1-based). A P-matrix is exactly what makes LCP(q, D) uniquely solvable for
+/// every q (Cottle, Pang, Stone, The Linear Complementarity Problem, Thm. 3.3.7). Throws
+/// std::invalid_argument for a non-square D or an m too large to enumerate.
+std::string PMatrixViolation(const Matrix& d);
 
 /// Names accepted by SetSceneValue: "tf", "x0.<state>" and every parameter name.
 std::vector<std::string> OverridableNames(const Scene& scene);

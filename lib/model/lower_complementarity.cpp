@@ -1,0 +1,428 @@
+// Complementarity systems (docs/complementarity.md, docs/lowering.md "Complementarity systems"):
+//
+//   x' += B(x, u, t, p) lambda,   0 <= lambda ⟂ w = g(x, u, t, p) + D(x, u, t, p) lambda >= 0.
+//
+// z = lambda (m), no equations G, pairs (a, b) = (w_k, lambda_k).
+//  - Index 2 (no D): a = g_k(x, t) is the continuous side and lambda a jump variable, exactly
+//    as a moving set's multiplier; the velocity level is 0 <= lambda ⟂ g_x (f + B lambda) + g_t.
+//  - Index 1 (D a P-matrix): lambda(x, t) solves an LCP with a P-matrix, so it is a Lipschitz
+//    function of the state and both sides are continuous (ContinuousSide::kBoth). Their
+//    velocity-level slots hold rates: 0 <= lambda' ⟂ w' = g_x F + g_t + (D_x F + D_t) lambda
+//    + D lambda' >= 0, where F = f + B lambda needs the *value* of lambda. v holds lambda', so
+//    at velocity level (BlockContext::velocity_roles set) this block evaluates F at the
+//    consistent value lambda_bar(y) of the roles: lambda_S = -D_SS^{-1} g_S on the pairs S
+//    kept at w = 0, lambda = 0 on the others.
+// Every derivative is exact (automatic differentiation of B, g, D, second order in the
+// velocity-level rows), compared with central differences in tests/model/.
+
+#include <Eigen/Dense>
+#include <cmath>
+#include <limits>
+
+#include "lowered_block.hpp"
+#include "moreau/complementarity/lcp.hpp"
+#include "moreau/core/error.hpp"
+
+namespace moreau::internal {
+namespace {
+
+// Row-major m x m (or n x m) matrix from a function's outputs.
+Matrix RowMajor(const Vector& values, int rows, int cols) {
+  return Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(
+      values.data(), rows, cols);
+}
+
+class ComplementarityBlock final : public LoweredBlock {
+ public:
+  ComplementarityBlock(const Scene& scene, const Complementarity& effect)
+      : effect_(effect),
+        nx_(scene.num_states()),
+        m_(static_cast<int>(effect.pair_names.size())),
+        index_one_(!effect.feedthrough.empty()) {
+    for (const SmoothFunction* f : {&effect.output, &effect.input_matrix, &effect.feedthrough}) {
+      RequireArgument(!f->has_sparse_state_jacobian(), "complementarity system '", effect.name,
+                      "': its functions need second derivatives; write them as generic lambdas "
+                      "(MakeSmoothFunction), not with a hand-written Jacobian");
+    }
+  }
+  std::unique_ptr<LoweredBlock> Clone() const override {
+    return std::make_unique<ComplementarityBlock>(*this);
+  }
+  int num_algebraic() const override { return m_; }
+  int num_equations() const override { return 0; }
+  int num_pairs() const override { return m_; }
+  std::vector<std::string> AlgebraicNames() const override {
+    std::vector<std::string> names;
+    for (const std::string& k : effect_.pair_names) names.push_back(effect_.name + ".lambda_" + k);
+    return names;
+  }
+  std::vector<PairInfo> Pairs() const override {
+    std::vector<PairInfo> pairs;
+    for (int k = 0; k < m_; ++k) {
+      const std::string& name = effect_.pair_names[static_cast<std::size_t>(k)];
+      pairs.push_back({effect_.name, effect_.name + "." + name,
+                       index_one_ ? ContinuousSide::kBoth : ContinuousSide::kA, 0,
+                       index_one_ ? layout.z_offset + k : -1});
+    }
+    return pairs;
+  }
+  // Index 1: lambda is a function of the state, part of the physical dynamics (time-freezing
+  // and the speed of time scale it). Index 2: a multiplier that adapts, as a moving set's.
+  bool ScaledByClockRate() const override { return index_one_; }
+
+  void Evaluate(const BlockContext& context, const ConstVectorRef& y, const ConstVectorRef& z,
+                Derivatives derivatives, PointEvaluation* out) override {
+    const int z0 = layout.z_offset;
+    const int k0 = layout.pair_offset;
+    const bool with_states = derivatives != Derivatives::kNone;
+    const bool all = derivatives == Derivatives::kAll;
+    EvaluateFunctions(context, y, derivatives);
+    // Multipliers in F: the stage values, or at velocity level (index 1) the consistent
+    // values, since v holds their rates there.
+    const bool consistent = index_one_ && context.velocity_roles != nullptr;
+    if (consistent) {
+      ConsistentValues(Roles(*context.velocity_roles), derivatives);
+      lambda_ = lambda_bar_;
+    } else {
+      lambda_ = z.segment(z0, m_);
+    }
+    const Matrix b = RowMajor(b_values_, nx_, m_);
+    // x' += B lambda.
+    out->F.head(nx_) += b * lambda_;
+    // pair k: a = w_k = g_k + (D lambda)_k, b = lambda_k (the stage unknown, or its rate).
+    out->A.segment(k0, m_) = g_;
+    if (index_one_) out->A.segment(k0, m_) += RowMajor(d_values_, m_, m_) * lambda_;
+    out->B.segment(k0, m_) = z.segment(z0, m_);
+    if (!with_states) return;
+
+    // d(B lambda) with lambda held, plus B dlambda_bar through the consistent values.
+    Matrix f_jacobian = ContractRows(jac_b_, lambda_);  // n_x x columns
+    if (consistent) f_jacobian += b * d_lambda_bar_;
+    if (!consistent) out->F_z.block(0, z0, nx_, m_) += b;
+    Scatter(context, f_jacobian, 0, all, &out->F_y, &out->F_u, &out->F_p, /*add=*/true);
+    // dw with lambda held (the partial derivative; the velocity level adds the rest).
+    Matrix a_jacobian = jac_g_;
+    if (index_one_) {
+      a_jacobian += ContractRows(jac_d_, lambda_);
+      out->A_z.block(k0, z0, m_, m_) = RowMajor(d_values_, m_, m_);
+    }
+    Scatter(context, a_jacobian, k0, all, &out->A_y, &out->A_u, &out->A_p, /*add=*/false);
+    out->B_z.block(k0, z0, m_, m_).setIdentity();
+  }
+
+  // Index 2: lambda from `previous` (not determined by the state), else 0. Index 1: the
+  // solution of the LCP 0 <= lambda ⟂ g + D lambda >= 0 at y (unique: D is a P-matrix),
+  // starting from the previous active set when given.
+  void InitialGuess(const BlockContext& context, const ConstVectorRef& y, const Vector* previous,
+                    VectorRef z) override {
+    const int z0 = layout.z_offset;
+    if (!index_one_) {
+      if (previous != nullptr) {
+        z.segment(z0, m_) = previous->segment(z0, m_);
+      } else {
+        z.segment(z0, m_).setZero();
+      }
+      return;
+    }
+    EvaluateFunctions(context, y, Derivatives::kNone);
+    const Matrix d = RowMajor(d_values_, m_, m_);
+    std::vector<bool> active(static_cast<std::size_t>(m_), false);
+    if (previous != nullptr) {
+      for (int k = 0; k < m_; ++k) active[static_cast<std::size_t>(k)] = (*previous)[z0 + k] > 0.0;
+    }
+    Vector lambda;
+    if (!SolveOnActiveSet(d, active, &lambda)) {
+      const LcpResult lcp = SolveLcp(d, g_, LcpOptions());
+      lambda = lcp.z;
+      // Polish on the active set the LCP identified (exact to round-off when it is right).
+      for (int k = 0; k < m_; ++k) active[static_cast<std::size_t>(k)] = lcp.z[k] > lcp.w[k];
+      Vector polished;
+      if (lcp.converged() && SolveOnActiveSet(d, active, &polished)) lambda = polished;
+    }
+    z.segment(z0, m_) = lambda;
+  }
+
+  std::vector<bool> ContinuousAlgebraic() const override {
+    return std::vector<bool>(static_cast<std::size_t>(m_), index_one_);
+  }
+  std::vector<bool> DifferentiatedEquations() const override { return {}; }
+
+  // Rows of d/d(y, u, p) [grad_y w_k . d] (d = F fixed) plus, for index 1, the terms the
+  // framework's rate X_y F + X_z v does not see: X_y depends on y also through lambda_bar(y),
+  // and X_z = D(y) multiplies the rates v_lambda.
+  void AddCurvature(const BlockContext& context, const ConstVectorRef& y,
+                    const ConstVectorRef& direction, Derivatives derivatives,
+                    CurvatureTerms* out) override {
+    const int k0 = layout.pair_offset;
+    const bool all = derivatives == Derivatives::kAll;
+    for (int k = 0; k < m_; ++k) {
+      AddHessianDirection(context, effect_.output, k, y, direction, derivatives, 1.0, &out->pair_y,
+                          &out->pair_u, &out->pair_p, k0 + k);
+    }
+    if (!index_one_) return;
+    MOREAU_ASSERT(context.velocity_roles != nullptr && context.velocity != nullptr,
+                  "complementarity curvature terms need the velocity-level roles and values");
+    EvaluateFunctions(context, y, derivatives);
+    ConsistentValues(Roles(*context.velocity_roles), derivatives);
+    // (a) second derivatives of (D(y) l)_k along d, l = lambda_bar held.
+    Vector weights = Vector::Zero(m_ * m_);
+    for (int k = 0; k < m_; ++k) {
+      weights.setZero();
+      weights.segment(k * m_, m_) = lambda_bar_;
+      AddWeightedHessianDirection(context, effect_.feedthrough, weights, y, direction, derivatives,
+                                  k0 + k, &out->pair_y, &out->pair_u, &out->pair_p);
+    }
+    // (b) d/dl [grad_y (D l)_k . d] dlambda_bar = M dlambda_bar, M_kj = grad D_kj . d.
+    const int t_col = TimeColumn(context, all);
+    Vector d_cols = Vector::Zero(jac_d_.cols());
+    d_cols.head(nx_) = direction.head(nx_);
+    d_cols[t_col] = direction[context.clock_index];
+    const Matrix m_matrix = RowMajor(jac_d_ * d_cols, m_, m_);
+    Scatter(context, m_matrix * d_lambda_bar_, k0, all, &out->pair_y, &out->pair_u, &out->pair_p,
+            /*add=*/true);
+    // (c) d/d(y, u, p) of D(y) v_lambda.
+    const Vector rates = context.velocity->segment(layout.z_offset, m_);
+    Scatter(context, ContractRows(jac_d_, rates), k0, all, &out->pair_y, &out->pair_u, &out->pair_p,
+            /*add=*/true);
+  }
+
+  // Free side of each pair. Index 2: the multiplier of an active pair (velocity level), g of
+  // an inactive one. Index 1: the consistent values at y for the statuses: lambda_k of a pair
+  // kept at w = 0, w_k of a pair kept at lambda = 0 (both functions of the state).
+  void EventIndicators(const BlockContext& context, const ConstVectorRef& y,
+                       const ConstVectorRef& v, const std::vector<bool>& a_zero,
+                       Derivatives derivatives, IndicatorEvaluation* out) override {
+    const int k0 = layout.pair_offset;
+    const int z0 = layout.z_offset;
+    const bool with_states = derivatives != Derivatives::kNone;
+    const bool all = derivatives == Derivatives::kAll;
+    EvaluateFunctions(context, y, derivatives);
+    if (!index_one_) {
+      for (int k = 0; k < m_; ++k) {
+        if (a_zero[static_cast<std::size_t>(k0 + k)]) {
+          out->values[k0 + k] = v[z0 + k];
+          if (with_states) out->d_v(k0 + k, z0 + k) = 1.0;
+          continue;
+        }
+        out->values[k0 + k] = g_[k];
+        if (with_states) {
+          Scatter(context, jac_g_.middleRows(k, 1), k0 + k, all, &out->d_y, &out->d_u, &out->d_p,
+                  /*add=*/false);
+        }
+      }
+      return;
+    }
+    std::vector<PairRole> roles(static_cast<std::size_t>(m_));
+    for (int k = 0; k < m_; ++k) {
+      roles[static_cast<std::size_t>(k)] =
+          a_zero[static_cast<std::size_t>(k0 + k)] ? PairRole::kAZero : PairRole::kBZero;
+    }
+    ConsistentValues(roles, derivatives);
+    const Matrix d = RowMajor(d_values_, m_, m_);
+    const Vector w = g_ + d * lambda_bar_;
+    Matrix w_jacobian;
+    if (with_states) w_jacobian = jac_g_ + ContractRows(jac_d_, lambda_bar_) + d * d_lambda_bar_;
+    for (int k = 0; k < m_; ++k) {
+      const bool conducting = a_zero[static_cast<std::size_t>(k0 + k)];
+      out->values[k0 + k] = conducting ? lambda_bar_[k] : w[k];
+      if (!with_states) continue;
+      const Matrix row =
+          conducting ? Matrix(d_lambda_bar_.middleRows(k, 1)) : Matrix(w_jacobian.middleRows(k, 1));
+      Scatter(context, row, k0 + k, all, &out->d_y, &out->d_u, &out->d_p, /*add=*/false);
+    }
+  }
+
+  // a = w = 0 kept: the pair is active (a diode conducts); b = lambda = 0: inactive (blocks).
+  std::vector<Event> StatusEvents(double t, const std::vector<bool>& before,
+                                  const std::vector<bool>& after) const override {
+    std::vector<Event> events;
+    for (int k = 0; k < m_; ++k) {
+      const auto i = static_cast<std::size_t>(k);
+      if (before[i] == after[i]) continue;
+      events.push_back(
+          {t, after[i] ? EventKind::kEnter : EventKind::kLeave,
+           effect_.name + "." + effect_.pair_names[i],
+           after[i] ? "w = 0, lambda >= 0 (pair active)" : "lambda = 0, w >= 0 (pair inactive)"});
+    }
+    return events;
+  }
+
+ private:
+  static SemismoothNewtonOptions LcpOptions() {
+    SemismoothNewtonOptions options;
+    options.tolerance = 1e-14;
+    options.max_iterations = 50;
+    options.linear_solver = LinearSolverKind::kDenseLu;
+    return options;
+  }
+
+  int TimeColumn(const BlockContext& context, bool all) const {
+    return all ? nx_ + static_cast<int>(context.inputs->size()) : nx_;
+  }
+
+  // The block's slice of the system's pair roles.
+  std::vector<PairRole> Roles(const std::vector<PairRole>& roles) const {
+    const auto first = roles.begin() + layout.pair_offset;
+    return std::vector<PairRole>(first, first + m_);
+  }
+
+  // g, B, D at (x, u, t, p), with Jacobians (columns x, [u], t, [p]) unless kNone.
+  void EvaluateFunctions(const BlockContext& context, const ConstVectorRef& y,
+                         Derivatives derivatives) {
+    x_ = y.head(nx_);
+    const double t = y[context.clock_index];
+    const Vector& u = *context.inputs;
+    const Vector& p = *context.parameters;
+    if (derivatives == Derivatives::kNone) {
+      effect_.output.Evaluate(x_, u, t, p, &g_);
+      effect_.input_matrix.Evaluate(x_, u, t, p, &b_values_);
+      if (index_one_) effect_.feedthrough.Evaluate(x_, u, t, p, &d_values_);
+      return;
+    }
+    const Wrt wrt = derivatives == Derivatives::kAll ? Wrt::All() : Wrt::XT();
+    effect_.output.Jacobian(x_, u, t, p, wrt, &g_, &jac_g_);
+    effect_.input_matrix.Jacobian(x_, u, t, p, wrt, &b_values_, &jac_b_);
+    if (index_one_) effect_.feedthrough.Jacobian(x_, u, t, p, wrt, &d_values_, &jac_d_);
+  }
+
+  // Rows r of the contraction sum_j l_j J.row(r * m + j): the Jacobian of M(.) l for a
+  // row-major matrix function M with m columns and l held fixed.
+  Matrix ContractRows(const Matrix& jacobian, const Vector& l) const {
+    const auto rows = static_cast<int>(jacobian.rows()) / m_;
+    Matrix out = Matrix::Zero(rows, jacobian.cols());
+    for (int r = 0; r < rows; ++r) {
+      for (int j = 0; j < m_; ++j) {
+        if (l[j] != 0.0) out.row(r) += l[j] * jacobian.row(r * m_ + j);
+      }
+    }
+    return out;
+  }
+
+  // Writes (add = false) or adds J (columns x, [u], t, [p]) into rows [row, row + J.rows()) of
+  // (dy, du, dp): x columns and the clock column of dy.
+  void Scatter(const BlockContext& context, const Matrix& j, int row, bool all, Matrix* dy,
+               Matrix* du, Matrix* dp, bool add) const {
+    const int rows = static_cast<int>(j.rows());
+    const int nu = static_cast<int>(context.inputs->size());
+    const int np = static_cast<int>(context.parameters->size());
+    const int t_col = TimeColumn(context, all);
+    if (!add) {
+      dy->block(row, 0, rows, nx_).setZero();
+      dy->block(row, context.clock_index, rows, 1).setZero();
+    }
+    dy->block(row, 0, rows, nx_) += j.leftCols(nx_);
+    dy->block(row, context.clock_index, rows, 1) += j.col(t_col);
+    if (!all) return;
+    if (!add) {
+      du->middleRows(row, rows).setZero();
+      dp->middleRows(row, rows).setZero();
+    }
+    du->middleRows(row, rows) += j.middleCols(nx_, nu);
+    dp->middleRows(row, rows) += j.rightCols(np);
+  }
+
+  // Adds d/d(y, u, p) [grad_y (sum_o weights_o f_o) . direction] into row `row`.
+  void AddWeightedHessianDirection(const BlockContext& context, const SmoothFunction& function,
+                                   const Vector& weights, const ConstVectorRef& y,
+                                   const ConstVectorRef& direction, Derivatives derivatives,
+                                   int row, Matrix* dy, Matrix* du, Matrix* dp) {
+    const bool all = derivatives == Derivatives::kAll;
+    function.WeightedHessian(y.head(nx_), *context.inputs, y[context.clock_index],
+                             *context.parameters, all ? Wrt::All() : Wrt::XT(), weights, &hessian_);
+    const int t_col = TimeColumn(context, all);
+    Vector d = Vector::Zero(hessian_.cols());
+    d.head(nx_) = direction.head(nx_);
+    d[t_col] = direction[context.clock_index];
+    const Vector hd = hessian_ * d;
+    Scatter(context, hd.transpose(), row, all, dy, du, dp, /*add=*/true);
+  }
+
+  // lambda on the active set S: D_SS lambda_S = -g_S, lambda = 0 elsewhere; true if the result
+  // is complementary (lambda_S >= 0, w >= 0 off S) up to round-off.
+  bool SolveOnActiveSet(const Matrix& d, const std::vector<bool>& active, Vector* lambda) const {
+    std::vector<int> s;
+    for (int k = 0; k < m_; ++k) {
+      if (active[static_cast<std::size_t>(k)]) s.push_back(k);
+    }
+    lambda->setZero(m_);
+    const int n = static_cast<int>(s.size());
+    if (n > 0) {
+      Matrix d_ss(n, n);
+      Vector rhs(n);
+      for (int i = 0; i < n; ++i) {
+        rhs[i] = -g_[s[static_cast<std::size_t>(i)]];
+        for (int j = 0; j < n; ++j)
+          d_ss(i, j) = d(s[static_cast<std::size_t>(i)], s[static_cast<std::size_t>(j)]);
+      }
+      Eigen::FullPivLU<Matrix> lu(d_ss);
+      if (!lu.isInvertible()) return false;
+      const Vector solved = lu.solve(rhs);
+      for (int i = 0; i < n; ++i) (*lambda)[s[static_cast<std::size_t>(i)]] = solved[i];
+    }
+    const Vector w = g_ + d * *lambda;
+    const double scale = 1.0 + g_.lpNorm<Eigen::Infinity>();
+    for (int k = 0; k < m_; ++k) {
+      const double free = active[static_cast<std::size_t>(k)] ? (*lambda)[k] : w[k];
+      if (!(free >= -kRoundOff * scale)) return false;
+    }
+    return true;
+  }
+
+  // Index 1: lambda_bar for the block's roles (S = pairs kept at w = 0: lambda_S =
+  // -D_SS^{-1} g_S; lambda = 0 on the others) and, unless kNone, d lambda_bar / d(x, [u], t,
+  // [p]) = -D_SS^{-1} [J_g + J_(D l)]_S with l = lambda_bar held (implicit differentiation of
+  // g_S + D_SS lambda_S = 0). A singular D_SS gives NaN (the solver then reports failure).
+  // Expects EvaluateFunctions at the same point and derivative level.
+  void ConsistentValues(const std::vector<PairRole>& roles, Derivatives derivatives) {
+    std::vector<int> s;
+    for (int k = 0; k < m_; ++k) {
+      if (roles[static_cast<std::size_t>(k)] == PairRole::kAZero) s.push_back(k);
+    }
+    const int n = static_cast<int>(s.size());
+    const Matrix d = RowMajor(d_values_, m_, m_);
+    lambda_bar_.setZero(m_);
+    const bool with_states = derivatives != Derivatives::kNone;
+    if (with_states) d_lambda_bar_.setZero(m_, jac_g_.cols());
+    if (n == 0) return;
+    Matrix d_ss(n, n);
+    Vector rhs(n);
+    for (int i = 0; i < n; ++i) {
+      rhs[i] = -g_[s[static_cast<std::size_t>(i)]];
+      for (int j = 0; j < n; ++j)
+        d_ss(i, j) = d(s[static_cast<std::size_t>(i)], s[static_cast<std::size_t>(j)]);
+    }
+    const Eigen::FullPivLU<Matrix> lu(d_ss);
+    if (!lu.isInvertible()) {
+      lambda_bar_.setConstant(std::numeric_limits<double>::quiet_NaN());
+      if (with_states) d_lambda_bar_.setConstant(std::numeric_limits<double>::quiet_NaN());
+      return;
+    }
+    const Vector solved = lu.solve(rhs);
+    for (int i = 0; i < n; ++i) lambda_bar_[s[static_cast<std::size_t>(i)]] = solved[i];
+    if (!with_states) return;
+    const Matrix partial = jac_g_ + ContractRows(jac_d_, lambda_bar_);
+    Matrix partial_s(n, partial.cols());
+    for (int i = 0; i < n; ++i) partial_s.row(i) = partial.row(s[static_cast<std::size_t>(i)]);
+    const Matrix d_solved = -lu.solve(partial_s);
+    for (int i = 0; i < n; ++i) d_lambda_bar_.row(s[static_cast<std::size_t>(i)]) = d_solved.row(i);
+  }
+
+  // Round-off allowance (relative to |g|) when checking a guessed active set.
+  static constexpr double kRoundOff = 1e-13;
+
+  Complementarity effect_;
+  int nx_;
+  int m_;
+  bool index_one_;
+  Vector x_, g_, b_values_, d_values_, lambda_, lambda_bar_;
+  Matrix jac_g_, jac_b_, jac_d_, d_lambda_bar_, hessian_;
+};
+
+}  // namespace
+
+std::unique_ptr<LoweredBlock> LowerComplementarity(const Scene& scene,
+                                                   const Complementarity& effect) {
+  return std::make_unique<ComplementarityBlock>(scene, effect);
+}
+
+}  // namespace moreau::internal
