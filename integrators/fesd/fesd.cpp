@@ -255,7 +255,13 @@ FesdResult FesdRun::Finish(std::chrono::steady_clock::time_point start) {
   result_.final_state = y_.head(nx_);
   result_.final_lowered_state = y_;
   result_.final_algebraic = z_last_;
-  if (result_.trajectory.t.empty() || result_.trajectory.t.back() != result_.final_time) {
+  // With dense output an output time at tf is the final point (the clock may differ from tf
+  // by round-off).
+  const bool final_output = dense_output_ && !result_.trajectory.t.empty() &&
+                            std::fabs(result_.trajectory.t.back() - result_.final_time) <=
+                                kClockTolerance * std::max(1.0, std::fabs(result_.final_time));
+  if (!final_output &&
+      (result_.trajectory.t.empty() || result_.trajectory.t.back() != result_.final_time)) {
     result_.trajectory.Append(result_.final_time, result_.final_state, z_last_, 0.0);
   }
   if (options_.sensitivities) {

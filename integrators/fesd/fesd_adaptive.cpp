@@ -242,6 +242,10 @@ void FesdRun::IntegrateAdaptive(bool clock_targets) {
       const double minimum =
           std::max(options_.min_step_size, kMinStepUlps * std::numeric_limits<double>::epsilon() *
                                                std::max(1.0, std::fabs(tau_)));
+      // The attempt's checks: certificates, resolution of the free sides, error estimate.
+      const double piece_length = tau_ - before.tau;
+      ErrorEstimate estimate;
+      double resolution = 0.0;
       if (!failed()) {
         double certificate = 0.0;
         for (std::size_t e = before.elements; e < result_.elements.size(); ++e) {
@@ -254,9 +258,25 @@ void FesdRun::IntegrateAdaptive(bool clock_targets) {
                    ": a switch inside it was not located");
         }
       }
+      if (!failed()) {
+        resolution = IndicatorResolution() / kIndicatorResolution;
+        if (!std::isfinite(resolution)) {
+          Fail(FesdStatus::kEventLocationFailure, position,
+               "a free side is negative between the stages of an element of the step: a switch "
+               "inside it was not located");
+        }
+      }
+      if (!failed()) {
+        estimate = EstimateError(piece_length / horizon, before.elements);
+        if (!std::isfinite(estimate.acceptance)) {
+          Fail(FesdStatus::kNewtonFailure, position,
+               "a comparison solve of the error estimate (the step's interval with another "
+               "element count) did not converge");
+        }
+      }
       if (failed()) {
-        // A solve failed: retry the step shorter (a switch then falls into a shorter step,
-        // with other element lengths around it), down to the minimum step.
+        // A solve or check failed: retry the step shorter (a switch then falls into a shorter
+        // step, with other element lengths around it), down to the minimum step.
         const FesdStatus status = result_.status;
         const std::string reason = result_.message;
         Restore(before);
@@ -272,9 +292,6 @@ void FesdRun::IntegrateAdaptive(bool clock_targets) {
         }
         continue;
       }
-      const double piece_length = tau_ - before.tau;
-      const double resolution = IndicatorResolution() / kIndicatorResolution;
-      const ErrorEstimate estimate = EstimateError(piece_length / horizon, before.elements);
       const double error = std::max(estimate.acceptance, resolution);
       const double proposal = std::max(estimate.proposal, resolution);
       if (!(error <= 1.0)) {
@@ -283,10 +300,9 @@ void FesdRun::IntegrateAdaptive(bool clock_targets) {
         step = controller.Reject(piece_length, proposal);
         if (step < minimum) {
           Fail(FesdStatus::kStepSizeTooSmall, position,
-               "the error estimate (" + Text(error) +
-                   " times the tolerance per unit step) of a "
-                   "step of " +
-                   Text(piece_length) + " calls for a step below min_step_size " + Text(minimum));
+               "the error estimate (" + Text(error) + " times the tolerance per unit step) of a " +
+                   "step of " + Text(piece_length) + " calls for a step below min_step_size " +
+                   Text(minimum));
           return;
         }
         continue;

@@ -13,7 +13,7 @@
 //     a rejection);
 //   after a rejection: H_new = H clamp(kSafety err^(-1/p), kMinFactor, kRejectFactor).
 // A step that ended on a switch starts the history afresh (the new mode has another error
-// constant); its proposal may grow up to kMaxFactor times the step that was attempted.
+// constant); its proposal is bounded by kMaxFactor times the step that was attempted.
 
 #include <algorithm>
 #include <cmath>
@@ -49,10 +49,12 @@ class StepController {
     }
     factor = std::max(factor, kMinFactor);
     if (last_rejected_) factor = std::min(factor, 1.0);
-    double next = h * factor;
-    // A switch that ended the step early says nothing about the step the solution allows:
-    // the proposal may reach kMaxFactor times the attempted step, not of the piece.
-    next = std::min(next, kMaxFactor * (switched ? attempted : h));
+    // A switch that ended the step early: the bound is relative to the attempted step (the
+    // piece may be much shorter; its estimate, at round-off, then allows growth by up to
+    // kSafety kMinError^(-1/p) within it). Attempting the whole step again after every switch
+    // costs a located switch per step where switches are dense (hard_fast_switching: 6912
+    // Newton iterations instead of 1183).
+    const double next = std::min(h * factor, kMaxFactor * (switched ? attempted : h));
     if (switched) {
       have_previous_ = false;
     } else {

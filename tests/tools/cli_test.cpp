@@ -36,7 +36,9 @@ TEST(CliTest, BadInputGivesClearErrorsAndExitCode2) {
   ExpectUsageError("run S3 --integrator radau", "does not support the moving set 'floor'");
   ExpectUsageError("run hopf --h 0", "step size h must be positive");
   ExpectUsageError("run hopf --stages 0", "stages must be in [1, 7]");
-  ExpectUsageError("run hopf --linear-solver qr", "bad value 'qr' for option 'linear_solver': expected one of auto, dense, sparse");
+  ExpectUsageError(
+      "run hopf --linear-solver qr",
+      "bad value 'qr' for option 'linear_solver': expected one of auto, dense, sparse");
   ExpectUsageError("show nope", "unknown scene 'nope'");
 }
 
@@ -119,6 +121,40 @@ TEST(CliTest, ReferenceScenesRunWithFesd) {
   }
 }
 
+// --rtol/--atol with --integrator fesd switch adaptive steps on (issue 16); --output-dt gives
+// the trajectory at those times; the accepted steps are in summary.json.
+TEST(CliTest, FesdRtolSwitchesAdaptiveStepsOn) {
+  const std::filesystem::path directory =
+      std::filesystem::temp_directory_path() / "moreau_cli_test_fesd_adaptive";
+  std::filesystem::remove_all(directory);
+  const Outcome outcome = RunCli(
+      "run F1 --integrator fesd --rtol 1e-8 --atol 1e-10 --output-dt 0.25 --quiet --no-plot "
+      "--out " +
+      directory.string());
+  EXPECT_EQ(outcome.exit_code, 0) << outcome.output;
+  std::ifstream json_file(directory / "summary.json");
+  const nlohmann::json summary = nlohmann::json::parse(json_file);
+  EXPECT_EQ(summary["status"], "success");
+  EXPECT_EQ(summary["options"]["adaptive"], true);
+  EXPECT_EQ(summary["options"]["rtol"], 1e-8);
+  EXPECT_EQ(summary["options"]["h"], 0.0);  // automatic first step
+  EXPECT_FALSE(summary["step_sequence"].empty());
+  EXPECT_EQ(summary["stats"]["num_steps"].get<long>(),
+            static_cast<long>(summary["step_sequence"].size()));
+  // t0, 0.25, ..., 1.5, and the final time pi/2.
+  std::ifstream trajectory(directory / "trajectory.csv");
+  std::string line;
+  std::getline(trajectory, line);
+  std::vector<double> times;
+  while (std::getline(trajectory, line)) times.push_back(std::stod(line.substr(0, line.find(','))));
+  ASSERT_EQ(times.size(), 8u) << outcome.output;
+  for (int k = 0; k < 7; ++k) EXPECT_DOUBLE_EQ(times[static_cast<std::size_t>(k)], 0.25 * k);
+  ExpectUsageError("run F1 --integrator fesd --h-min 1e-6",
+                   "'h_min' applies to the fesd integrator with adaptive steps only");
+  ExpectUsageError("run F1 --integrator fesd --rtol 1e-8 --output-times 0.5,9",
+                   "output time 9 is outside [t0, tf]");
+}
+
 TEST(CliTest, IdaRunsWithTolerances) {
   const std::filesystem::path directory =
       std::filesystem::temp_directory_path() / "moreau_cli_test_ida";
@@ -178,8 +214,7 @@ TEST(CliTest, HysteresisScenesReportPhysicalTimeAndRelaySignals) {
   std::getline(csv, header);
   EXPECT_EQ(header.rfind("t,x,thermostat.w,clock,", 0), 0u) << header;
   ExpectUsageError("run S3 --numerical-time", "applies to scenes with hysteresis relays");
-  ExpectUsageError("run H1 --integrator ida --numerical-time",
-                   "simulated by the fesd integrator");
+  ExpectUsageError("run H1 --integrator ida --numerical-time", "simulated by the fesd integrator");
   ExpectUsageError("run H1 --integrator timestepping", "hysteresis relay 'thermostat'");
 }
 
@@ -217,7 +252,9 @@ TEST(CliTest, DaiScenesRunWithAlpha) {
                    "option 'stages' does not apply to integrator 'alpha'");
   ExpectUsageError("run S3 --integrator fesd --rho 0.5",
                    "option 'rho' does not apply to integrator 'fesd'");
-  ExpectUsageError("run D2 --objective nope", "bad value 'nope' for option 'objective': expected one of feasibility, least-change, reference");
+  ExpectUsageError("run D2 --objective nope",
+                   "bad value 'nope' for option 'objective': expected one of feasibility, "
+                   "least-change, reference");
   ExpectUsageError("run D2 --rho 1", "rho must be in [0, 1)");
   ExpectUsageError("run S3 --integrator alpha", "does not support the moving set 'floor'");
 }
@@ -271,8 +308,8 @@ TEST(CliTest, SceneFilesRunShowCheckAndSweep) {
   std::filesystem::remove_all(directory);
   const Outcome file = RunCli("run " + s3 + " --set floor=-0.5 --no-plot --quiet --out " +
                               (directory / "file").string());
-  const Outcome builtin = RunCli("run S3 --set floor=-0.5 --no-plot --quiet --out " +
-                                 (directory / "builtin").string());
+  const Outcome builtin =
+      RunCli("run S3 --set floor=-0.5 --no-plot --quiet --out " + (directory / "builtin").string());
   ASSERT_EQ(file.exit_code, 0) << file.output;
   ASSERT_EQ(builtin.exit_code, 0) << builtin.output;
   std::ifstream a(directory / "file" / "summary.json"), b(directory / "builtin" / "summary.json");
@@ -289,8 +326,7 @@ TEST(CliTest, SceneFilesRunShowCheckAndSweep) {
   // S3: y = (x1, x2, clock), z = (lambda): s (n_y + n_z) = 2 * 4 unknowns per element.
   EXPECT_NE(check.output.find("3 states y"), std::string::npos) << check.output;
   EXPECT_NE(check.output.find("1 complementarity pairs"), std::string::npos) << check.output;
-  EXPECT_NE(check.output.find("8 unknowns per element (s = 2"), std::string::npos)
-      << check.output;
+  EXPECT_NE(check.output.find("8 unknowns per element (s = 2"), std::string::npos) << check.output;
 
   const Outcome sweep = RunCli("sweep " + s3 + " --grid floor=-1:-0.5:3 --no-plot --quiet --out " +
                                (directory / "sweep").string());
@@ -300,7 +336,8 @@ TEST(CliTest, SceneFilesRunShowCheckAndSweep) {
   const std::filesystem::path bad = directory / "bad.toml";
   std::ofstream(bad) << "name = \"bad\"\nstates = [\"x\"]\nx0 = [1.0]\ntf = 1.0\n"
                         "dynamics = [\"-k*x\"]\n";
-  ExpectUsageError("check " + bad.string(), bad.string() + ":5:15 (dynamics[0]): unknown name 'k' in '-k*x'");
+  ExpectUsageError("check " + bad.string(),
+                   bad.string() + ":5:15 (dynamics[0]): unknown name 'k' in '-k*x'");
   ExpectUsageError("run " + bad.string(), "unknown name 'k'");
   ExpectUsageError("check nope.toml", "cannot read scene file 'nope.toml'");
 }
