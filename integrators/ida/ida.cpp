@@ -2,6 +2,7 @@
 // docs/ida.md). SUNDIALS types stay in this file.
 
 #include "moreau/integrators/ida.hpp"
+#include "moreau/integrators/simulate.hpp"
 
 #include <ida/ida.h>
 #include <ida/ida_ls.h>
@@ -23,7 +24,6 @@
 #include <stdexcept>
 
 #include "moreau/core/error.hpp"
-#include "moreau/integrators/simulate.hpp"
 
 namespace moreau {
 
