@@ -437,17 +437,21 @@ double FesdRun::IndicatorResolution() const {
       }
       for (int k : continuous) {
         double low = actual[k], high = actual[k], size = std::fabs(actual[k]);
+        double nearest = std::fabs(actual[k]);  // closest approach to zero
         for (const Vector& value : values) {
           low = std::min(low, value[k]);
           high = std::max(high, value[k]);
           size = std::max(size, std::fabs(value[k]));
+          nearest = std::min(nearest, std::fabs(value[k]));
         }
         // A free side negative between the checked points: a switch that was not located.
         if (actual[k] < -options_.event_tolerance * std::max(1.0, std::fabs(values[0][k]))) {
           return std::numeric_limits<double>::infinity();
         }
+        // Relative to the variation over the element, or to the distance from zero where that
+        // is larger (a free side that stays far from zero cannot hide a pair of roots).
         worst = std::max(worst, std::fabs(actual[k] - predicted[k]) /
-                                    (high - low + kIndicatorFloor * (1.0 + size)));
+                                    (std::max(high - low, nearest) + kIndicatorFloor * (1.0 + size)));
       }
     }
   }
