@@ -317,7 +317,11 @@ void FesdRun::IntegrateAdaptive(bool clock_targets) {
 
 // Hairer & Wanner I, Sec. II.4 (as the smooth Radau IIA integrator), for order p = 2s - 1, with
 // F at the consistent algebraic values of the initial statuses; norms over the scene states.
+// Where the states do not move at t0 the heuristic has no information (its fallback is
+// 1e-6): a state at rest while a moving set or a switching function of time approaches (S2)
+// starts with kQuietStart of the horizon instead, and the step grows from there.
 double FesdRun::StartingStep(double span) {
+  constexpr double kQuietStart = 1e-3;
   const Vector z0 = ConsistentGuess(y_, v_);
   PointEvaluation point;
   system_.Evaluate(y_, z0, Derivatives::kNone, &point);
@@ -331,13 +335,13 @@ double FesdRun::StartingStep(double span) {
     return std::sqrt(sum / nx_);
   };
   const double d0 = norm(y_), d1 = norm(f0);
-  double h0 = (d0 < 1e-5 || d1 < 1e-5) ? 1e-6 : 0.01 * d0 / d1;
+  double h0 = (d0 < 1e-5 || d1 < 1e-5) ? kQuietStart * span : 0.01 * d0 / d1;
   h0 = std::min(h0, span);
   const Vector y1 = y_ + h0 * f0;
   system_.Evaluate(y1, ConsistentGuess(y1, v_), Derivatives::kNone, &point);
   const double d2 = point.F.allFinite() ? norm(point.F - f0) / h0 : 0.0;
   const double p = 2.0 * s_ - 1.0;
-  const double h1 = std::max(d1, d2) <= 1e-15 ? std::max(1e-6, h0 * 1e-3)
+  const double h1 = std::max(d1, d2) <= 1e-15 ? std::max(kQuietStart * span, h0 * 1e-3)
                                               : std::pow(0.01 / std::max(d1, d2), 1.0 / (p + 1.0));
   return std::min(options_.finite_elements * std::min(100.0 * h0, h1), span);
 }
