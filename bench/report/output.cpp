@@ -327,8 +327,7 @@ std::string AdaptiveAgainstIdaMarkdown(const std::vector<Series>& series,
       for (std::size_t k = 0; k < kTargetErrors.size(); ++k) {
         const double fesd = s->time_to_target[k], reference = ida->time_to_target[k];
         if (std::isfinite(fesd) && std::isfinite(reference)) {
-          md << " " << std::setprecision(2) << fesd / reference << (fesd <= reference ? "" : " ✗")
-             << " |";
+          md << " " << Fixed(fesd / reference, 2) << (fesd <= reference ? "" : " ✗") << " |";
         } else if (std::isfinite(fesd)) {
           md << " IDA: not reached |";
         } else if (std::isfinite(reference)) {
