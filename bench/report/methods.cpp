@@ -63,6 +63,14 @@ std::vector<Method> Methods() {
     methods.push_back(MakeMethod("fesd", "FESD s=" + std::to_string(s), s, OrderTheory::kRadau,
                                  FixedStep(), "h"));
   }
+  // Adaptive FESD (issue 16), swept over rtol like IDA; the Newton tolerance stays at its
+  // default (the error estimate and the switch times are meant for the tolerances users give).
+  for (int s = 3; s <= 4; ++s) {
+    SimulationSettings adaptive;
+    adaptive.options = {{"adaptive", true}, {"record_trajectory", false}};
+    methods.push_back(MakeMethod("fesd", "FESD adaptive s=" + std::to_string(s), s,
+                                 OrderTheory::kNone, adaptive, "rtol", true));
+  }
   for (int s = 1; s <= 3; ++s) {
     methods.push_back(MakeMethod("timestepping", "time-stepping s=" + std::to_string(s), s,
                                  OrderTheory::kFirstOrderAcrossSwitches, FixedStep(), "h"));

@@ -95,8 +95,12 @@ void WriteCsv(const std::vector<Series>& series, const std::string& path) {
   }
 }
 
-// Colour per method: blues for FESD, reds for time-stepping, purples for Radau IIA.
+// Colour per method: blues for FESD, greens for adaptive FESD, reds for time-stepping, purples
+// for Radau IIA.
 std::string Colour(const Method& method) {
+  if (method.integrator == "fesd" && method.tolerance_driven) {
+    return method.stages >= 4 ? "#006d2c" : "#31a354";
+  }
   static const std::map<std::string, std::vector<std::string>> palette = {
       {"fesd", {"#6baed6", "#3182bd", "#08519c", "#08306b"}},
       {"timestepping", {"#fc9272", "#ef3b2c", "#a50f15"}},
@@ -296,6 +300,48 @@ std::string TableMarkdown(const std::vector<Series>& series, const std::vector<S
   return md.str();
 }
 
+// Adaptive FESD against IDA (issue 16): per scene, the CPU time adaptive FESD needs to reach
+// each target error divided by IDA's (both interpolated like the main table, from the same
+// run); <= 1: adaptive FESD is not slower.
+std::string AdaptiveAgainstIdaMarkdown(const std::vector<Series>& series,
+                                       const std::vector<SceneCase>& scenes) {
+  std::ostringstream md;
+  md << "| scene | method |";
+  for (double target : kTargetErrors) md << " to " << Sci(target, 0) << " |";
+  md << "\n|---|---|";
+  for (std::size_t k = 0; k < kTargetErrors.size(); ++k) md << "---|";
+  md << "\n";
+  bool any = false;
+  for (const SceneCase& scene : scenes) {
+    const Series* ida = nullptr;
+    std::vector<const Series*> adaptive;
+    for (const Series& s : series) {
+      if (s.scene != &scene || !s.refused.empty()) continue;
+      if (s.method->integrator == "ida") ida = &s;
+      if (s.method->integrator == "fesd" && s.method->tolerance_driven) adaptive.push_back(&s);
+    }
+    if (ida == nullptr || adaptive.empty()) continue;
+    any = true;
+    for (const Series* s : adaptive) {
+      md << "| " << scene.name << " | " << s->method->label << " / IDA |";
+      for (std::size_t k = 0; k < kTargetErrors.size(); ++k) {
+        const double fesd = s->time_to_target[k], reference = ida->time_to_target[k];
+        if (std::isfinite(fesd) && std::isfinite(reference)) {
+          md << " " << Fixed(fesd / reference, 2) << (fesd <= reference ? "" : " ✗") << " |";
+        } else if (std::isfinite(fesd)) {
+          md << " IDA: not reached |";
+        } else if (std::isfinite(reference)) {
+          md << " ✗ not reached |";
+        } else {
+          md << " neither |";
+        }
+      }
+      md << "\n";
+    }
+  }
+  return any ? md.str() : "";
+}
+
 std::string RefusalMarkdown(const std::vector<Series>& series) {
   // One row per (scene, integrator): the stage variants refuse for the same reason.
   std::ostringstream md;
@@ -348,6 +394,13 @@ std::string WriteReport(const std::vector<Series>& series, const std::vector<Sce
         "FESD finite element. All runs: `"
      << link << "/measurements.csv`.\n\n"
      << TableMarkdown(series, scenes) << "\n";
+  const std::string against_ida = AdaptiveAgainstIdaMarkdown(series, scenes);
+  if (!against_ida.empty()) {
+    md << "Adaptive FESD against IDA: CPU time to reach each error divided by IDA's, from this "
+          "run (≤ 1: adaptive FESD is not slower; ✗: slower or not reached; \"IDA: not "
+          "reached\": IDA's sweep, down to rtol 1e-12, does not get there):\n\n"
+       << against_ida << "\n";
+  }
   md << "Answers, floors and asymptotic ranges:\n\n";
   for (const SceneCase& scene : scenes) {
     md << "- " << scene.title << ": " << scene.answer_source << ", " << scene.switch_times.size()

@@ -26,8 +26,9 @@ SemismoothNewtonOptions FesdOptions::DefaultNewtonOptions() {
 void FesdOptions::Validate() const {
   RequireArgument(stages >= 1 && stages <= kMaxRadauStages, "stages must be in [1, ",
                   kMaxRadauStages, "], got ", stages);
-  RequireArgument(std::isfinite(step_size) && step_size > 0.0,
-                  "step size h must be positive and finite, got ", step_size);
+  RequireArgument(std::isfinite(step_size) && (step_size > 0.0 || (adaptive && step_size == 0.0)),
+                  "step size h must be positive and finite (0 = automatic when adaptive), got ",
+                  step_size);
   RequireArgument(finite_elements >= 1, "finite elements per step must be >= 1, got ",
                   finite_elements);
   RequireArgument(std::isfinite(event_tolerance) && event_tolerance > 0.0,
@@ -36,6 +37,29 @@ void FesdOptions::Validate() const {
                   "min element fraction must be in (0, 0.5], got ", min_element_fraction);
   RequireArgument(max_event_retries >= 1, "max event retries must be >= 1, got ",
                   max_event_retries);
+  RequireArgument(std::isfinite(relative_tolerance) && relative_tolerance > 0.0,
+                  "relative tolerance rtol must be positive and finite, got ", relative_tolerance);
+  RequireArgument(std::isfinite(absolute_tolerance) && absolute_tolerance > 0.0,
+                  "absolute tolerance atol must be positive and finite, got ", absolute_tolerance);
+  RequireArgument(std::isfinite(min_step_size) && min_step_size > 0.0,
+                  "min step size must be positive and finite, got ", min_step_size);
+  RequireArgument(std::isfinite(max_step_size) && max_step_size >= 0.0 &&
+                      (max_step_size == 0.0 || max_step_size >= min_step_size),
+                  "max step size must be 0 (no bound) or at least min_step_size, got ",
+                  max_step_size);
+  RequireArgument(std::isfinite(output_step) && output_step >= 0.0,
+                  "output step must be nonnegative and finite (0: none), got ", output_step);
+  for (double t : output_times) {
+    RequireArgument(std::isfinite(t), "output times must be finite, got ", t);
+  }
+  RequireArgument(step_sequence.empty() || !adaptive,
+                  "step_sequence replays the steps of an adaptive run without error control; it "
+                  "cannot be combined with adaptive");
+  for (double h : step_sequence) {
+    RequireArgument(std::isfinite(h) && h >= 0.0,
+                    "step_sequence entries must be finite and >= 0 (0: to the segment end), got ",
+                    h);
+  }
   newton.Validate();
 }
 
@@ -49,6 +73,8 @@ std::string ToString(FesdStatus status) {
       return "event_location_failure";
     case FesdStatus::kStatusDecisionFailure:
       return "status_decision_failure";
+    case FesdStatus::kStepSizeTooSmall:
+      return "step_size_too_small";
   }
   return "?";
 }
@@ -61,6 +87,8 @@ FesdStats& FesdStats::operator+=(const FesdStats& other) {
   num_newton_iterations += other.num_newton_iterations;
   num_factorizations += other.num_factorizations;
   num_event_retries += other.num_event_retries;
+  num_rejected_steps += other.num_rejected_steps;
+  num_failed_steps += other.num_failed_steps;
   max_cross_complementarity = std::max(max_cross_complementarity, other.max_cross_complementarity);
   max_complementarity = std::max(max_complementarity, other.max_complementarity);
   min_element_length = std::min(min_element_length, other.min_element_length);
@@ -71,7 +99,11 @@ FesdStats& FesdStats::operator+=(const FesdStats& other) {
 
 std::string FesdStats::Summary() const {
   std::ostringstream s;
-  s << num_steps << " steps, " << num_elements << " elements, " << num_switches << " switches, "
+  s << num_steps << " steps";
+  if (num_rejected_steps + num_failed_steps > 0) {
+    s << " (" << num_rejected_steps << " rejected, " << num_failed_steps << " failed and retried)";
+  }
+  s << ", " << num_elements << " elements, " << num_switches << " switches, "
     << num_newton_iterations << " Newton iterations, max cross complementarity "
     << max_cross_complementarity << ", " << cpu_seconds << " s";
   return s.str();
@@ -109,6 +141,9 @@ FesdResult FesdRun::Run() {
   result_.stats.min_element_length = std::numeric_limits<double>::infinity();
   segment_ends_ = SegmentEnds(scene.initial_time, scene.final_time, scene.ControlBreakpoints());
   if (options_.sensitivities) InitializeSensitivities();
+  PrepareOutputTimes();
+  keep_polynomials_ = options_.adaptive || dense_output_;
+  check_jump_stages_ = options_.adaptive || !options_.step_sequence.empty();
   if (options_.initial_state.size() > 0 && !ProjectInitialState()) return Finish(start);
 
   // Statuses at the initial state: the slow solution if x0 lies on a switching surface or
@@ -122,7 +157,10 @@ FesdResult FesdRun::Run() {
     result_.trajectory.Append(scene.initial_time, y_.head(nx_), Vector(), 0.0);
     if (system_.time_freezing()) result_.numerical_trajectory.Append(tau_, y_, z_guess_, 0.0);
     // With a speed of time the horizon is in numerical time: the fixed-grid loop.
-    if (system_.time_freezing() && scene.time_scale_input < 0) {
+    const bool clock_targets = system_.time_freezing() && scene.time_scale_input < 0;
+    if (options_.adaptive || !options_.step_sequence.empty()) {
+      IntegrateAdaptive(clock_targets);
+    } else if (clock_targets) {
       IntegrateTimeFreezing();
     } else {
       Integrate();
@@ -218,7 +256,13 @@ FesdResult FesdRun::Finish(std::chrono::steady_clock::time_point start) {
   result_.final_state = y_.head(nx_);
   result_.final_lowered_state = y_;
   result_.final_algebraic = z_last_;
-  if (result_.trajectory.t.empty() || result_.trajectory.t.back() != result_.final_time) {
+  // With dense output an output time at tf is the final point (the clock may differ from tf
+  // by round-off).
+  const bool final_output = dense_output_ && !result_.trajectory.t.empty() &&
+                            std::fabs(result_.trajectory.t.back() - result_.final_time) <=
+                                kClockTolerance * std::max(1.0, std::fabs(result_.final_time));
+  if (!final_output &&
+      (result_.trajectory.t.empty() || result_.trajectory.t.back() != result_.final_time)) {
     result_.trajectory.Append(result_.final_time, result_.final_state, z_last_, 0.0);
   }
   if (options_.sensitivities) {

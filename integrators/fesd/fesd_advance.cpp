@@ -59,6 +59,9 @@ bool FesdRun::Advance(double step_end, int* remaining) {
       break;
     }
     violation = StageViolation(group_.element(0), scales, e);
+    if (!violation.found && check_jump_stages_) {
+      violation = JumpStageViolation(group_.element(0), y, solved.solution, scales, e);
+    }
     const Vector y_next = group_.EndState(solved.solution);
     if (!violation.found) violation = EndViolation(group_.element(0), y_next, scales, e, &v_end);
     trial_w.push_back(solved.solution);
@@ -120,6 +123,11 @@ bool FesdRun::Advance(double step_end, int* remaining) {
     Vector v_inner = w.segment(group_.v_offset(), nz_);
     for (int k = 0; k < m && !inner.found; ++k) {
       inner = StageViolation(group_.element(k), scales, k);
+      if (!inner.found && check_jump_stages_) {
+        inner = JumpStageViolation(group_.element(k), group_.ElementStart(w, k),
+                                   w.segment(group_.element_offset(k), group_.element_size()),
+                                   scales, k);
+      }
       if (!inner.found && k + 1 < m) {
         inner = EndViolation(group_.element(k), group_.ElementStart(w, k + 1), scales, k, &v_inner);
       }
@@ -191,6 +199,7 @@ void FesdRun::AdvanceSmooth(double step_end, int remaining) {
         result_.stage_trajectory.Append(yi[system_.clock_index()], yi.head(nx_), Vector(), h);
       }
     }
+    if (keep_polynomials_) OnCommittedElement({y_, smooth_z_, Matrix(0, s_), h, {}, false});
     y_ += smooth_z_.col(s_ - 1);
     FesdElement element;
     element.t_start = tau_;
@@ -203,7 +212,7 @@ void FesdRun::AdvanceSmooth(double step_end, int remaining) {
     last_z_matrix_ = smooth_z_;
     last_h_ = h;
     have_last_w_ = true;
-    if (options_.record_trajectory) {
+    if (options_.record_trajectory && !dense_output_) {
       result_.trajectory.Append(y_[system_.clock_index()], y_.head(nx_), Vector(), h);
     }
     if (progress_) progress_(y_[system_.clock_index()]);

@@ -19,7 +19,23 @@ IntegratorEntry FesdEntry() {
   std::vector<OptionBinding<O>> options = {
       BindInteger("stages", &O::stages, "Radau IIA stages s in 1..7 (order 2s - 1)"),
       BindReal("h", &O::step_size,
-               "integration step H > 0 (control interval; numerical time with relays)"),
+               "integration step H > 0 (control interval; numerical time with relays); with "
+               "adaptive steps the initial step (automatic when not given)"),
+      BindBool("adaptive", &O::adaptive,
+               "step-size control by the local error estimate (rtol or atol switch it on)"),
+      BindReal("rtol", &O::relative_tolerance,
+               "relative tolerance of the adaptive steps (sets adaptive), > 0"),
+      BindReal("atol", &O::absolute_tolerance,
+               "absolute tolerance of the adaptive steps (sets adaptive), > 0"),
+      BindReal("h_min", &O::min_step_size, "smallest adaptive step and failure retry, > 0"),
+      BindReal("h_max", &O::max_step_size, "largest adaptive step, >= 0 (0: no bound)"),
+      BindReal("output_dt", &O::output_step,
+               "dense output every output_dt from t0 (collocation polynomials), >= 0"),
+      BindRealList("output_times", &O::output_times,
+                   "dense output at these times in [t0, tf] (collocation polynomials)"),
+      BindRealList("step_sequence", &O::step_sequence,
+                   "replay an adaptive run's accepted steps (its step_sequence) without error "
+                   "control"),
       BindInteger("fe", &O::finite_elements, "nominal finite elements per step N_fe >= 1"),
       BindSwitching(&O::switching_form),
       BindReal("event_tol", &O::event_tolerance,
@@ -42,6 +58,10 @@ IntegratorEntry FesdEntry() {
       BindStat("num_switches", &S::num_switches, "element boundaries with a switch"),
       BindStat("num_groups", &S::num_groups, "group solves with the event equation"),
       BindStat("num_event_retries", &S::num_event_retries, "re-solves at switches"),
+      BindStat("num_rejected_steps", &S::num_rejected_steps,
+               "adaptive steps rejected by the error test"),
+      BindStat("num_failed_steps", &S::num_failed_steps,
+               "adaptive steps whose solves failed, retried shorter"),
       BindStat("num_newton_iterations", &S::num_newton_iterations, "Newton iterations"),
       BindStat("num_factorizations", &S::num_factorizations, "LU factorizations"),
       BindStat("max_cross_complementarity", &S::max_cross_complementarity,
@@ -69,6 +89,7 @@ IntegratorEntry FesdEntry() {
                                   static_cast<double>(e.newton_iterations), e.newton_residual,
                                   e.complementarity, e.cross_complementarity});
         }
+        out->step_sequence = result.step_sequence;
         if (result.sensitivities.lowered.size() == 0) return;
         SimulationSensitivities s;
         s.initial_state = result.sensitivities.initial_state;
@@ -77,7 +98,19 @@ IntegratorEntry FesdEntry() {
         s.segment_starts = result.sensitivities.segment_starts;
         out->sensitivities = s;
       },
-      {},
+      // rtol or atol switch adaptive steps on; without an initial h the controller picks the
+      // first step. The controller's bounds without adaptive steps would be silently ignored,
+      // so they are refused.
+      [](const std::map<std::string, SettingValue>& given, O* built) {
+        if (given.count("rtol") > 0 || given.count("atol") > 0) built->adaptive = true;
+        if (built->adaptive && given.count("h") == 0) built->step_size = 0.0;
+        for (const char* controller_option : {"h_min", "h_max"}) {
+          RequireArgument(built->adaptive || given.count(controller_option) == 0, "option '",
+                          controller_option,
+                          "' applies to the fesd integrator with adaptive steps only (set "
+                          "adaptive, rtol or atol)");
+        }
+      },
       // Lowered once, run many times (Simulator, Python's moreau.Integrator).
       [](const Scene& scene, const O& built) {
         auto integrator = std::make_shared<FesdIntegrator>(scene, built);

@@ -37,6 +37,20 @@ SolveRecord FesdRun::Record(const Vector& w, double h, bool ends_at_switch,
     element.newton_residual = solved.residual_norm;
     Certificates(stages, y0, w_e, a_previous, b_previous, &element);
     record.elements.push_back(element);
+    if (keep_polynomials_) {
+      ElementPolynomial polynomial;
+      polynomial.y0 = y0;
+      polynomial.increments.resize(ny_, s_);
+      polynomial.algebraic.resize(nz_, s_);
+      for (int i = 0; i < s_; ++i) {
+        polynomial.increments.col(i) = w_e.segment(stages.state_offset(i), ny_);
+        polynomial.algebraic.col(i) = stages.Algebraic(w_e, i);
+      }
+      polynomial.h = h;
+      polynomial.a_zero = a_zero_;
+      polynomial.frozen = record.frozen;
+      record.polynomials.push_back(std::move(polynomial));
+    }
     if (options_.record_stages && !record.frozen) {
       for (int i = 0; i < s_; ++i) {
         const Vector yi = y0 + w_e.segment(stages.state_offset(i), ny_);
@@ -62,6 +76,7 @@ SolveRecord FesdRun::Record(const Vector& w, double h, bool ends_at_switch,
 
 void FesdRun::Commit(const SolveRecord& record) {
   for (std::size_t e = 0; e < record.elements.size(); ++e) {
+    if (!record.polynomials.empty()) OnCommittedElement(record.polynomials[e]);
     FesdElement element = record.elements[e];
     element.t_start = tau_;
     tau_ += element.length;
@@ -79,7 +94,7 @@ void FesdRun::Commit(const SolveRecord& record) {
       const bool last = e + 1 == record.elements.size();
       const Vector& y = last ? record.y_end : record.ends[e];
       const Vector& z = last ? record.z_last : record.algebraic[e];
-      if (!record.frozen) {
+      if (!record.frozen && !dense_output_) {  // dense output: the output times instead
         result_.trajectory.Append(y[system_.clock_index()], y.head(nx_), z, element.length);
       }
       if (system_.time_freezing()) {

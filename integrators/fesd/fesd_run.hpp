@@ -6,6 +6,8 @@
 //   fesd_switches.cpp      status decisions at t0, at switches and at step boundaries
 //   fesd_record.cpp        committing solved elements: trajectories and certificates
 //   fesd_sensitivities.cpp implicit-function-theorem transfers and saltation
+//   fesd_adaptive.cpp      adaptive steps: the step loop, error estimate, rejection, retries
+//   dense_output.cpp       values at requested output times from the collocation polynomials
 
 #include <chrono>
 #include <memory>
@@ -17,6 +19,7 @@
 #include "group_system.hpp"
 #include "moreau/integrators/fesd.hpp"
 #include "moreau/newton/semismooth_newton.hpp"
+#include "step_control.hpp"
 
 namespace moreau::internal {
 
@@ -37,6 +40,19 @@ struct Transfer {
   Matrix inputs;      // (n_y + 1) x n_u
 };
 
+// The collocation polynomial of a committed element, y(t_start + theta h) = y0 + sum_j
+// w_j(theta) Z_j (RadauTableau::InterpolationWeights), with the statuses it was solved with.
+// Kept only where adaptive steps (error estimate) or dense output need it.
+struct ElementPolynomial {
+  Vector y0;
+  Matrix increments;  // n_y x s: Z_j
+  Matrix algebraic;   // n_z x s: stage algebraic values z_j
+  double h = 0.0;
+  std::vector<bool> a_zero;
+  bool frozen = false;
+  Vector End() const { return y0 + increments.col(increments.cols() - 1); }
+};
+
 // Everything a solved element or group contributes to the result, captured while its stage
 // data and Newton factorization are available; committed if the solution is kept.
 struct SolveRecord {
@@ -50,6 +66,7 @@ struct SolveRecord {
   double length = 0.0;    // total integration time covered
   bool frozen = false;    // physical time frozen (a relay jumping): not in physical outputs
   Transfer transfer;
+  std::vector<ElementPolynomial> polynomials;  // per element, with keep_polynomials_
 };
 
 class FesdRun {
@@ -182,6 +199,13 @@ class FesdRun {
   Violation EndViolation(const internal::CollocationStages& stages, const Vector& y,
                          const Vector& scales, int element, Vector* v) const;
 
+  // Adaptive steps (and replays): the first stage at which a jump free side, evaluated
+  // consistently from the stage state (velocity level, ConsistentFreeSides), is negative
+  // beyond tolerance. Long elements can hold two roots of a multiplier or theta, which the
+  // check at element ends misses (fesd_adaptive.cpp).
+  Violation JumpStageViolation(const internal::CollocationStages& stages, const Vector& y0,
+                               const ConstVectorRef& w_e, const Vector& scales, int element) const;
+
   // Crossing fraction of pair k between the second-to-last stage and a negative end value.
   double EndCrossing(const internal::CollocationStages& stages, int k, double end_value) const;
 
@@ -217,6 +241,76 @@ class FesdRun {
 
   void ApplyTransfer(const Transfer& transfer);
 
+  // --- adaptive steps (fesd_adaptive.cpp) ---------------------------------------------------
+  // The run loop with adaptive steps (or a replayed step sequence): per control segment, steps
+  // of length H chosen by the controller, each one Advance (it ends at the first switch),
+  // accepted by the error estimate or rolled back and retried shorter. clock_targets: time-
+  // freezing (steps in numerical time, the clock lands on the segment end).
+  void IntegrateAdaptive(bool clock_targets);
+
+  // Everything an attempted step may change, to roll it back (work counters stay).
+  struct Snapshot {
+    Vector y, v, z_guess, z_last, boundary_a, boundary_b, last_w;
+    double tau = 0.0, last_h = 0.0;
+    bool have_last_w = false;
+    std::vector<bool> a_zero;
+    Matrix last_z_matrix, sensitivity;
+    Eigen::RowVectorXd d_step_end;
+    std::size_t trajectory = 0, stage_trajectory = 0, numerical_trajectory = 0, events = 0,
+                elements = 0, next_output = 0;
+    std::vector<std::size_t> relay_jumps;
+    FesdStats stats;
+  };
+  Snapshot Save() const;
+  void Restore(const Snapshot& snapshot);
+
+  // Hairer-Wanner's starting step for order p = 2s - 1 from F at y_ and at an Euler step,
+  // times the elements per step (the heuristic sizes one collocation element).
+  double StartingStep(double span);
+
+  // Local error estimate of the elements committed by the last attempt (piece_: m elements of
+  // length h with one set of statuses), Richardson extrapolation against a solution of the
+  // same interval with one element of length m h (m >= 2) or two of h/2 (m = 1):
+  //   m >= 2: le = (y_coarse - y_m) / (m^p - 1),  m = 1: le = (y_1 - y_halves) 2^p / (2^p - 1).
+  // Returns max_i |le_i| / allowed_i over the lowered states, allowed_i = (atol + rtol
+  // max(|y_start_i|, |y_end_i|)) `fraction` (error per unit step: fraction is the part of the
+  // horizon the piece covers), but never below what floating point resolves (proposal) and
+  // the solves resolve (acceptance; see kNewtonNoise); infinity if a comparison solve fails.
+  // first_element: the piece's first element in result_.elements.
+  struct ErrorEstimate {
+    double acceptance = 0.0;  // the step is accepted iff <= 1
+    double proposal = 0.0;    // what the controller sizes the next step by
+  };
+  ErrorEstimate EstimateError(double fraction, std::size_t first_element);
+
+  // How well the piece's elements resolve the continuous free sides (the functions whose sign
+  // changes are switches): the largest, over elements, pairs and two test points in the
+  // widest gaps between the element start and the stages, of |value - interpolant| / range,
+  // the interpolant through the start and the stages, the range over all of them. Infinity
+  // if a free side is negative at a test point (a switch between the checked points).
+  double IndicatorResolution() const;
+
+  // Solves one fixed-length element from y0 with the given statuses (comparison solutions of
+  // EstimateError), initial guess from the piece's collocation polynomials. Returns false if
+  // Newton does not converge; *y_end is the element's end state.
+  bool SolveComparisonElement(const Vector& y0, double t0, double h,
+                              const std::vector<bool>& a_zero, Vector* y_end);
+
+  // The state of the piece's collocation polynomials at offset `offset` from the piece start,
+  // with the algebraic values of the nearest stage (guesses for comparison solves).
+  void PieceState(double offset, Vector* y, Vector* z) const;
+
+  // Called for every committed element (Commit, AdvanceSmooth) when keep_polynomials_: the
+  // adaptive attempt's piece and the dense output.
+  void OnCommittedElement(const ElementPolynomial& element);
+
+  // --- dense output (dense_output.cpp) ------------------------------------------------------
+  // Sorts and checks the output times (output_times and the output_step grid), throws
+  // std::invalid_argument for times outside [t0, tf].
+  void PrepareOutputTimes();
+  // Appends the output times inside a committed element to the trajectory.
+  void DenseOutput(const ElementPolynomial& element);
+
   FesdOptions options_;
   ProgressCallback progress_;
   std::optional<LoweredSystem> owned_;  // empty when running on an external system
@@ -243,6 +337,16 @@ class FesdRun {
   std::unique_ptr<internal::SmoothCollocationSolver> smooth_;  // elements without pairs
   Matrix smooth_z_, last_z_matrix_, extrapolation_;
   double extrapolation_ratio_ = -1.0;
+  // Adaptive steps and dense output.
+  bool keep_polynomials_ = false;         // record ElementPolynomial of committed elements
+  bool check_jump_stages_ = false;        // JumpStageViolation in the trial pass and groups
+  bool capture_piece_ = false;            // collect them in piece_ (adaptive attempts)
+  std::vector<ElementPolynomial> piece_;  // elements committed by the current attempt
+  double comparison_residual_ = 0.0;      // largest Newton residual of comparison solves
+  Eigen::RowVectorXd d_step_end_;         // d(step end)/d(x0, p, u) of the last step
+  bool dense_output_ = false;             // output times replace element ends
+  std::vector<double> output_times_;      // sorted, in (t0, tf]
+  std::size_t next_output_ = 0;
 };
 
 }  // namespace moreau::internal

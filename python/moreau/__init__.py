@@ -336,6 +336,12 @@ class Result:
         return self._native.records()
 
     @functools.cached_property
+    def step_sequence(self) -> List[float]:
+        """Adaptive FESD: the accepted steps; ``step_sequence=`` replays them (0: to the end
+        of the control segment)."""
+        return list(self._native.step_sequence())
+
+    @functools.cached_property
     def sensitivities(self) -> Optional[Sensitivities]:
         native = self._native.sensitivities()
         if native is None:

@@ -411,6 +411,7 @@ PYBIND11_MODULE(_moreau, m) {
              }
              return out;
            })
+      .def("step_sequence", [](const SimulationResult& r) { return r.step_sequence; })
       .def("sensitivities", [](const SimulationResult& r) -> py::object {
         if (!r.sensitivities) return py::none();
         py::dict out;

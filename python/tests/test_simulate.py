@@ -16,6 +16,7 @@ SAME_SETTINGS = [
     ("H1", "fesd", {"stages": 3, "h": 0.1}),
     ("D2", "alpha", {"h": 0.1, "rho": 0.5}),
     ("S3", "ida", {"rtol": 1e-8, "atol": 1e-10}),
+    ("F1", "fesd", {"rtol": 1e-8, "atol": 1e-10}),
 ]
 
 
@@ -101,6 +102,22 @@ def test_sensitivities_match_central_differences(name, integrator, h):
         scale = max(1.0, np.max(np.abs(sens.dx_dp[:, j])))
         np.testing.assert_allclose(sens.dx_dp[:, j], column, rtol=0,
                                    atol=SENSITIVITY_TOLERANCE * scale, err_msg=pname)
+
+
+def test_fesd_adaptive_steps_and_their_replay():
+    """rtol switches FESD's adaptive steps on; the accepted steps replay bit for bit."""
+    f1 = moreau.scene("F1")
+    run = moreau.simulate(f1, integrator="fesd", rtol=1e-8, atol=1e-10)
+    assert run.success, run.message
+    assert run.options["adaptive"]
+    assert len(run.step_sequence) == run.stats["num_steps"]
+    exact = np.array([-1.5974603774506984, 0.7614936206060108])  # F1's closed form
+    scale = 1.7  # max |x| over F1's solution (the tolerance bound of issue 16)
+    assert np.max(np.abs(run.x[-1] - exact)) <= 10 * 1e-8 * scale
+    replay = moreau.simulate(f1, integrator="fesd", step_sequence=run.step_sequence)
+    assert replay.success, replay.message
+    assert np.array_equal(replay.x[-1], run.x[-1])
+    assert replay.step_sequence == run.step_sequence
 
 
 def test_numerical_failure_is_a_status_not_an_exception():

@@ -55,6 +55,20 @@ INSTANTIATE_TEST_SUITE_P(ReferenceProblems, IdaReferenceTest,
                                            testing::F2b(), testing::F2c(), testing::F3()),
                          [](const auto& test_info) { return test_info.param.scene; });
 
+// Every internal step is counted once: each return of IDA_ONE_STEP is one step (a root
+// return stands for the step that passed the root), and the phases' counters are added once
+// (they were added twice for phases ending at a root).
+TEST(IdaTest, StepCountMatchesTheRecordedSteps) {
+  for (const char* name : {"F1", "S3", "H1"}) {
+    const IdaResult result = SimulateIda(MakeScene(name), IdaOptions());
+    ASSERT_EQ(result.status, IdaStatus::kSuccess) << result.message;
+    const long recorded =
+        std::count_if(result.trajectory.step.begin(), result.trajectory.step.end(),
+                      [](double h) { return h > 0; });
+    EXPECT_EQ(result.stats.num_steps, recorded) << name;
+  }
+}
+
 TEST(IdaTest, ThermostatSwitchesAndFinalStateMatchClosedForm) {
   const IdaResult result = SimulateIda(MakeScene("H1"), IdaOptions::Reference());
   ASSERT_EQ(result.status, IdaStatus::kSuccess) << result.message;

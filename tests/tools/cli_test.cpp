@@ -119,6 +119,40 @@ TEST(CliTest, ReferenceScenesRunWithFesd) {
   }
 }
 
+// --rtol/--atol with --integrator fesd switch adaptive steps on (issue 16); --output-dt gives
+// the trajectory at those times; the accepted steps are in summary.json.
+TEST(CliTest, FesdRtolSwitchesAdaptiveStepsOn) {
+  const std::filesystem::path directory =
+      std::filesystem::temp_directory_path() / "moreau_cli_test_fesd_adaptive";
+  std::filesystem::remove_all(directory);
+  const Outcome outcome = RunCli(
+      "run F1 --integrator fesd --rtol 1e-8 --atol 1e-10 --output-dt 0.25 --quiet --no-plot "
+      "--out " +
+      directory.string());
+  EXPECT_EQ(outcome.exit_code, 0) << outcome.output;
+  std::ifstream json_file(directory / "summary.json");
+  const nlohmann::json summary = nlohmann::json::parse(json_file);
+  EXPECT_EQ(summary["status"], "success");
+  EXPECT_EQ(summary["options"]["adaptive"], true);
+  EXPECT_EQ(summary["options"]["rtol"], 1e-8);
+  EXPECT_EQ(summary["options"]["h"], 0.0);  // automatic first step
+  EXPECT_FALSE(summary["step_sequence"].empty());
+  EXPECT_EQ(summary["stats"]["num_steps"].get<long>(),
+            static_cast<long>(summary["step_sequence"].size()));
+  // t0, 0.25, ..., 1.5, and the final time pi/2.
+  std::ifstream trajectory(directory / "trajectory.csv");
+  std::string line;
+  std::getline(trajectory, line);
+  std::vector<double> times;
+  while (std::getline(trajectory, line)) times.push_back(std::stod(line.substr(0, line.find(','))));
+  ASSERT_EQ(times.size(), 8u) << outcome.output;
+  for (int k = 0; k < 7; ++k) EXPECT_DOUBLE_EQ(times[static_cast<std::size_t>(k)], 0.25 * k);
+  ExpectUsageError("run F1 --integrator fesd --h-min 1e-6",
+                   "'h_min' applies to the fesd integrator with adaptive steps only");
+  ExpectUsageError("run F1 --integrator fesd --rtol 1e-8 --output-times 0.5,9",
+                   "output time 9 is outside [t0, tf]");
+}
+
 TEST(CliTest, IdaRunsWithTolerances) {
   const std::filesystem::path directory =
       std::filesystem::temp_directory_path() / "moreau_cli_test_ida";

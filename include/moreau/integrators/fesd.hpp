@@ -42,6 +42,19 @@
 /// Speed of time (Scene::time_scale_input): the scene's time axis is numerical time, every
 /// physical rate and the clock are multiplied by the input s; final_time is the clock.
 ///
+/// Adaptive steps (FesdOptions::adaptive, or rtol/atol given to Simulate and the command line;
+/// docs/fesd-formulation.md, section 10): the step H is chosen by a local error estimate,
+/// Richardson extrapolation of the accepted solution against a solution of the same interval with
+/// another element count (one element of m h for m >= 2 elements of length h, two of h/2 for one),
+/// valid on elements that end on a switch because their statuses are fixed, with error per unit
+/// step (local error <= tol H / (tf - t0), so that the global error follows the tolerance) and a
+/// predictive (Gustafsson) controller. A step ends at the first switch in it. A step whose
+/// solves fail (Newton, event location) is retried with half the step down to min_step_size.
+/// Sensitivities in adaptive mode are those of the accepted step sequence with the step sizes
+/// held fixed (internal differentiation); FesdOptions::step_sequence replays a sequence.
+/// Dense output (FesdOptions::output_times, output_step): the collocation polynomial of the
+/// element containing each time, never across a switch.
+///
 /// Hysteresis relays are lowered by time-freezing (docs/lowering.md): the integration
 /// variable becomes numerical time tau, in which a relay's memory w travels continuously
 /// between 0 and 1 while the clock (physical time) stands still. Steps have length H in tau;
@@ -68,7 +81,8 @@ struct FesdOptions {
   /// Radau IIA stages s in [1, kMaxRadauStages]; order 2s - 1 (1, 3, 5, 7 for s = 1..4).
   int stages = 3;
   /// Integration step H > 0 (control interval; steps never cross control breakpoints). With
-  /// hysteresis relays H is measured in numerical time (see the file comment).
+  /// hysteresis relays H is measured in numerical time (see the file comment). Adaptive: the
+  /// initial step, 0 = automatic (Hairer-Wanner's starting step for order 2s - 1, times N_fe).
   double step_size = 0.1;
   /// Nominal finite elements per step N_fe >= 1.
   int finite_elements = 2;
@@ -87,6 +101,35 @@ struct FesdOptions {
   int max_event_retries = 6;
   /// Compute dx(T)/dx(0), dx(T)/dp, dx(T)/du (FesdResult::sensitivities).
   bool sensitivities = false;
+  /// Step-size control by the local error estimate (see the file comment and
+  /// docs/fesd-formulation.md, section 10) instead of fixed steps H.
+  bool adaptive = false;
+  /// Tolerances of the adaptive steps, > 0: the local error of a step of length H, weighted
+  /// per state by atol + rtol max(|y_start|, |y_end|), is kept below H / (tf - t0) (error per
+  /// unit step), so that the error at tf is about rtol relative to the solution scale.
+  double relative_tolerance = 1e-6;
+  double absolute_tolerance = 1e-8;
+  /// Smallest step of the adaptive controller and of the failure retries, > 0 (never below
+  /// 64 ulps of the time); below it the run stops with kStepSizeTooSmall or the status of the
+  /// failed solve.
+  double min_step_size = 1e-12;
+  /// Largest adaptive step, >= 0 (0: no bound; steps never cross control breakpoints).
+  double max_step_size = 0.0;
+  /// Dense output: the trajectory holds the state at these times (physical time, in
+  /// [t0, tf], any order) instead of every element end, evaluated on the collocation
+  /// polynomial of the element that contains the time (never across a switch; accuracy:
+  /// the polynomial's uniform order s + 1, exact at element ends). Algebraic values there are
+  /// the consistent ones (velocity level) at the interpolated state.
+  std::vector<double> output_times;
+  /// Dense output every output_step from t0 (with output_times: both), >= 0 (0: none).
+  double output_step = 0.0;
+  /// Replays the steps of an adaptive run (FesdResult::step_sequence) without error control:
+  /// step k ends at min(t_k + step_sequence[k], end of its control segment); an entry 0 is a
+  /// step to the end of the segment (with hysteresis relays: the clock to it). A step ends at
+  /// the first switch in it; entries left over are unused, and steps to the segment end
+  /// follow when they run out. With sensitivities: the derivatives of exactly this discrete
+  /// map, which an adaptive run also reports (step sizes held fixed).
+  std::vector<double> step_sequence;
   /// Start from this lowered state y0 = (x0, relay memories w0, clock) instead of the scene's
   /// (empty: the scene's x0, initial memories and t0). A shooting code passes node states this
   /// way: with time-freezing a node may lie inside a frozen interval (0 < w < 1).
@@ -108,6 +151,7 @@ enum class FesdStatus {
   kEventLocationFailure,   ///< a switch was detected but no group solve ended on it within
                            ///< max_event_retries (Newton failure or inconsistent signs)
   kStatusDecisionFailure,  ///< no consistent continuation at a switch point
+  kStepSizeTooSmall,       ///< adaptive: the error test failed with the step at min_step_size
 };
 std::string ToString(FesdStatus status);
 
@@ -150,6 +194,8 @@ struct FesdStats {
   long num_newton_iterations = 0;
   long num_factorizations = 0;
   long num_event_retries = 0;
+  long num_rejected_steps = 0;  ///< adaptive: steps rejected by the error test
+  long num_failed_steps = 0;    ///< adaptive: steps whose solves failed, retried smaller
   double max_cross_complementarity = 0.0;
   double max_complementarity = 0.0;
   double min_element_length = 0.0;
@@ -176,6 +222,10 @@ struct FesdResult {
   std::vector<RelaySignal> relays;
   std::vector<Event> events;
   std::vector<FesdElement> elements;
+  /// The accepted steps of an adaptive run (or of a replay) in the form FesdOptions::
+  /// step_sequence takes them: the attempted length of every step, 0 for a step to the end
+  /// of its control segment.
+  std::vector<double> step_sequence;
   FesdSensitivities sensitivities;  ///< with FesdOptions::sensitivities
   FesdStats stats;
 };

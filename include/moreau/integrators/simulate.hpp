@@ -134,6 +134,8 @@ struct SimulationResult {
   std::vector<std::vector<double>> records;
   /// With the `sensitivities` option.
   std::optional<SimulationSensitivities> sensitivities;
+  /// Adaptive FESD: the accepted steps, in the form its option `step_sequence` replays them.
+  std::vector<double> step_sequence;
 
   /// The statistic with this name (std::invalid_argument if the integrator has none).
   double Stat(const std::string& name) const;

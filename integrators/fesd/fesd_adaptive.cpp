@@ -1,0 +1,524 @@
+// Adaptive steps of FESD (docs/fesd-formulation.md, section 10): the step loop with error
+// estimate, rejection and failure retries, and the replay of a step sequence.
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+#include "fesd_run.hpp"
+#include "moreau/core/error.hpp"
+
+namespace moreau::internal {
+namespace {
+
+// A step that would end within this fraction of itself before the segment end lands on the
+// end instead (no needlessly short last step; the smooth Radau IIA integrator does the same).
+constexpr double kLandingFraction = 0.01;
+// A step whose solves failed (Newton, event location, status decision) is retried with this
+// fraction of its length.
+constexpr double kFailureFactor = 0.5;
+// A committed element whose complementarity or cross-complementarity certificate exceeds this
+// many event tolerances holds a switch that was not located (e.g. two roots of a multiplier
+// inside one long element): the step counts as failed and is retried shorter. Correct
+// elements have certificates at the Newton tolerance (tests: <= 1e-10).
+constexpr double kMissedSwitchCertificate = 10.0;
+// The solutions compared by the error estimate are rounded to eps (1 + |y|) and converged to
+// their Newton residuals r (scaled by 1 + |y|), so their difference is known to about
+// kNewtonNoise eps (1 + |y|) at best and kNewtonNoise r (1 + |y|) for the solves at hand. The
+// allowed local error of a state is never below the first (the step proposal) nor, for
+// accepting a step, below the second: error per unit step would otherwise ask, on short
+// steps, for local errors below what floating point and the solves resolve (the 1e-6
+// transient of hard_stiff_set). The residual varies from solve to solve (1e-16 to 5e-14 on F1)
+// and would make the proposals jump, so proposals use the first floor only.
+constexpr double kNewtonNoise = 10.0;
+// Resolution of the continuous free sides (IndicatorResolution): the interpolant of their
+// values at the element start and stages may miss the value in a gap by at most this fraction
+// of their range over the element; beyond it sign checks at the stages could miss a pair of
+// roots between them.
+constexpr double kIndicatorResolution = 0.1;
+// Indicators that vary by less than this (relative to 1 + their size) over an element count
+// as resolved.
+constexpr double kIndicatorFloor = 1e-8;
+// Steps below this many ulps of the time cannot be told apart from zero-length steps.
+constexpr double kMinStepUlps = 64.0;
+
+void Truncate(Trajectory* trajectory, std::size_t size) {
+  trajectory->t.resize(size);
+  trajectory->x.resize(size);
+  trajectory->algebraic.resize(size);
+  trajectory->step.resize(size);
+}
+
+std::string Text(double value) {
+  std::ostringstream s;
+  s.precision(6);
+  s << value;
+  return s.str();
+}
+
+}  // namespace
+
+FesdRun::Snapshot FesdRun::Save() const {
+  Snapshot s;
+  s.y = y_;
+  s.v = v_;
+  s.z_guess = z_guess_;
+  s.z_last = z_last_;
+  s.boundary_a = boundary_a_;
+  s.boundary_b = boundary_b_;
+  s.last_w = last_w_;
+  s.tau = tau_;
+  s.last_h = last_h_;
+  s.have_last_w = have_last_w_;
+  s.a_zero = a_zero_;
+  s.last_z_matrix = last_z_matrix_;
+  s.sensitivity = sensitivity_;
+  s.d_step_end = d_step_end_;
+  s.trajectory = result_.trajectory.size();
+  s.stage_trajectory = result_.stage_trajectory.size();
+  s.numerical_trajectory = result_.numerical_trajectory.size();
+  s.events = result_.events.size();
+  s.elements = result_.elements.size();
+  s.next_output = next_output_;
+  for (const RelaySignal& relay : result_.relays) s.relay_jumps.push_back(relay.jump_times.size());
+  s.stats = result_.stats;
+  return s;
+}
+
+void FesdRun::Restore(const Snapshot& s) {
+  y_ = s.y;
+  v_ = s.v;
+  z_guess_ = s.z_guess;
+  z_last_ = s.z_last;
+  boundary_a_ = s.boundary_a;
+  boundary_b_ = s.boundary_b;
+  last_w_ = s.last_w;
+  tau_ = s.tau;
+  last_h_ = s.last_h;
+  have_last_w_ = s.have_last_w;
+  a_zero_ = s.a_zero;
+  last_z_matrix_ = s.last_z_matrix;
+  sensitivity_ = s.sensitivity;
+  d_step_end_ = s.d_step_end;
+  Truncate(&result_.trajectory, s.trajectory);
+  Truncate(&result_.stage_trajectory, s.stage_trajectory);
+  Truncate(&result_.numerical_trajectory, s.numerical_trajectory);
+  result_.events.resize(s.events);
+  result_.elements.resize(s.elements);
+  next_output_ = s.next_output;
+  for (std::size_t i = 0; i < result_.relays.size(); ++i) {
+    result_.relays[i].jump_times.resize(s.relay_jumps[i]);
+    result_.relays[i].values.resize(s.relay_jumps[i]);
+  }
+  // The solution goes back; the work done on the rejected attempt stays counted.
+  const FesdStats work = result_.stats;
+  result_.stats = s.stats;
+  result_.stats.num_newton_iterations = work.num_newton_iterations;
+  result_.stats.num_groups = work.num_groups;
+  result_.stats.num_event_retries = work.num_event_retries;
+  result_.stats.num_rejected_steps = work.num_rejected_steps;
+  result_.stats.num_failed_steps = work.num_failed_steps;
+  result_.status = FesdStatus::kSuccess;
+  result_.message.clear();
+}
+
+Violation FesdRun::JumpStageViolation(const CollocationStages& stages, const Vector& y0,
+                                      const ConstVectorRef& w_e, const Vector& scales,
+                                      int element) const {
+  Violation first;
+  // Screen: the stage values of the jump sides approximate the consistent ones to O(h^s);
+  // an element whose jump sides are positive at every stage is not checked further (a missed
+  // pair of roots inside shows as negative stage values, and the certificates of committed
+  // elements catch the rest, see IntegrateAdaptive).
+  bool suspicious = false;
+  for (int k = 0; k < np_ && !suspicious; ++k) {
+    if (!FreeSideIsJump(k)) continue;
+    const bool a_zero = a_zero_[static_cast<std::size_t>(k)];
+    for (int i = 0; i < s_; ++i) {
+      const double free = a_zero ? stages.stage(i).B[k] : stages.stage(i).A[k];
+      suspicious |= !(free > options_.event_tolerance * scales[k]);
+    }
+  }
+  if (!suspicious) return first;
+  Vector previous = Vector::Constant(np_, std::numeric_limits<double>::quiet_NaN());
+  double previous_c = 0.0;
+  for (int i = 0; i < s_ && !first.found; ++i) {
+    const Vector y = y0 + w_e.segment(stages.state_offset(i), ny_);
+    const Vector free = ConsistentFreeSides(y, stages.stage(i), stages.Algebraic(w_e, i));
+    for (int k = 0; k < np_; ++k) {
+      if (!FreeSideIsJump(k) || !(free[k] < -options_.event_tolerance * scales[k])) continue;
+      double fraction = tableau_.c[i];
+      if (std::isfinite(previous[k]) && std::isfinite(free[k]) && previous[k] > free[k]) {
+        fraction =
+            previous_c + (tableau_.c[i] - previous_c) * previous[k] / (previous[k] - free[k]);
+      }
+      fraction = std::clamp(fraction, 1e-3, 1.0);
+      if (!first.found || fraction < first.fraction) first = {true, element, fraction};
+    }
+    previous = free;
+    previous_c = tableau_.c[i];
+  }
+  return first;
+}
+
+void FesdRun::OnCommittedElement(const ElementPolynomial& element) {
+  if (capture_piece_) piece_.push_back(element);
+  DenseOutput(element);
+}
+
+void FesdRun::IntegrateAdaptive(bool clock_targets) {
+  const Scene& scene = system_.scene();
+  const int clock = system_.clock_index();
+  const bool replay = !options_.step_sequence.empty();
+  // The error per unit step is measured against the horizon (in the integration variable;
+  // with time-freezing the physical horizon, the frozen intervals being exact up to round-off).
+  const double horizon = scene.final_time - scene.initial_time;
+  StepController controller(2 * s_ - 1);
+  double step = options_.step_size > 0.0 ? options_.step_size : StartingStep(horizon);
+  std::size_t next_replay = 0;
+  if (options_.sensitivities) d_step_end_ = Eigen::RowVectorXd::Zero(sensitivity_.cols());
+  for (std::size_t segment = 0; segment + 1 < segment_ends_.size() && !failed(); ++segment) {
+    segment_ = static_cast<int>(segment);
+    system_.SetInputs(scene.InputValues(segment_ends_[segment]));
+    const double segment_end = segment_ends_[segment + 1];
+    const double reached =
+        clock_targets ? kClockTolerance * std::max(1.0, std::fabs(segment_end)) : 0.0;
+    while (!failed()) {
+      const double position = clock_targets ? y_[clock] : tau_;
+      const double rest = segment_end - position;
+      if (rest <= reached) break;
+      // With time-freezing a frozen step does not move the clock: it never lands.
+      const bool frozen = clock_targets && system_.TimeFrozen(a_zero_);
+      double length = 0.0;
+      bool lands = false;
+      if (replay) {
+        const double entry = next_replay < options_.step_sequence.size()
+                                 ? options_.step_sequence[next_replay++]
+                                 : 0.0;
+        lands = !frozen && (entry == 0.0 || entry >= rest);
+        length = lands ? rest : (entry > 0.0 ? entry : options_.step_size);
+      } else {
+        if (options_.max_step_size > 0.0) step = std::min(step, options_.max_step_size);
+        lands = !frozen && step * (1.0 + kLandingFraction) >= rest;
+        length = lands ? rest : step;
+      }
+      // Running clock at rate 1: landing in numerical time takes the clock distance.
+      const double step_end = lands && !clock_targets ? segment_end : tau_ + length;
+      const Snapshot before = replay ? Snapshot() : Save();
+      if (options_.sensitivities) {
+        // Row n_y of sensitivity_ is d(tau - step_end). Step lengths are held fixed (internal
+        // differentiation), so a step's end moves with its start, except a landing step whose
+        // end is the segment end (a constant; with time-freezing the clock's target).
+        const Eigen::RowVectorXd d_tau = sensitivity_.row(ny_) + d_step_end_;
+        Eigen::RowVectorXd d_end = d_tau;
+        if (lands) {
+          d_end = clock_targets ? Eigen::RowVectorXd(d_tau - sensitivity_.row(clock))
+                                : Eigen::RowVectorXd::Zero(d_tau.size());
+        }
+        sensitivity_.row(ny_) = d_tau - d_end;
+        d_step_end_ = d_end;
+      }
+      capture_piece_ = keep_polynomials_;
+      piece_.clear();
+      ProgressCallback progress;
+      std::swap(progress, progress_);  // no progress reports from attempts that may be rejected
+      int remaining = options_.finite_elements;
+      bool switched = false;
+      if (smooth_) {
+        AdvanceSmooth(step_end, remaining);
+      } else {
+        switched = Advance(step_end, &remaining);
+      }
+      std::swap(progress, progress_);
+      capture_piece_ = false;
+      if (replay) {
+        if (failed()) return;
+        result_.step_sequence.push_back(lands ? 0.0 : length);
+        ++result_.stats.num_steps;
+        if (progress_) progress_(y_[clock]);
+        continue;
+      }
+      const double minimum =
+          std::max(options_.min_step_size, kMinStepUlps * std::numeric_limits<double>::epsilon() *
+                                               std::max(1.0, std::fabs(tau_)));
+      // The attempt's checks: certificates, resolution of the free sides, error estimate.
+      const double piece_length = tau_ - before.tau;
+      ErrorEstimate estimate;
+      double resolution = 0.0;
+      if (!failed()) {
+        double certificate = 0.0;
+        for (std::size_t e = before.elements; e < result_.elements.size(); ++e) {
+          certificate = std::max({certificate, result_.elements[e].cross_complementarity,
+                                  result_.elements[e].complementarity});
+        }
+        if (certificate > kMissedSwitchCertificate * options_.event_tolerance) {
+          Fail(FesdStatus::kEventLocationFailure, position,
+               "an element of the step has complementarity certificate " + Text(certificate) +
+                   ": a switch inside it was not located");
+        }
+      }
+      if (!failed()) {
+        resolution = IndicatorResolution() / kIndicatorResolution;
+        if (!std::isfinite(resolution)) {
+          Fail(FesdStatus::kEventLocationFailure, position,
+               "a free side is negative between the stages of an element of the step: a switch "
+               "inside it was not located");
+        }
+      }
+      if (!failed()) {
+        estimate = EstimateError(piece_length / horizon, before.elements);
+        if (!std::isfinite(estimate.acceptance)) {
+          Fail(FesdStatus::kNewtonFailure, position,
+               "a comparison solve of the error estimate (the step's interval with another "
+               "element count) did not converge");
+        }
+      }
+      if (failed()) {
+        // A solve or check failed: retry the step shorter (a switch then falls into a shorter
+        // step, with other element lengths around it), down to the minimum step.
+        const FesdStatus status = result_.status;
+        const std::string reason = result_.message;
+        Restore(before);
+        ++result_.stats.num_failed_steps;
+        controller.Failed();
+        step = kFailureFactor * length;
+        if (step < minimum) {
+          result_.status = status;
+          result_.message = reason + " (adaptive: retried with the step halved down to " +
+                            Text(length) + ", below which lies min_step_size " + Text(minimum) +
+                            ")";
+          return;
+        }
+        continue;
+      }
+      const double error = std::max(estimate.acceptance, resolution);
+      const double proposal = std::max(estimate.proposal, resolution);
+      if (!(error <= 1.0)) {
+        Restore(before);
+        ++result_.stats.num_rejected_steps;
+        step = controller.Reject(piece_length, proposal);
+        if (step < minimum) {
+          Fail(FesdStatus::kStepSizeTooSmall, position,
+               "the error estimate (" + Text(error) + " times the tolerance per unit step) of a " +
+                   "step of " + Text(piece_length) + " calls for a step below min_step_size " +
+                   Text(minimum));
+          return;
+        }
+        continue;
+      }
+      result_.step_sequence.push_back(lands ? 0.0 : length);
+      ++result_.stats.num_steps;
+      step = controller.Accept(piece_length, length, proposal, switched);
+      if (progress_) progress_(y_[clock]);
+    }
+  }
+}
+
+// Hairer & Wanner I, Sec. II.4 (as the smooth Radau IIA integrator), for order p = 2s - 1, with
+// F at the consistent algebraic values of the initial statuses; norms over the scene states.
+// Where the states do not move at t0 the heuristic has no information (its fallback is
+// 1e-6): a state at rest while a moving set or a switching function of time approaches (S2)
+// starts with kQuietStart of the horizon instead, and the step grows from there.
+double FesdRun::StartingStep(double span) {
+  constexpr double kQuietStart = 1e-3;
+  const Vector z0 = ConsistentGuess(y_, v_);
+  PointEvaluation point;
+  system_.Evaluate(y_, z0, Derivatives::kNone, &point);
+  const Vector f0 = point.F;
+  auto norm = [&](const Vector& value) {
+    double sum = 0.0;
+    for (int i = 0; i < nx_; ++i) {
+      const double w = options_.absolute_tolerance + options_.relative_tolerance * std::fabs(y_[i]);
+      sum += (value[i] / w) * (value[i] / w);
+    }
+    return std::sqrt(sum / nx_);
+  };
+  const double d0 = norm(y_), d1 = norm(f0);
+  double h0 = (d0 < 1e-5 || d1 < 1e-5) ? kQuietStart * span : 0.01 * d0 / d1;
+  h0 = std::min(h0, span);
+  const Vector y1 = y_ + h0 * f0;
+  system_.Evaluate(y1, ConsistentGuess(y1, v_), Derivatives::kNone, &point);
+  const double d2 = point.F.allFinite() ? norm(point.F - f0) / h0 : 0.0;
+  const double p = 2.0 * s_ - 1.0;
+  const double h1 = std::max(d1, d2) <= 1e-15 ? std::max(kQuietStart * span, h0 * 1e-3)
+                                              : std::pow(0.01 / std::max(d1, d2), 1.0 / (p + 1.0));
+  return std::min(options_.finite_elements * std::min(100.0 * h0, h1), span);
+}
+
+FesdRun::ErrorEstimate FesdRun::EstimateError(double fraction, std::size_t first_element) {
+  MOREAU_ASSERT(!piece_.empty(), "adaptive step without committed elements");
+  const int m = static_cast<int>(piece_.size());
+  const double h = piece_.front().h;
+  const Vector& y_start = piece_.front().y0;
+  const Vector y_end = piece_.back().End();
+  const std::vector<bool>& a_zero = piece_.front().a_zero;
+  const double p = 2.0 * s_ - 1.0;
+  // How accurately the compared solutions are known (see kNewtonNoise); the smooth kernel
+  // stops on increments below the Newton tolerance.
+  double residual = smooth_ ? options_.newton.tolerance : 0.0;
+  for (std::size_t e = first_element; e < result_.elements.size(); ++e) {
+    residual = std::max(residual, result_.elements[e].newton_residual);
+  }
+  comparison_residual_ = 0.0;
+  const double infinity = std::numeric_limits<double>::infinity();
+  const ErrorEstimate failed{infinity, infinity};
+  Vector local;
+  if (m >= 2) {
+    Vector coarse;
+    if (!SolveComparisonElement(y_start, 0.0, m * h, a_zero, &coarse)) return failed;
+    local = (coarse - y_end) / (std::pow(m, p) - 1.0);
+  } else {
+    Vector half, fine;
+    if (!SolveComparisonElement(y_start, 0.0, 0.5 * h, a_zero, &half) ||
+        !SolveComparisonElement(half, 0.5 * h, 0.5 * h, a_zero, &fine)) {
+      return failed;
+    }
+    const double power = std::pow(2.0, p);
+    local = (y_end - fine) * (power / (power - 1.0));
+  }
+  residual = std::max(residual, comparison_residual_);
+  ErrorEstimate estimate;
+  for (int i = 0; i < ny_; ++i) {
+    const double size = std::max(std::fabs(y_start[i]), std::fabs(y_end[i]));
+    const double allowed =
+        std::max((options_.absolute_tolerance + options_.relative_tolerance * size) * fraction,
+                 kNewtonNoise * std::numeric_limits<double>::epsilon() * (1.0 + size));
+    const double noise = kNewtonNoise * residual * (1.0 + size);
+    estimate.proposal = std::max(estimate.proposal, std::fabs(local[i]) / allowed);
+    estimate.acceptance =
+        std::max(estimate.acceptance, std::fabs(local[i]) / std::max(allowed, noise));
+  }
+  return estimate;
+}
+
+double FesdRun::IndicatorResolution() const {
+  if (np_ == 0) return 0.0;
+  // Nodes: the element start and the stages; test points: the midpoints of the two widest gaps
+  // between nodes, where the interpolation error of a function the element does not resolve
+  // is largest.
+  std::vector<double> nodes = {0.0};
+  for (int i = 0; i < s_; ++i) nodes.push_back(tableau_.c[i]);
+  std::vector<std::pair<double, double>> gaps;  // (width, midpoint)
+  for (std::size_t j = 0; j + 1 < nodes.size(); ++j) {
+    gaps.emplace_back(nodes[j + 1] - nodes[j], 0.5 * (nodes[j] + nodes[j + 1]));
+  }
+  std::sort(gaps.rbegin(), gaps.rend());
+  std::vector<double> tests;
+  for (std::size_t j = 0; j < std::min<std::size_t>(2, gaps.size()); ++j) {
+    tests.push_back(gaps[j].second);
+  }
+  const std::size_t n = nodes.size();
+  double worst = 0.0;
+  IndicatorEvaluation at;
+  for (const ElementPolynomial& element : piece_) {
+    std::vector<int> continuous;
+    for (int k = 0; k < np_; ++k) {
+      const bool continuous_a =
+          system_.pairs()[static_cast<std::size_t>(k)].continuous == ContinuousSide::kA;
+      // The free side is continuous when the status keeps the jump side at zero.
+      if (element.a_zero[static_cast<std::size_t>(k)] != continuous_a) continuous.push_back(k);
+    }
+    if (continuous.empty()) continue;
+    const Vector v = element.algebraic.col(0);
+    auto indicators = [&](double theta) {
+      const Vector y = element.y0 + element.increments * tableau_.InterpolationWeights(theta);
+      system_.EvaluateEventIndicators(y, v, element.a_zero, Derivatives::kNone, &at);
+      return at.values;
+    };
+    std::vector<Vector> values;
+    for (double theta : nodes) values.push_back(indicators(theta));
+    for (double theta : tests) {
+      const Vector actual = indicators(theta);
+      // Lagrange interpolation through the nodes.
+      Vector predicted = Vector::Zero(np_);
+      for (std::size_t j = 0; j < n; ++j) {
+        double basis = 1.0;
+        for (std::size_t l = 0; l < n; ++l) {
+          if (l != j) basis *= (theta - nodes[l]) / (nodes[j] - nodes[l]);
+        }
+        predicted += basis * values[j];
+      }
+      for (int k : continuous) {
+        double low = actual[k], high = actual[k], size = std::fabs(actual[k]);
+        double nearest = std::fabs(actual[k]);  // closest approach to zero
+        for (const Vector& value : values) {
+          low = std::min(low, value[k]);
+          high = std::max(high, value[k]);
+          size = std::max(size, std::fabs(value[k]));
+          nearest = std::min(nearest, std::fabs(value[k]));
+        }
+        // A free side negative between the checked points: a switch that was not located.
+        if (actual[k] < -options_.event_tolerance * std::max(1.0, std::fabs(values[0][k]))) {
+          return std::numeric_limits<double>::infinity();
+        }
+        // Relative to the variation over the element, or to the distance from zero where that
+        // is larger (a free side that stays far from zero cannot hide a pair of roots).
+        worst = std::max(worst, std::fabs(actual[k] - predicted[k]) /
+                                    (std::max(high - low, nearest) + kIndicatorFloor * (1.0 + size)));
+      }
+    }
+  }
+  return worst;
+}
+
+void FesdRun::PieceState(double offset, Vector* y, Vector* z) const {
+  const double h = piece_.front().h;
+  const int m = static_cast<int>(piece_.size());
+  const int e = std::clamp(static_cast<int>(std::floor(offset / h)), 0, m - 1);
+  const ElementPolynomial& element = piece_[static_cast<std::size_t>(e)];
+  const double theta = offset / h - e;
+  *y = element.y0 + element.increments * tableau_.InterpolationWeights(theta);
+  if (nz_ == 0) {
+    z->resize(0);
+    return;
+  }
+  Eigen::Index nearest = 0;
+  (tableau_.c.array() - theta).abs().minCoeff(&nearest);
+  *z = element.algebraic.col(nearest);
+}
+
+bool FesdRun::SolveComparisonElement(const Vector& y0, double t0, double h,
+                                     const std::vector<bool>& a_zero, Vector* y_end) {
+  Vector base, z;
+  PieceState(t0, &base, &z);
+  std::vector<Vector> states(static_cast<std::size_t>(s_)), algebraic(static_cast<std::size_t>(s_));
+  for (int i = 0; i < s_; ++i) {
+    PieceState(t0 + tableau_.c[i] * h, &states[static_cast<std::size_t>(i)],
+               &algebraic[static_cast<std::size_t>(i)]);
+  }
+  if (smooth_) {
+    Matrix increments(ny_, s_);
+    for (int i = 0; i < s_; ++i) increments.col(i) = states[static_cast<std::size_t>(i)] - base;
+    SmoothCollocationSolver::Stopping stopping;
+    stopping.tolerance = options_.newton.tolerance;
+    stopping.max_iterations = options_.newton.max_iterations;
+    const long factorizations = smooth_->num_factorizations();
+    int iterations = 0;
+    const auto outcome = smooth_->Solve(h, y0, stopping, &increments, &iterations);
+    result_.stats.num_newton_iterations += iterations;
+    factorizations_ += smooth_->num_factorizations() - factorizations;
+    if (outcome != SmoothCollocationSolver::Outcome::kConverged) return false;
+    *y_end = y0 + increments.col(s_ - 1);
+    return true;
+  }
+  GroupSetup setup;
+  setup.y_start = y0;
+  setup.a_zero = a_zero;
+  setup.h_fixed = h;
+  group_.Configure(setup);
+  const CollocationStages& stages = group_.element(0);
+  Vector guess(group_.num_unknowns());
+  for (int i = 0; i < s_; ++i) {
+    guess.segment(stages.state_offset(i), ny_) = states[static_cast<std::size_t>(i)] - base;
+    guess.segment(stages.algebraic_offset(i), nz_) = algebraic[static_cast<std::size_t>(i)];
+  }
+  const SemismoothNewtonResult solved = newton_.Solve(group_, guess);
+  CountNewton(solved);
+  if (!solved.converged()) return false;
+  comparison_residual_ = std::max(comparison_residual_, solved.residual_norm);
+  *y_end = group_.EndState(solved.solution);
+  return true;
+}
+
+}  // namespace moreau::internal
