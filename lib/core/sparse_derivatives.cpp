@@ -770,6 +770,8 @@ SparseDerivativeStats SparseDerivatives::stats() const {
   SparseDerivativeStats stats = stats_;
   stats.point_dependent = pattern_.point_dependent;
   stats.num_cached_plans = static_cast<int>(jacobian_plans_.size() + hessian_plans_.size());
+  stats.workspace_bytes = (inputs1_.capacity() + outputs1_.capacity()) * sizeof(Dual1) +
+                          (inputs2_.capacity() + outputs2_.capacity()) * sizeof(Dual2);
   return stats;
 }
 

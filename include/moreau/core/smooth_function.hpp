@@ -21,6 +21,7 @@
 /// Evaluation uses per-object workspaces and is not thread-safe; copies are deep (each
 /// integrator owns its copies), so separate objects may be used from separate threads.
 
+#include <cstddef>
 #include <functional>
 #include <memory>
 #include <string>
@@ -129,6 +130,9 @@ struct SparseDerivativeStats {
   int hessian_passes = 0;
   /// Row subsets whose patterns and colourings are cached (Jacobian and Hessian plans).
   int num_cached_plans = 0;
+  /// Memory held by the dual-number workspaces (one Dual1 and, after a Hessian, one Dual2 per
+  /// input and per output; sizeof(Dual2) is about 2.4 kB).
+  std::size_t workspace_bytes = 0;
 };
 
 /// Type-erased smooth model function with exact derivatives (see file comment).
