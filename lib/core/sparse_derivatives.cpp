@@ -712,6 +712,17 @@ void SparseDerivatives::WeightedHessian(TypedFunction* function, const ConstVect
   };
   const int chunks = (colors + kChunk - 1) / kChunk;
   stats_.hessian_colors = colors;
+  // The chunk pairs (a <= b) that hold some pair of an active output: only those are evaluated
+  // (a Hessian whose pairs are all diagonal needs the diagonal chunks only).
+  needed_chunk_pairs_.assign(static_cast<std::size_t>(chunks * chunks), 0);
+  for (int o : active_outputs_) {
+    for (int e = plan.pair_start[static_cast<std::size_t>(o)];
+         e < plan.pair_start[static_cast<std::size_t>(o) + 1]; ++e) {
+      const int a = compact(plan.pair_i[static_cast<std::size_t>(e)]) / kChunk;
+      const int b = compact(plan.pair_j[static_cast<std::size_t>(e)]) / kChunk;
+      needed_chunk_pairs_[static_cast<std::size_t>(std::min(a, b) * chunks + std::max(a, b))] = 1;
+    }
+  }
 
   const int m = function->num_outputs();
   const int nx = pattern_.nx, nu = pattern_.nu, np = pattern_.np;
@@ -721,6 +732,7 @@ void SparseDerivatives::WeightedHessian(TypedFunction* function, const ConstVect
   for (int a = 0; a < chunks; ++a) {
     const int outer_size = std::min(kChunk, colors - a * kChunk);
     for (int b = a; b < chunks; ++b) {
+      if (!needed_chunk_pairs_[static_cast<std::size_t>(a * chunks + b)]) continue;
       const int inner_size = std::min(kChunk, colors - b * kChunk);
       for (int i : seeded_) {
         const int c = compact(i);

@@ -87,6 +87,7 @@ class SparseDerivatives {
   std::vector<Dual2> inputs2_, outputs2_;
   std::vector<int> input_mark_, color_mark_, compact_color_, seeded_, active_outputs_;
   std::vector<int> used_colors_;
+  std::vector<char> needed_chunk_pairs_;
   int mark_stamp_ = 0;
 
   SparseDerivativeStats stats_;

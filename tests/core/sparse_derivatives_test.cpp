@@ -437,6 +437,49 @@ TEST(SparseCostTest, ColoursDoNotGrowWithTheNumberOfInputs) {
   }
 }
 
+TEST(SparseCostTest, ManyColoursSpanSeveralChunksOfDirections) {
+  // Outputs on overlapping windows of 24 of 64 inputs: at least 24 colours, so the compressed
+  // directions span two chunks of Dual1::kCapacity (two Dual1 passes; Dual2 passes for the
+  // chunk pairs (0,0), (0,1), (1,1)). A coupled and a diagonal Hessian per window.
+  constexpr int kInputs = 64, kWindow = 24, kStride = 4;
+  constexpr int kOutputs = (kInputs - kWindow) / kStride + 1;
+  const SmoothFunction coupled = MakeSmoothFunction(
+      "windows", 2 * kOutputs,
+      [](const auto& x, const auto&, const auto& t, const auto&, auto& out) {
+        using std::exp;
+        for (int k = 0; k < kOutputs; ++k) {
+          auto sum = 0.0 * t;
+          auto squares = 0.0 * t;
+          for (int i = k * kStride; i < k * kStride + kWindow; ++i) {
+            sum += (0.01 * i + 0.1) * x[i];
+            squares += x[i] * x[i];
+          }
+          out[2 * k] = exp(sum) * x[k * kStride] + t * x[k * kStride + 1];
+          out[2 * k + 1] = squares;
+        }
+      });
+  Point at;
+  at.x = Vector::LinSpaced(kInputs, -0.8, 0.9);
+  at.t = 0.4;
+  std::vector<int> odd, even;
+  for (int k = 0; k < 2 * kOutputs; ++k) (k % 2 ? odd : even).push_back(k);
+  const Vector weights = Vector::LinSpaced(2 * kOutputs, -1.0, 1.5);
+  SparseMatrix jac, hess;
+  for (Wrt wrt : {Wrt::XT(), Wrt::All()}) {
+    ASSERT_NO_FATAL_FAILURE(
+        CompareWithDense(coupled, at, wrt, nullptr, weights, "windows", &jac, &hess));
+    EXPECT_GE(coupled.sparse_derivative_stats().jacobian_colors, kWindow);
+    EXPECT_EQ(coupled.sparse_derivative_stats().jacobian_passes, 2);
+    EXPECT_EQ(coupled.sparse_derivative_stats().hessian_passes, 3);
+    ASSERT_NO_FATAL_FAILURE(
+        CompareWithDense(coupled, at, wrt, &even, weights, "windows (coupled)", &jac, &hess));
+    ASSERT_NO_FATAL_FAILURE(
+        CompareWithDense(coupled, at, wrt, &odd, weights, "windows (squares)", &jac, &hess));
+    // Diagonal second derivatives only: the off-diagonal chunk pair is skipped.
+    EXPECT_EQ(coupled.sparse_derivative_stats().hessian_passes, 2);
+  }
+}
+
 TEST(SparseCostTest, CopiesDetectOnTheirOwnAndPlansAreCachedPerRowSubset) {
   Vector q;
   const SmoothFunction c = NeighbourPairs(16, &q);
