@@ -2,6 +2,8 @@
 
 #include <algorithm>
 
+#include "sparse_derivatives.hpp"
+
 namespace moreau {
 
 namespace internal {
@@ -16,6 +18,30 @@ void ThrowArgumentIndex(const std::string& function, const char* argument, int i
 }  // namespace internal
 
 namespace internal {
+
+TypedFunction::TypedFunction(std::string name, int num_outputs)
+    : name_(std::move(name)), num_outputs_(num_outputs) {}
+
+TypedFunction::~TypedFunction() = default;
+
+void TypedFunction::SparseJacobian(const ConstVectorRef& x, const ConstVectorRef& u, double t,
+                                   const ConstVectorRef& p, Wrt wrt, Vector* out, SparseMatrix* jac,
+                                   const std::vector<int>* rows) {
+  if (!sparse_) sparse_ = std::make_unique<SparseDerivatives>();
+  sparse_->Jacobian(this, x, u, t, p, wrt, out, jac, rows);
+}
+
+void TypedFunction::SparseWeightedHessian(const ConstVectorRef& x, const ConstVectorRef& u,
+                                          double t, const ConstVectorRef& p, Wrt wrt,
+                                          const ConstVectorRef& weights, SparseMatrix* hess,
+                                          const std::vector<int>* rows) {
+  if (!sparse_) sparse_ = std::make_unique<SparseDerivatives>();
+  sparse_->WeightedHessian(this, x, u, t, p, wrt, weights, hess, rows);
+}
+
+SparseDerivativeStats TypedFunction::sparse_derivative_stats() const {
+  return sparse_ ? sparse_->stats() : SparseDerivativeStats{};
+}
 
 void TypedFunction::Evaluate(const ConstVectorRef& x, const ConstVectorRef& u, double t,
                              const ConstVectorRef& p, Vector* out) {
@@ -264,6 +290,11 @@ void SmoothFunction::Concept::SparseWeightedHessian(
   }
   hess->setFromTriplets(entries.begin(), entries.end());
   hess->makeCompressed();
+}
+
+SparseDerivativeStats SmoothFunction::sparse_derivative_stats() const {
+  const internal::TypedFunction* f = typed();
+  return f != nullptr ? f->sparse_derivative_stats() : SparseDerivativeStats{};
 }
 
 bool SmoothFunction::has_sparse_state_jacobian() const {

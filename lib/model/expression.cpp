@@ -626,7 +626,8 @@ void Run(const Program& program, const T* x, const T* u, const T& t, const T* p,
   }
 }
 
-// A model function given by expressions: one program, evaluated for T = double, Dual1, Dual2.
+// A model function given by expressions: one program, evaluated for T = double, Dual1, Dual2
+// and SparsityTracer (sparsity detection).
 class ExpressionFunction final : public TypedFunctionFor<ExpressionFunction> {
   using Base = TypedFunctionFor<ExpressionFunction>;
   friend Base;
@@ -646,8 +647,11 @@ class ExpressionFunction final : public TypedFunctionFor<ExpressionFunction> {
       return scratch0_;
     } else if constexpr (std::is_same_v<T, Dual1>) {
       return scratch1_;
-    } else {
+    } else if constexpr (std::is_same_v<T, Dual2>) {
       return scratch2_;
+    } else {
+      static_assert(std::is_same_v<T, SparsityTracer>);
+      return scratch_trace_;
     }
   }
 
@@ -670,6 +674,7 @@ class ExpressionFunction final : public TypedFunctionFor<ExpressionFunction> {
   std::vector<double> scratch0_;
   std::vector<Dual1> scratch1_;
   std::vector<Dual2> scratch2_;
+  std::vector<SparsityTracer> scratch_trace_;
 };
 
 }  // namespace

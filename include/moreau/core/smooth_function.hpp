@@ -10,8 +10,10 @@
 /// OutVector<T> of the declared size, zero-initialized. moreau instantiates the lambda with
 /// T = double for values, T = Dual<double> for Jacobians and T = Dual<Dual<double>> for
 /// weighted Hessians (forward-mode automatic differentiation, chunked in blocks of
-/// Dual<double>::kCapacity directions, so there is no limit on the number of inputs).
-/// Derivatives are therefore exact to round-off; no solver ever uses finite differences.
+/// Dual<double>::kCapacity directions, so there is no limit on the number of inputs), and
+/// T = SparsityTracer to detect which inputs each output depends on, for the sparse
+/// derivatives (docs/sparse-derivatives.md). Derivatives are therefore exact to round-off; no
+/// solver ever uses finite differences.
 ///
 /// Reading x[i] outside the argument's size or writing out[k] outside the declared output
 /// size throws std::invalid_argument naming the function, the argument and both sizes.
@@ -19,6 +21,7 @@
 /// Evaluation uses per-object workspaces and is not thread-safe; copies are deep (each
 /// integrator owns its copies), so separate objects may be used from separate threads.
 
+#include <cstddef>
 #include <functional>
 #include <memory>
 #include <string>
@@ -26,6 +29,7 @@
 #include <vector>
 
 #include "moreau/core/dual.hpp"
+#include "moreau/core/sparsity_tracer.hpp"
 #include "moreau/core/types.hpp"
 
 namespace moreau {
@@ -102,7 +106,34 @@ struct Wrt {
 
 namespace internal {
 class TypedFunction;
+class SparseDerivatives;
 }  // namespace internal
+
+/// Counters of the sparse derivatives of one function object (docs/sparse-derivatives.md).
+struct SparseDerivativeStats {
+  /// Traced evaluations that detected the sparsity pattern (1 after the first sparse call of a
+  /// function without value-dependent branches).
+  int num_detections = 0;
+  /// The traced evaluation inspected a value that depends on the inputs (a comparison, isfinite,
+  /// ValueOf): the pattern may depend on the point, so it is detected again at every sparse
+  /// call and the stored pattern is the union of the patterns seen so far.
+  bool point_dependent = false;
+  /// Re-detections of a point-dependent function that found new entries (each changes the
+  /// pattern of later results and recomputes the colourings).
+  int num_pattern_growths = 0;
+  /// Colours (compressed directions) and Dual1 evaluations of the last SparseJacobian.
+  int jacobian_colors = 0;
+  int jacobian_passes = 0;
+  /// Colours among the inputs of the nonzero-weight outputs, and Dual2 evaluations, of the last
+  /// SparseWeightedHessian.
+  int hessian_colors = 0;
+  int hessian_passes = 0;
+  /// Row subsets whose patterns and colourings are cached (Jacobian and Hessian plans).
+  int num_cached_plans = 0;
+  /// Memory held by the dual-number workspaces (one Dual1 and, after a Hessian, one Dual2 per
+  /// input and per output; sizeof(Dual2) is about 2.4 kB).
+  std::size_t workspace_bytes = 0;
+};
 
 /// Type-erased smooth model function with exact derivatives (see file comment).
 class SmoothFunction {
@@ -152,6 +183,9 @@ class SmoothFunction {
   void SparseWeightedHessian(const ConstVectorRef& x, const ConstVectorRef& u, double t,
                              const ConstVectorRef& p, Wrt wrt, const ConstVectorRef& weights,
                              SparseMatrix* hess, const std::vector<int>* rows = nullptr) const;
+  /// Counters of SparseJacobian and SparseWeightedHessian (all zero for functions without
+  /// automatic differentiation).
+  SparseDerivativeStats sparse_derivative_stats() const;
   /// True for functions made by MakeSparseStateFunction (hand-written sparse dg/dx).
   bool has_sparse_state_jacobian() const;
   /// out = g and jac_x = dg/dx as a sparse matrix (only if has_sparse_state_jacobian()).
@@ -200,13 +234,16 @@ using Dual1 = Dual<double>;
 using Dual2 = Dual<Dual<double>>;
 
 // A function evaluated by one routine templated over the scalar type: values (double),
-// Jacobians (Dual1, forward mode in chunks of Dual1::kCapacity directions) and weighted
-// Hessians (Dual2) come from the three Call overloads. Implemented by generic lambdas
-// (AutoDiffFunction) and by compositions of such functions (stacked functions).
+// Jacobians (Dual1, forward mode in chunks of Dual1::kCapacity directions), weighted
+// Hessians (Dual2) and sparsity patterns (SparsityTracer) come from the four Call overloads.
+// Implemented by generic lambdas (AutoDiffFunction) and by compositions of such functions (stacked
+// functions).
 class TypedFunction : public SmoothFunction::Concept {
  public:
-  TypedFunction(std::string name, int num_outputs)
-      : name_(std::move(name)), num_outputs_(num_outputs) {}
+  TypedFunction(std::string name, int num_outputs);
+  ~TypedFunction() override;
+  TypedFunction(const TypedFunction&) = delete;
+  TypedFunction& operator=(const TypedFunction&) = delete;
   const std::string& name() const override { return name_; }
   int num_outputs() const override { return num_outputs_; }
   TypedFunction* typed() override { return this; }
@@ -218,6 +255,15 @@ class TypedFunction : public SmoothFunction::Concept {
   void WeightedHessian(const ConstVectorRef& x, const ConstVectorRef& u, double t,
                        const ConstVectorRef& p, Wrt wrt, const ConstVectorRef& weights,
                        Matrix* hess) override;
+  // Sparsity detection, column colouring and compressed forward mode
+  // (lib/core/sparse_derivatives.hpp, docs/sparse-derivatives.md).
+  void SparseJacobian(const ConstVectorRef& x, const ConstVectorRef& u, double t,
+                      const ConstVectorRef& p, Wrt wrt, Vector* out, SparseMatrix* jac,
+                      const std::vector<int>* rows) override;
+  void SparseWeightedHessian(const ConstVectorRef& x, const ConstVectorRef& u, double t,
+                             const ConstVectorRef& p, Wrt wrt, const ConstVectorRef& weights,
+                             SparseMatrix* hess, const std::vector<int>* rows) override;
+  SparseDerivativeStats sparse_derivative_stats() const;
 
   // out[0..num_outputs()) = g(x, u, t, p) in the scalar type; `out` is zeroed by the caller.
   virtual void Call(const double* x, int nx, const double* u, int nu, const double& t,
@@ -226,6 +272,9 @@ class TypedFunction : public SmoothFunction::Concept {
                     int np, Dual1* out) = 0;
   virtual void Call(const Dual2* x, int nx, const Dual2* u, int nu, const Dual2& t, const Dual2* p,
                     int np, Dual2* out) = 0;
+  virtual void Call(const SparsityTracer* x, int nx, const SparsityTracer* u, int nu,
+                    const SparsityTracer& t, const SparsityTracer* p, int np,
+                    SparsityTracer* out) = 0;
 
  protected:
   std::string name_;
@@ -244,9 +293,12 @@ class TypedFunction : public SmoothFunction::Concept {
                   const ConstVectorRef& p, Wrt wrt, Seed&& seed);
   Space<Dual1> space1_;
   Space<Dual2> space2_;
+  // Detected patterns, colourings and workspaces; made at the first sparse call and not copied
+  // (a copy detects again at its own first sparse call).
+  std::unique_ptr<SparseDerivatives> sparse_;
 };
 
-// A TypedFunction whose three Call overloads forward to one template
+// A TypedFunction whose four Call overloads forward to one template
 // Derived::Invoke<T>(x, nx, u, nu, t, p, np, out) (declare TypedFunctionFor<Derived> a friend
 // if Invoke is private).
 template <class Derived>
@@ -263,6 +315,10 @@ class TypedFunctionFor : public TypedFunction {
   }
   void Call(const Dual2* x, int nx, const Dual2* u, int nu, const Dual2& t, const Dual2* p, int np,
             Dual2* out) final {
+    static_cast<Derived*>(this)->Invoke(x, nx, u, nu, t, p, np, out);
+  }
+  void Call(const SparsityTracer* x, int nx, const SparsityTracer* u, int nu,
+            const SparsityTracer& t, const SparsityTracer* p, int np, SparsityTracer* out) final {
     static_cast<Derived*>(this)->Invoke(x, nx, u, nu, t, p, np, out);
   }
 };

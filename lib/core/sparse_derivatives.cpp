@@ -1,0 +1,790 @@
+// Sparse exact derivatives (docs/sparse-derivatives.md): sparsity detection from a traced
+// evaluation, distance-2 colourings per row subset, compressed forward mode with Dual1 and
+// Dual2, and recovery straight into a fixed compressed-column pattern.
+#include "sparse_derivatives.hpp"
+
+#include <algorithm>
+#include <cstring>
+#include <deque>
+#include <utility>
+
+#include "column_coloring.hpp"
+
+namespace moreau::internal {
+
+namespace {
+
+constexpr int kChunk = Dual1::kCapacity;  // directions per Dual1/Dual2 level and evaluation
+
+using Kind = SparsityTape::Kind;
+
+// Jacobian and second-derivative patterns of the outputs `output_nodes` of a traced evaluation.
+// The Jacobian pattern of an output is the set of inputs reachable from its node; its
+// second-derivative pattern is the union, over the nonlinear nodes reachable from it, of the
+// pairs of inputs that node's operation couples (Walther 2008, "nonlinear interaction
+// domains"). Cost: the nodes reachable from each output, plus one dependency set per operand of
+// a nonlinear node (memoized), plus the pairs generated.
+void AnalyzeTape(const SparsityTape& tape, const std::vector<int>& output_nodes, int num_inputs,
+                 SparsityPattern* pattern) {
+  const std::size_t num_nodes = tape.nodes.size();
+  std::vector<int> reach_mark(num_nodes, -1), dep_mark(num_nodes, -1);
+  int dep_stamp = 0;
+  std::vector<int> memo_index(num_nodes, -1);
+  std::deque<std::vector<int>> memo;  // deque: references stay valid as it grows
+  std::vector<int> reach_stack, dep_stack, inputs, nonlinear;
+  std::vector<std::pair<int, int>> pairs;
+
+  // D(node): the sorted inputs on which `node` depends.
+  auto dependencies = [&](int node) -> const std::vector<int>& {
+    int& index = memo_index[static_cast<std::size_t>(node)];
+    if (index >= 0) return memo[static_cast<std::size_t>(index)];
+    std::vector<int> result;
+    ++dep_stamp;
+    dep_stack.assign(1, node);
+    while (!dep_stack.empty()) {
+      const int v = dep_stack.back();
+      dep_stack.pop_back();
+      if (dep_mark[static_cast<std::size_t>(v)] == dep_stamp) continue;
+      dep_mark[static_cast<std::size_t>(v)] = dep_stamp;
+      if (v < num_inputs) {
+        result.push_back(v);
+        continue;
+      }
+      const SparsityTape::Node& n = tape.nodes[static_cast<std::size_t>(v)];
+      if (n.a >= 0) dep_stack.push_back(n.a);
+      if (n.b >= 0) dep_stack.push_back(n.b);
+    }
+    std::sort(result.begin(), result.end());
+    index = static_cast<int>(memo.size());
+    memo.push_back(std::move(result));
+    return memo.back();
+  };
+  auto add_product = [&pairs](const std::vector<int>& a, const std::vector<int>& b) {
+    for (int i : a) {
+      for (int j : b) pairs.emplace_back(std::min(i, j), std::max(i, j));
+    }
+  };
+  auto add_square = [&pairs](const std::vector<int>& a) {
+    for (std::size_t i = 0; i < a.size(); ++i) {
+      for (std::size_t j = i; j < a.size(); ++j) pairs.emplace_back(a[i], a[j]);
+    }
+  };
+
+  const int num_outputs = static_cast<int>(output_nodes.size());
+  pattern->jac_start.assign(1, 0);
+  pattern->hess_start.assign(1, 0);
+  pattern->jac_inputs.clear();
+  pattern->hess_first.clear();
+  pattern->hess_second.clear();
+  std::vector<int> merged;
+  for (int k = 0; k < num_outputs; ++k) {
+    inputs.clear();
+    nonlinear.clear();
+    pairs.clear();
+    const int root = output_nodes[static_cast<std::size_t>(k)];
+    if (root >= 0) reach_stack.assign(1, root);
+    while (!reach_stack.empty()) {
+      const int v = reach_stack.back();
+      reach_stack.pop_back();
+      if (reach_mark[static_cast<std::size_t>(v)] == k) continue;
+      reach_mark[static_cast<std::size_t>(v)] = k;
+      if (v < num_inputs) {
+        inputs.push_back(v);
+        continue;
+      }
+      const SparsityTape::Node& n = tape.nodes[static_cast<std::size_t>(v)];
+      if (n.kind != Kind::kLinear) nonlinear.push_back(v);
+      if (n.a >= 0) reach_stack.push_back(n.a);
+      if (n.b >= 0) reach_stack.push_back(n.b);
+    }
+    std::sort(inputs.begin(), inputs.end());
+    pattern->jac_inputs.insert(pattern->jac_inputs.end(), inputs.begin(), inputs.end());
+    pattern->jac_start.push_back(static_cast<int>(pattern->jac_inputs.size()));
+
+    for (int v : nonlinear) {
+      const SparsityTape::Node& n = tape.nodes[static_cast<std::size_t>(v)];
+      switch (n.kind) {
+        case Kind::kProduct:  // d2(ab) = da db + db da
+          add_product(dependencies(n.a), dependencies(n.b));
+          break;
+        case Kind::kQuotient: {  // d2(a/b) couples a with b and b with itself
+          const std::vector<int>& b = dependencies(n.b);
+          if (n.a >= 0) add_product(dependencies(n.a), b);
+          add_square(b);
+          break;
+        }
+        case Kind::kNonlinear: {
+          if (n.b < 0) {
+            add_square(dependencies(n.a));
+          } else {
+            const std::vector<int>& a = dependencies(n.a);
+            const std::vector<int>& b = dependencies(n.b);
+            merged.clear();
+            std::set_union(a.begin(), a.end(), b.begin(), b.end(), std::back_inserter(merged));
+            add_square(merged);
+          }
+          break;
+        }
+        case Kind::kInput:
+        case Kind::kLinear:
+          break;
+      }
+    }
+    std::sort(pairs.begin(), pairs.end());
+    pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+    for (const auto& [i, j] : pairs) {
+      pattern->hess_first.push_back(i);
+      pattern->hess_second.push_back(j);
+    }
+    pattern->hess_start.push_back(static_cast<int>(pattern->hess_first.size()));
+  }
+}
+
+// Column of each input for `wrt` (x | u | t | p with unselected blocks removed), or -1.
+std::vector<int> ColumnsOfInputs(const SparsityPattern& pattern, Wrt wrt, int* num_columns) {
+  std::vector<int> column(static_cast<std::size_t>(pattern.num_inputs), -1);
+  int next = 0;
+  int input = 0;
+  auto block = [&](int size, bool selected) {
+    for (int i = 0; i < size; ++i, ++input) {
+      column[static_cast<std::size_t>(input)] = selected ? next++ : -1;
+    }
+  };
+  block(pattern.nx, wrt.x);
+  block(pattern.nu, wrt.u);
+  block(1, wrt.t);
+  block(pattern.np, wrt.p);
+  *num_columns = next;
+  return column;
+}
+
+unsigned WrtBits(Wrt wrt) {
+  return (wrt.x ? 1u : 0u) | (wrt.u ? 2u : 0u) | (wrt.t ? 4u : 0u) | (wrt.p ? 8u : 0u);
+}
+
+// The rows of a call: all outputs, or the caller's subset (checked once, when a plan is made).
+std::vector<int> SelectedRows(const TypedFunction& function, const std::vector<int>* rows) {
+  const int m = function.num_outputs();
+  if (rows == nullptr) {
+    std::vector<int> all(static_cast<std::size_t>(m));
+    for (int k = 0; k < m; ++k) all[static_cast<std::size_t>(k)] = k;
+    return all;
+  }
+  for (std::size_t r = 0; r < rows->size(); ++r) {
+    const int k = (*rows)[r];
+    RequireArgument(k >= 0 && k < m, "function '", function.name(), "': row ", k,
+                    " of the sparse derivative's row subset is not an output (", m, " outputs)");
+    RequireArgument(r == 0 || (*rows)[r - 1] < k, "function '", function.name(),
+                    "': the row subset of a sparse derivative must be sorted and unique, got ",
+                    (*rows)[r - 1], " before ", k);
+  }
+  return *rows;
+}
+
+// A compressed-column pattern with zero values from per-column sorted row lists.
+SparseMatrix PatternMatrix(int rows, int cols, const std::vector<int>& column_start,
+                           const std::vector<int>& row_index) {
+  SparseMatrix matrix(rows, cols);
+  matrix.resizeNonZeros(static_cast<Eigen::Index>(row_index.size()));
+  std::copy(column_start.begin(), column_start.end(), matrix.outerIndexPtr());
+  std::copy(row_index.begin(), row_index.end(), matrix.innerIndexPtr());
+  std::fill(matrix.valuePtr(), matrix.valuePtr() + row_index.size(), 0.0);
+  MOREAU_ASSERT(matrix.isCompressed(), "pattern matrix must be compressed");
+  return matrix;
+}
+
+// Gives `target` the pattern of `pattern` unless it already has it (then only its values are
+// overwritten by the caller: no allocation in steady state).
+void AdoptPattern(const SparseMatrix& pattern, SparseMatrix* target) {
+  const bool same =
+      target->rows() == pattern.rows() && target->cols() == pattern.cols() &&
+      target->isCompressed() && target->nonZeros() == pattern.nonZeros() &&
+      std::equal(pattern.outerIndexPtr(), pattern.outerIndexPtr() + pattern.cols() + 1,
+                 target->outerIndexPtr()) &&
+      std::equal(pattern.innerIndexPtr(), pattern.innerIndexPtr() + pattern.nonZeros(),
+                 target->innerIndexPtr());
+  if (!same) *target = pattern;
+}
+
+}  // namespace
+
+SparsityPattern DetectSparsity(TypedFunction* function, const ConstVectorRef& x,
+                               const ConstVectorRef& u, double t, const ConstVectorRef& p) {
+  SparsityPattern pattern;
+  pattern.nx = static_cast<int>(x.size());
+  pattern.nu = static_cast<int>(u.size());
+  pattern.np = static_cast<int>(p.size());
+  pattern.num_inputs = pattern.nx + pattern.nu + 1 + pattern.np;
+  SparsityTape tape;
+  tape.nodes.reserve(static_cast<std::size_t>(pattern.num_inputs) * 4);
+  std::vector<SparsityTracer> inputs;
+  inputs.reserve(static_cast<std::size_t>(pattern.num_inputs));
+  auto add = [&](double value) {
+    const int node = tape.Record(Kind::kInput, -1, -1);
+    inputs.emplace_back(value, &tape, node);
+  };
+  for (Eigen::Index i = 0; i < x.size(); ++i) add(x[i]);
+  for (Eigen::Index i = 0; i < u.size(); ++i) add(u[i]);
+  add(t);
+  for (Eigen::Index i = 0; i < p.size(); ++i) add(p[i]);
+  std::vector<SparsityTracer> outputs(static_cast<std::size_t>(function->num_outputs()),
+                                      SparsityTracer(0.0));
+  const SparsityTracer* base = inputs.data();
+  function->Call(base, pattern.nx, base + pattern.nx, pattern.nu, base[pattern.nx + pattern.nu],
+                 base + pattern.nx + pattern.nu + 1, pattern.np, outputs.data());
+  std::vector<int> output_nodes(outputs.size());
+  for (std::size_t k = 0; k < outputs.size(); ++k) {
+    MOREAU_ASSERT(!outputs[k].traced() || outputs[k].tape() == &tape,
+                  "an output of the traced evaluation belongs to another evaluation");
+    output_nodes[k] = outputs[k].node();
+  }
+  pattern.point_dependent = tape.value_dependent;
+  AnalyzeTape(tape, output_nodes, pattern.num_inputs, &pattern);
+  return pattern;
+}
+
+bool MergePattern(const SparsityPattern& other, SparsityPattern* into) {
+  MOREAU_ASSERT(other.SameSizes(into->nx, into->nu, into->np), "merging patterns of other sizes");
+  const int m = static_cast<int>(into->jac_start.size()) - 1;
+  bool grew = false;
+  std::vector<int> jac_start{0}, jac_inputs, hess_start{0}, hess_first, hess_second;
+  for (int k = 0; k < m; ++k) {
+    const auto k0 = static_cast<std::size_t>(k), k1 = k0 + 1;
+    const auto a0 = into->jac_inputs.begin() + into->jac_start[k0];
+    const auto a1 = into->jac_inputs.begin() + into->jac_start[k1];
+    const auto b0 = other.jac_inputs.begin() + other.jac_start[k0];
+    const auto b1 = other.jac_inputs.begin() + other.jac_start[k1];
+    const std::size_t before = jac_inputs.size();
+    std::set_union(a0, a1, b0, b1, std::back_inserter(jac_inputs));
+    grew = grew || static_cast<long>(jac_inputs.size() - before) != (a1 - a0);
+    jac_start.push_back(static_cast<int>(jac_inputs.size()));
+
+    // Pairs, merged in lexicographic order.
+    int a = into->hess_start[k0], b = other.hess_start[k0];
+    const int a_end = into->hess_start[k1], b_end = other.hess_start[k1];
+    auto key = [](const std::vector<int>& first, const std::vector<int>& second, int e) {
+      return std::make_pair(first[static_cast<std::size_t>(e)],
+                            second[static_cast<std::size_t>(e)]);
+    };
+    while (a < a_end || b < b_end) {
+      std::pair<int, int> next;
+      if (b >= b_end || (a < a_end && key(into->hess_first, into->hess_second, a) <=
+                                          key(other.hess_first, other.hess_second, b))) {
+        next = key(into->hess_first, into->hess_second, a);
+        if (b < b_end && key(other.hess_first, other.hess_second, b) == next) ++b;
+        ++a;
+      } else {
+        next = key(other.hess_first, other.hess_second, b++);
+        grew = true;
+      }
+      hess_first.push_back(next.first);
+      hess_second.push_back(next.second);
+    }
+    hess_start.push_back(static_cast<int>(hess_first.size()));
+  }
+  if (grew) {
+    into->jac_start = std::move(jac_start);
+    into->jac_inputs = std::move(jac_inputs);
+    into->hess_start = std::move(hess_start);
+    into->hess_first = std::move(hess_first);
+    into->hess_second = std::move(hess_second);
+  }
+  into->point_dependent = into->point_dependent || other.point_dependent;
+  return grew;
+}
+
+// ---- plans --------------------------------------------------------------------------------
+
+// Everything about SparseJacobian for one (wrt, rows) that does not depend on the point.
+struct SparseDerivatives::JacobianPlan {
+  unsigned wrt_bits = 0;
+  bool all_rows = true;
+  std::vector<int> rows;
+  std::uint64_t last_use = 0;
+
+  SparseMatrix pattern;  // num_outputs x columns, zero values
+  int num_colors = 0;
+  int num_passes = 0;  // ceil(num_colors / kChunk) Dual1 evaluations
+  // Inputs seeded in pass q: seeded_input[seeded_start[q] .. seeded_start[q + 1]), with their
+  // direction (colour - q kChunk).
+  std::vector<int> seeded_start, seeded_input, seeded_direction;
+  // Entries recovered in pass q: [entry_start[q], entry_start[q + 1]): value position in the
+  // pattern, output, direction.
+  std::vector<int> entry_start, entry_position, entry_output, entry_direction;
+};
+
+// Everything about SparseWeightedHessian for one (wrt, rows) that does not depend on the point.
+struct SparseDerivatives::HessianPlan {
+  unsigned wrt_bits = 0;
+  bool all_rows = true;
+  std::vector<int> rows;
+  std::uint64_t last_use = 0;
+
+  SparseMatrix pattern;  // columns x columns, both triangles, zero values
+  int num_colors = 0;    // colours of a distance-2 colouring of the supports below
+  // Outputs (of the subset) with a non-empty second-derivative pattern in the selected columns.
+  std::vector<int> outputs;
+  // Support of output outputs[o]: the inputs in its restricted second-derivative pairs,
+  // support_input[support_start[o] .. support_start[o + 1]); all have distinct colours.
+  std::vector<int> support_start, support_input;
+  std::vector<int> input_color;  // per input, -1 if in no support
+  // Pairs of output outputs[o]: pair_i/pair_j (inputs, i <= j) for e in
+  // [pair_start[o], pair_start[o + 1]), with the positions of (i, j) and (j, i) in the pattern.
+  std::vector<int> pair_start, pair_i, pair_j, position_ij, position_ji;
+};
+
+SparseDerivatives::SparseDerivatives() = default;
+SparseDerivatives::~SparseDerivatives() = default;
+
+void SparseDerivatives::UpdatePattern(TypedFunction* function, const ConstVectorRef& x,
+                                      const ConstVectorRef& u, double t, const ConstVectorRef& p) {
+  const int nx = static_cast<int>(x.size()), nu = static_cast<int>(u.size()),
+            np = static_cast<int>(p.size());
+  const bool fresh = !pattern_.SameSizes(nx, nu, np);
+  if (!fresh && !pattern_.point_dependent) return;
+  SparsityPattern detected = DetectSparsity(function, x, u, t, p);
+  ++stats_.num_detections;
+  if (fresh) {
+    pattern_ = std::move(detected);
+  } else if (MergePattern(detected, &pattern_)) {
+    ++stats_.num_pattern_growths;
+  } else {
+    return;  // nothing new: the plans stay valid
+  }
+  jacobian_plans_.clear();
+  hessian_plans_.clear();
+  const std::size_t n = static_cast<std::size_t>(pattern_.num_inputs);
+  input_mark_.assign(n, 0);
+  color_mark_.assign(n, 0);
+  compact_color_.assign(n, -1);
+  mark_stamp_ = 0;
+}
+
+SparseDerivatives::JacobianPlan& SparseDerivatives::FindJacobianPlan(const TypedFunction& function,
+                                                                     Wrt wrt,
+                                                                     const std::vector<int>* rows) {
+  const unsigned bits = WrtBits(wrt);
+  for (auto& plan : jacobian_plans_) {
+    if (plan->wrt_bits == bits && plan->all_rows == (rows == nullptr) &&
+        (rows == nullptr || plan->rows == *rows)) {
+      plan->last_use = ++clock_;
+      return *plan;
+    }
+  }
+  auto plan = std::make_unique<JacobianPlan>();
+  plan->wrt_bits = bits;
+  plan->all_rows = rows == nullptr;
+  const std::vector<int> selected = SelectedRows(function, rows);
+  if (rows != nullptr) plan->rows = *rows;
+  plan->last_use = ++clock_;
+
+  int num_columns = 0;
+  const std::vector<int> column_of = ColumnsOfInputs(pattern_, wrt, &num_columns);
+  const int m = function.num_outputs();
+
+  // Row-wise pattern of the selected rows (columns increase with inputs: sorted rows).
+  std::vector<int> row_start{0}, row_column;
+  for (int k : selected) {
+    const auto k0 = static_cast<std::size_t>(k);
+    for (int e = pattern_.jac_start[k0]; e < pattern_.jac_start[k0 + 1]; ++e) {
+      const int column =
+          column_of[static_cast<std::size_t>(pattern_.jac_inputs[static_cast<std::size_t>(e)])];
+      if (column >= 0) row_column.push_back(column);
+    }
+    row_start.push_back(static_cast<int>(row_column.size()));
+  }
+  const std::vector<int> colors =
+      ColorColumnsDistanceTwo(num_columns, row_start, row_column, &plan->num_colors);
+  plan->num_passes = (plan->num_colors + kChunk - 1) / kChunk;
+
+  // Compressed-column pattern (rows ascend within each column since `selected` ascends) and
+  // the value position of every row-wise entry.
+  std::vector<int> column_start(static_cast<std::size_t>(num_columns) + 1, 0);
+  for (int column : row_column) ++column_start[static_cast<std::size_t>(column) + 1];
+  for (int c = 0; c < num_columns; ++c) {
+    column_start[static_cast<std::size_t>(c) + 1] += column_start[static_cast<std::size_t>(c)];
+  }
+  std::vector<int> fill(column_start.begin(), column_start.end() - 1);
+  std::vector<int> row_index(row_column.size());
+  std::vector<int> position(row_column.size());
+  for (std::size_t r = 0; r < selected.size(); ++r) {
+    for (int e = row_start[r]; e < row_start[r + 1]; ++e) {
+      const int column = row_column[static_cast<std::size_t>(e)];
+      const int at = fill[static_cast<std::size_t>(column)]++;
+      row_index[static_cast<std::size_t>(at)] = selected[r];
+      position[static_cast<std::size_t>(e)] = at;
+    }
+  }
+  plan->pattern = PatternMatrix(m, num_columns, column_start, row_index);
+
+  // Entries grouped by pass (counting sort on colour / kChunk).
+  const int passes = plan->num_passes;
+  plan->entry_start.assign(static_cast<std::size_t>(passes) + 1, 0);
+  for (int column : row_column) {
+    ++plan->entry_start[static_cast<std::size_t>(colors[static_cast<std::size_t>(column)] /
+                                                 kChunk) +
+                        1];
+  }
+  for (int q = 0; q < passes; ++q) {
+    plan->entry_start[static_cast<std::size_t>(q) + 1] +=
+        plan->entry_start[static_cast<std::size_t>(q)];
+  }
+  const std::size_t entries = row_column.size();
+  plan->entry_position.resize(entries);
+  plan->entry_output.resize(entries);
+  plan->entry_direction.resize(entries);
+  std::vector<int> next(plan->entry_start.begin(), plan->entry_start.end() - 1);
+  for (std::size_t r = 0; r < selected.size(); ++r) {
+    for (int e = row_start[r]; e < row_start[r + 1]; ++e) {
+      const int color = colors[static_cast<std::size_t>(row_column[static_cast<std::size_t>(e)])];
+      const auto at = static_cast<std::size_t>(next[static_cast<std::size_t>(color / kChunk)]++);
+      plan->entry_position[at] = position[static_cast<std::size_t>(e)];
+      plan->entry_output[at] = selected[r];
+      plan->entry_direction[at] = color % kChunk;
+    }
+  }
+
+  // Seeded inputs grouped by pass.
+  plan->seeded_start.assign(static_cast<std::size_t>(passes) + 1, 0);
+  for (int i = 0; i < pattern_.num_inputs; ++i) {
+    const int column = column_of[static_cast<std::size_t>(i)];
+    if (column >= 0 && colors[static_cast<std::size_t>(column)] >= 0) {
+      ++plan->seeded_start[static_cast<std::size_t>(colors[static_cast<std::size_t>(column)] /
+                                                    kChunk) +
+                           1];
+    }
+  }
+  for (int q = 0; q < passes; ++q) {
+    plan->seeded_start[static_cast<std::size_t>(q) + 1] +=
+        plan->seeded_start[static_cast<std::size_t>(q)];
+  }
+  plan->seeded_input.resize(static_cast<std::size_t>(plan->seeded_start.back()));
+  plan->seeded_direction.resize(plan->seeded_input.size());
+  std::vector<int> seed_next(plan->seeded_start.begin(), plan->seeded_start.end() - 1);
+  for (int i = 0; i < pattern_.num_inputs; ++i) {
+    const int column = column_of[static_cast<std::size_t>(i)];
+    if (column < 0 || colors[static_cast<std::size_t>(column)] < 0) continue;
+    const int color = colors[static_cast<std::size_t>(column)];
+    const auto at = static_cast<std::size_t>(seed_next[static_cast<std::size_t>(color / kChunk)]++);
+    plan->seeded_input[at] = i;
+    plan->seeded_direction[at] = color % kChunk;
+  }
+
+  if (static_cast<int>(jacobian_plans_.size()) >= kMaxPlansPerKind) {
+    const auto oldest =
+        std::min_element(jacobian_plans_.begin(), jacobian_plans_.end(),
+                         [](const auto& a, const auto& b) { return a->last_use < b->last_use; });
+    jacobian_plans_.erase(oldest);
+  }
+  jacobian_plans_.push_back(std::move(plan));
+  return *jacobian_plans_.back();
+}
+
+SparseDerivatives::HessianPlan& SparseDerivatives::FindHessianPlan(const TypedFunction& function,
+                                                                   Wrt wrt,
+                                                                   const std::vector<int>* rows) {
+  const unsigned bits = WrtBits(wrt);
+  for (auto& plan : hessian_plans_) {
+    if (plan->wrt_bits == bits && plan->all_rows == (rows == nullptr) &&
+        (rows == nullptr || plan->rows == *rows)) {
+      plan->last_use = ++clock_;
+      return *plan;
+    }
+  }
+  auto plan = std::make_unique<HessianPlan>();
+  plan->wrt_bits = bits;
+  plan->all_rows = rows == nullptr;
+  const std::vector<int> selected = SelectedRows(function, rows);
+  if (rows != nullptr) plan->rows = *rows;
+  plan->last_use = ++clock_;
+
+  int num_columns = 0;
+  const std::vector<int> column_of = ColumnsOfInputs(pattern_, wrt, &num_columns);
+  const std::size_t n = static_cast<std::size_t>(pattern_.num_inputs);
+
+  // Pairs restricted to the selected columns, and the support of each output.
+  std::vector<int> stamp(n, -1);
+  plan->support_start.assign(1, 0);
+  plan->pair_start.assign(1, 0);
+  std::vector<std::pair<int, int>> union_entries;  // (column, row), both triangles
+  for (int k : selected) {
+    const auto k0 = static_cast<std::size_t>(k);
+    const std::size_t pairs_before = plan->pair_i.size();
+    const std::size_t support_before = plan->support_input.size();
+    for (int e = pattern_.hess_start[k0]; e < pattern_.hess_start[k0 + 1]; ++e) {
+      const int i = pattern_.hess_first[static_cast<std::size_t>(e)];
+      const int j = pattern_.hess_second[static_cast<std::size_t>(e)];
+      const int ci = column_of[static_cast<std::size_t>(i)];
+      const int cj = column_of[static_cast<std::size_t>(j)];
+      if (ci < 0 || cj < 0) continue;
+      plan->pair_i.push_back(i);
+      plan->pair_j.push_back(j);
+      union_entries.emplace_back(cj, ci);
+      if (ci != cj) union_entries.emplace_back(ci, cj);
+      for (int input : {i, j}) {
+        if (stamp[static_cast<std::size_t>(input)] != k) {
+          stamp[static_cast<std::size_t>(input)] = k;
+          plan->support_input.push_back(input);
+        }
+      }
+    }
+    if (plan->pair_i.size() == pairs_before) continue;
+    std::sort(plan->support_input.begin() + static_cast<long>(support_before),
+              plan->support_input.end());
+    plan->outputs.push_back(k);
+    plan->pair_start.push_back(static_cast<int>(plan->pair_i.size()));
+    plan->support_start.push_back(static_cast<int>(plan->support_input.size()));
+  }
+
+  // Distance-2 colouring of the supports (inputs as columns): the inputs of every output have
+  // distinct colours, so each output's second derivatives are read off the compressed ones.
+  int num_colors = 0;
+  const std::vector<int> colors = ColorColumnsDistanceTwo(pattern_.num_inputs, plan->support_start,
+                                                          plan->support_input, &num_colors);
+  plan->num_colors = num_colors;
+  plan->input_color = colors;
+
+  // Union pattern (both triangles) and the value positions of every pair.
+  std::sort(union_entries.begin(), union_entries.end());
+  union_entries.erase(std::unique(union_entries.begin(), union_entries.end()), union_entries.end());
+  std::vector<int> column_start(static_cast<std::size_t>(num_columns) + 1, 0);
+  std::vector<int> row_index(union_entries.size());
+  for (std::size_t e = 0; e < union_entries.size(); ++e) {
+    ++column_start[static_cast<std::size_t>(union_entries[e].first) + 1];
+    row_index[e] = union_entries[e].second;
+  }
+  for (int c = 0; c < num_columns; ++c) {
+    column_start[static_cast<std::size_t>(c) + 1] += column_start[static_cast<std::size_t>(c)];
+  }
+  plan->pattern = PatternMatrix(num_columns, num_columns, column_start, row_index);
+  auto position = [&](int row, int column) {
+    const auto begin = row_index.begin() + column_start[static_cast<std::size_t>(column)];
+    const auto end = row_index.begin() + column_start[static_cast<std::size_t>(column) + 1];
+    const auto found = std::lower_bound(begin, end, row);
+    MOREAU_ASSERT(found != end && *found == row, "Hessian pair missing from its pattern");
+    return static_cast<int>(found - row_index.begin());
+  };
+  plan->position_ij.resize(plan->pair_i.size());
+  plan->position_ji.resize(plan->pair_i.size());
+  for (std::size_t e = 0; e < plan->pair_i.size(); ++e) {
+    const int ci = column_of[static_cast<std::size_t>(plan->pair_i[e])];
+    const int cj = column_of[static_cast<std::size_t>(plan->pair_j[e])];
+    plan->position_ij[e] = position(ci, cj);
+    plan->position_ji[e] = position(cj, ci);
+  }
+
+  if (static_cast<int>(hessian_plans_.size()) >= kMaxPlansPerKind) {
+    const auto oldest =
+        std::min_element(hessian_plans_.begin(), hessian_plans_.end(),
+                         [](const auto& a, const auto& b) { return a->last_use < b->last_use; });
+    hessian_plans_.erase(oldest);
+  }
+  hessian_plans_.push_back(std::move(plan));
+  return *hessian_plans_.back();
+}
+
+void SparseDerivatives::FillInputs1(const ConstVectorRef& x, const ConstVectorRef& u, double t,
+                                    const ConstVectorRef& p) {
+  const std::size_t n = static_cast<std::size_t>(pattern_.num_inputs);
+  input_values_.resize(n);
+  std::size_t i = 0;
+  for (Eigen::Index k = 0; k < x.size(); ++k) input_values_[i++] = x[k];
+  for (Eigen::Index k = 0; k < u.size(); ++k) input_values_[i++] = u[k];
+  input_values_[i++] = t;
+  for (Eigen::Index k = 0; k < p.size(); ++k) input_values_[i++] = p[k];
+  inputs1_.resize(n);
+  for (std::size_t k = 0; k < n; ++k) inputs1_[k] = Dual1(input_values_[k]);
+}
+
+void SparseDerivatives::FillInputs2(const ConstVectorRef& x, const ConstVectorRef& u, double t,
+                                    const ConstVectorRef& p) {
+  const std::size_t n = static_cast<std::size_t>(pattern_.num_inputs);
+  input_values_.resize(n);
+  std::size_t i = 0;
+  for (Eigen::Index k = 0; k < x.size(); ++k) input_values_[i++] = x[k];
+  for (Eigen::Index k = 0; k < u.size(); ++k) input_values_[i++] = u[k];
+  input_values_[i++] = t;
+  for (Eigen::Index k = 0; k < p.size(); ++k) input_values_[i++] = p[k];
+  inputs2_.resize(n);
+  for (std::size_t k = 0; k < n; ++k) inputs2_[k] = Dual2(input_values_[k]);
+}
+
+// ---- Jacobian -----------------------------------------------------------------------------
+
+void SparseDerivatives::Jacobian(TypedFunction* function, const ConstVectorRef& x,
+                                 const ConstVectorRef& u, double t, const ConstVectorRef& p,
+                                 Wrt wrt, Vector* out, SparseMatrix* jac,
+                                 const std::vector<int>* rows) {
+  UpdatePattern(function, x, u, t, p);
+  const JacobianPlan& plan = FindJacobianPlan(*function, wrt, rows);
+  AdoptPattern(plan.pattern, jac);
+  stats_.jacobian_colors = plan.num_colors;
+  stats_.jacobian_passes = plan.num_passes;
+  if (plan.num_passes == 0) {  // nothing to differentiate: the value only
+    function->Evaluate(x, u, t, p, out);
+    return;
+  }
+  const int m = function->num_outputs();
+  const int nx = pattern_.nx, nu = pattern_.nu, np = pattern_.np;
+  out->resize(m);
+  double* values = jac->valuePtr();
+  FillInputs1(x, u, t, p);
+  outputs1_.resize(static_cast<std::size_t>(m));
+  for (int q = 0; q < plan.num_passes; ++q) {
+    // One direction per colour of this chunk; every other input is a constant.
+    const int directions = std::min(kChunk, plan.num_colors - q * kChunk);
+    const auto s0 = static_cast<std::size_t>(plan.seeded_start[static_cast<std::size_t>(q)]);
+    const auto s1 = static_cast<std::size_t>(plan.seeded_start[static_cast<std::size_t>(q) + 1]);
+    for (std::size_t s = s0; s < s1; ++s) {
+      const auto i = static_cast<std::size_t>(plan.seeded_input[s]);
+      inputs1_[i] = Dual1::Variable(input_values_[i], directions, plan.seeded_direction[s]);
+    }
+    std::fill(outputs1_.begin(), outputs1_.end(), Dual1(0.0));
+    const Dual1* base = inputs1_.data();
+    function->Call(base, nx, base + nx, nu, base[static_cast<std::size_t>(nx + nu)],
+                   base + nx + nu + 1, np, outputs1_.data());
+    if (q == 0) {
+      for (int k = 0; k < m; ++k) (*out)[k] = outputs1_[static_cast<std::size_t>(k)].value();
+    }
+    // Direct recovery: in every row, the colour of an entry's column is that column's alone.
+    const auto e0 = static_cast<std::size_t>(plan.entry_start[static_cast<std::size_t>(q)]);
+    const auto e1 = static_cast<std::size_t>(plan.entry_start[static_cast<std::size_t>(q) + 1]);
+    for (std::size_t e = e0; e < e1; ++e) {
+      const Dual1& g = outputs1_[static_cast<std::size_t>(plan.entry_output[e])];
+      const int direction = plan.entry_direction[e];
+      values[plan.entry_position[e]] = direction < g.size() ? g.d(direction) : 0.0;
+    }
+    for (std::size_t s = s0; s < s1; ++s) {
+      const auto i = static_cast<std::size_t>(plan.seeded_input[s]);
+      inputs1_[i] = Dual1(input_values_[i]);
+    }
+  }
+}
+
+// ---- weighted Hessian ---------------------------------------------------------------------
+
+void SparseDerivatives::WeightedHessian(TypedFunction* function, const ConstVectorRef& x,
+                                        const ConstVectorRef& u, double t, const ConstVectorRef& p,
+                                        Wrt wrt, const ConstVectorRef& weights, SparseMatrix* hess,
+                                        const std::vector<int>* rows) {
+  UpdatePattern(function, x, u, t, p);
+  const HessianPlan& plan = FindHessianPlan(*function, wrt, rows);
+  AdoptPattern(plan.pattern, hess);
+  double* values = hess->valuePtr();
+  std::fill(values, values + hess->nonZeros(), 0.0);
+  stats_.hessian_colors = 0;
+  stats_.hessian_passes = 0;
+
+  // Outputs with a nonzero weight, their inputs (seeded) and the colours those use, renumbered
+  // 0, 1, ... in increasing colour order so that only they take directions.
+  if (++mark_stamp_ == 0) {  // wrapped: reset the marks
+    std::fill(input_mark_.begin(), input_mark_.end(), 0);
+    std::fill(color_mark_.begin(), color_mark_.end(), 0);
+    mark_stamp_ = 1;
+  }
+  active_outputs_.clear();
+  seeded_.clear();
+  used_colors_.clear();
+  for (std::size_t o = 0; o < plan.outputs.size(); ++o) {
+    if (weights[plan.outputs[o]] == 0.0) continue;
+    active_outputs_.push_back(static_cast<int>(o));
+    for (int s = plan.support_start[o]; s < plan.support_start[o + 1]; ++s) {
+      const int i = plan.support_input[static_cast<std::size_t>(s)];
+      if (input_mark_[static_cast<std::size_t>(i)] == mark_stamp_) continue;
+      input_mark_[static_cast<std::size_t>(i)] = mark_stamp_;
+      seeded_.push_back(i);
+      const int color = plan.input_color[static_cast<std::size_t>(i)];
+      if (color_mark_[static_cast<std::size_t>(color)] != mark_stamp_) {
+        color_mark_[static_cast<std::size_t>(color)] = mark_stamp_;
+        used_colors_.push_back(color);
+      }
+    }
+  }
+  if (active_outputs_.empty()) return;  // zero weights: no derivative work at all
+  std::sort(used_colors_.begin(), used_colors_.end());
+  const int colors = static_cast<int>(used_colors_.size());
+  for (int c = 0; c < colors; ++c) {
+    compact_color_[static_cast<std::size_t>(used_colors_[static_cast<std::size_t>(c)])] = c;
+  }
+  auto compact = [&](int input) {
+    return compact_color_[static_cast<std::size_t>(
+        plan.input_color[static_cast<std::size_t>(input)])];
+  };
+  const int chunks = (colors + kChunk - 1) / kChunk;
+  stats_.hessian_colors = colors;
+  // The chunk pairs (a <= b) that hold some pair of an active output: only those are evaluated
+  // (a Hessian whose pairs are all diagonal needs the diagonal chunks only).
+  needed_chunk_pairs_.assign(static_cast<std::size_t>(chunks * chunks), 0);
+  for (int o : active_outputs_) {
+    for (int e = plan.pair_start[static_cast<std::size_t>(o)];
+         e < plan.pair_start[static_cast<std::size_t>(o) + 1]; ++e) {
+      const int a = compact(plan.pair_i[static_cast<std::size_t>(e)]) / kChunk;
+      const int b = compact(plan.pair_j[static_cast<std::size_t>(e)]) / kChunk;
+      needed_chunk_pairs_[static_cast<std::size_t>(std::min(a, b) * chunks + std::max(a, b))] = 1;
+    }
+  }
+
+  const int m = function->num_outputs();
+  const int nx = pattern_.nx, nu = pattern_.nu, np = pattern_.np;
+  FillInputs2(x, u, t, p);
+  outputs2_.resize(static_cast<std::size_t>(m));
+  // Outer level seeds the colours of chunk a, inner level those of chunk b >= a (symmetry).
+  for (int a = 0; a < chunks; ++a) {
+    const int outer_size = std::min(kChunk, colors - a * kChunk);
+    for (int b = a; b < chunks; ++b) {
+      if (!needed_chunk_pairs_[static_cast<std::size_t>(a * chunks + b)]) continue;
+      const int inner_size = std::min(kChunk, colors - b * kChunk);
+      for (int i : seeded_) {
+        const int c = compact(i);
+        const int chunk = c / kChunk;
+        if (chunk != a && chunk != b) continue;
+        const double value = input_values_[static_cast<std::size_t>(i)];
+        const Dual1 inner =
+            chunk == b ? Dual1::Variable(value, inner_size, c % kChunk) : Dual1(value);
+        inputs2_[static_cast<std::size_t>(i)] =
+            chunk == a ? Dual2::Variable(inner, outer_size, c % kChunk) : Dual2(inner);
+      }
+      std::fill(outputs2_.begin(), outputs2_.end(), Dual2(0.0));
+      const Dual2* base = inputs2_.data();
+      function->Call(base, nx, base + nx, nu, base[static_cast<std::size_t>(nx + nu)],
+                     base + nx + nu + 1, np, outputs2_.data());
+      ++stats_.hessian_passes;
+      // Per-output direct recovery of the pairs whose colours fall in chunks (a, b).
+      for (int o : active_outputs_) {
+        const int k = plan.outputs[static_cast<std::size_t>(o)];
+        const double w = weights[k];
+        const Dual2& g = outputs2_[static_cast<std::size_t>(k)];
+        for (int e = plan.pair_start[static_cast<std::size_t>(o)];
+             e < plan.pair_start[static_cast<std::size_t>(o) + 1]; ++e) {
+          const auto ue = static_cast<std::size_t>(e);
+          int ci = compact(plan.pair_i[ue]);
+          int cj = compact(plan.pair_j[ue]);
+          if (ci / kChunk != a) std::swap(ci, cj);  // ci: the outer one
+          if (ci / kChunk != a || cj / kChunk != b) continue;
+          const int outer = ci % kChunk, inner = cj % kChunk;
+          double second = 0.0;
+          if (outer < g.size()) {
+            const Dual1& row = g.d(outer);
+            if (inner < row.size()) second = row.d(inner);
+          }
+          values[plan.position_ij[ue]] += w * second;
+          if (plan.position_ji[ue] != plan.position_ij[ue])
+            values[plan.position_ji[ue]] += w * second;
+        }
+      }
+      for (int i : seeded_)
+        inputs2_[static_cast<std::size_t>(i)] = Dual2(input_values_[static_cast<std::size_t>(i)]);
+    }
+  }
+}
+
+SparseDerivativeStats SparseDerivatives::stats() const {
+  SparseDerivativeStats stats = stats_;
+  stats.point_dependent = pattern_.point_dependent;
+  stats.num_cached_plans = static_cast<int>(jacobian_plans_.size() + hessian_plans_.size());
+  stats.workspace_bytes = (inputs1_.capacity() + outputs1_.capacity()) * sizeof(Dual1) +
+                          (inputs2_.capacity() + outputs2_.capacity()) * sizeof(Dual2);
+  return stats;
+}
+
+}  // namespace moreau::internal

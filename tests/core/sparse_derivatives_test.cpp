@@ -1,0 +1,520 @@
+// Sparse exact derivatives (SmoothFunction::SparseJacobian, SparseWeightedHessian;
+// docs/sparse-derivatives.md): equal to the dense forward-mode AD on every model function of
+// every catalog scene and example scene file, with fixed patterns, empty Hessian patterns for
+// affine functions, point-dependent branches handled soundly, and cost that follows the true
+// nonzeros (colours, not inputs).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "moreau/core/smooth_function.hpp"
+#include "moreau/model/scene.hpp"
+#include "moreau/model/scene_file.hpp"
+#include "moreau/scenes/catalog.hpp"
+
+#ifndef MOREAU_EXAMPLES_DIR
+#error "MOREAU_EXAMPLES_DIR must name examples/ (tests/CMakeLists.txt)"
+#endif
+
+namespace moreau {
+namespace {
+
+// The sparse and the dense derivatives run the same dual-number operations on every path from
+// an input to an output (a compressed direction carries one input per output, the others
+// contribute exact zeros), and both accumulate weighted Hessians over outputs in increasing
+// order: they agree to a few ulps of the entry. 1e-14 relative to max(1, |entry|) leaves room
+// for a differently rounded association without hiding a wrong entry (O(1) or missing).
+constexpr double kDerivativeTolerance = 1e-14;
+
+std::vector<int> AllRows(int m) {
+  std::vector<int> rows(static_cast<std::size_t>(m));
+  for (int k = 0; k < m; ++k) rows[static_cast<std::size_t>(k)] = k;
+  return rows;
+}
+
+std::string WrtName(Wrt wrt) { return wrt.p ? "All" : (wrt.u ? "XUT" : (wrt.t ? "XT" : "X")); }
+
+struct Point {
+  Vector x, u, p;
+  double t = 0.0;
+};
+
+// Asserts |a - b| <= tolerance (1 + |b|) entrywise, naming the worst entry.
+void ExpectClose(const Matrix& sparse, const Matrix& dense, const std::string& what) {
+  ASSERT_EQ(sparse.rows(), dense.rows()) << what;
+  ASSERT_EQ(sparse.cols(), dense.cols()) << what;
+  if (dense.size() == 0) return;
+  // Error relative to the bound, entrywise; NaN (a wrong or missing entry) compares false.
+  const Matrix excess =
+      (sparse - dense)
+          .cwiseAbs()
+          .cwiseQuotient((kDerivativeTolerance * (1.0 + dense.array().abs())).matrix());
+  Eigen::Index i = 0, j = 0;
+  const double worst = excess.maxCoeff(&i, &j);
+  ASSERT_TRUE(worst <= 1.0 && sparse.allFinite() == dense.allFinite())
+      << what << ": entry (" << i << ", " << j << ") sparse " << sparse(i, j) << " dense "
+      << dense(i, j);
+}
+
+bool SamePattern(const SparseMatrix& a, const SparseMatrix& b) {
+  if (a.rows() != b.rows() || a.cols() != b.cols() || a.nonZeros() != b.nonZeros()) return false;
+  for (Eigen::Index j = 0; j <= a.cols(); ++j) {
+    if (a.outerIndexPtr()[j] != b.outerIndexPtr()[j]) return false;
+  }
+  for (Eigen::Index e = 0; e < a.nonZeros(); ++e) {
+    if (a.innerIndexPtr()[e] != b.innerIndexPtr()[e]) return false;
+  }
+  return true;
+}
+
+// Compares the sparse derivatives of f at `point` with the dense ones for (wrt, rows, weights);
+// returns the patterns for the invariance check.
+void CompareWithDense(const SmoothFunction& f, const Point& point, Wrt wrt,
+                      const std::vector<int>* rows, const Vector& weights, const std::string& what,
+                      SparseMatrix* jac, SparseMatrix* hess) {
+  const int m = f.num_outputs();
+  const std::string where = what + " wrt " + WrtName(wrt) + (rows ? " (row subset)" : "");
+  Vector dense_value, sparse_value;
+  Matrix dense_jac;
+  f.Jacobian(point.x, point.u, point.t, point.p, wrt, &dense_value, &dense_jac);
+  ASSERT_TRUE(dense_value.allFinite() && dense_jac.allFinite()) << where << ": choose a point "
+                                                                << "inside the domain";
+  f.SparseJacobian(point.x, point.u, point.t, point.p, wrt, &sparse_value, jac, rows);
+  ASSERT_EQ(sparse_value.size(), m) << where;
+  for (int k = 0; k < m; ++k) {
+    EXPECT_NEAR(sparse_value[k], dense_value[k],
+                kDerivativeTolerance * (1 + std::fabs(dense_value[k])))
+        << where << ": value " << k;
+  }
+  const std::vector<int> selected = rows ? *rows : AllRows(m);
+  std::vector<char> in_rows(static_cast<std::size_t>(m), 0);
+  for (int k : selected) in_rows[static_cast<std::size_t>(k)] = 1;
+  Matrix expected = dense_jac;
+  for (int k = 0; k < m; ++k) {
+    if (!in_rows[static_cast<std::size_t>(k)]) expected.row(k).setZero();
+  }
+  for (int j = 0; j < jac->outerSize(); ++j) {
+    for (SparseMatrix::InnerIterator it(*jac, j); it; ++it) {
+      ASSERT_TRUE(in_rows[static_cast<std::size_t>(it.row())])
+          << where << ": Jacobian entry stored in row " << it.row() << " outside the subset";
+    }
+  }
+  ASSERT_NO_FATAL_FAILURE(ExpectClose(Matrix(*jac), expected, where + " Jacobian"));
+
+  if (f.typed() == nullptr) return;  // hand-written Jacobian: no second derivatives
+  Vector masked = Vector::Zero(m);
+  for (int k : selected) masked[k] = weights[k];
+  Matrix dense_hess;
+  f.WeightedHessian(point.x, point.u, point.t, point.p, wrt, masked, &dense_hess);
+  ASSERT_TRUE(dense_hess.allFinite()) << where;
+  f.SparseWeightedHessian(point.x, point.u, point.t, point.p, wrt, weights, hess, rows);
+  ASSERT_NO_FATAL_FAILURE(ExpectClose(Matrix(*hess), dense_hess, where + " Hessian"));
+}
+
+// A point near the scene's initial data: states and inputs perturbed by up to 10% of their
+// scale, time inside the horizon, parameters by up to 1% (keeps every catalog function in its
+// domain: positive densities, speeds and radii stay positive).
+Point RandomPoint(const Scene& scene, std::mt19937* rng) {
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  Point point;
+  point.x = scene.initial_state;
+  for (Eigen::Index i = 0; i < point.x.size(); ++i) {
+    point.x[i] += 0.1 * unit(*rng) * (1.0 + std::fabs(point.x[i]));
+  }
+  std::uniform_real_distribution<double> fraction(0.0, 1.0);
+  point.t = scene.initial_time + fraction(*rng) * (scene.final_time - scene.initial_time);
+  point.u = scene.InputValues(point.t);
+  for (Eigen::Index i = 0; i < point.u.size(); ++i) {
+    point.u[i] += 0.1 * unit(*rng) * (1.0 + std::fabs(point.u[i]));
+  }
+  point.p = scene.ParameterValues();
+  for (Eigen::Index i = 0; i < point.p.size(); ++i) point.p[i] *= 1.0 + 0.01 * unit(*rng);
+  return point;
+}
+
+// Every model function of a scene, with a name for messages.
+std::vector<std::pair<std::string, SmoothFunction>> ModelFunctions(const Scene& scene) {
+  std::vector<std::pair<std::string, SmoothFunction>> functions;
+  auto add = [&functions](const std::string& what, const SmoothFunction& f) {
+    if (!f.empty()) functions.emplace_back(what, f);
+  };
+  add("dynamics", scene.dynamics);
+  for (const Effect& effect : scene.effects) {
+    const std::string name = EffectKind(effect) + " '" + EffectName(effect) + "'";
+    if (const auto* set = std::get_if<MovingSet>(&effect)) {
+      add(name + " constraints", set->constraints);
+    } else if (const auto* switching = std::get_if<SwitchingSurfaces>(&effect)) {
+      add(name + " surfaces", switching->surfaces);
+      for (std::size_t i = 0; i < switching->modes.size(); ++i) {
+        add(name + " mode " + std::to_string(i), switching->modes[i]);
+      }
+    } else if (const auto* relay = std::get_if<HysteresisRelay>(&effect)) {
+      add(name + " input", relay->input);
+      add(name + " field A", relay->mode_a);
+      add(name + " field B", relay->mode_b);
+    } else if (const auto* path = std::get_if<PathConstraints>(&effect)) {
+      add(name + " constraints", path->constraints);
+    }
+  }
+  return functions;
+}
+
+// The acceptance check on one scene: every function, Wrt::XT() and Wrt::All(), all rows and a
+// random subset, random weights (some zero) and all-zero weights, at two random points whose
+// patterns must agree.
+void CheckScene(const Scene& scene, unsigned seed) {
+  std::mt19937 rng(seed);
+  const auto functions = ModelFunctions(scene);
+  ASSERT_FALSE(functions.empty()) << scene.name;
+  for (const auto& [what_function, f] : functions) {
+    const std::string what = scene.name + " " + what_function + " ('" + f.name() + "')";
+    const int m = f.num_outputs();
+    std::uniform_real_distribution<double> weight(-2.0, 2.0);
+    std::bernoulli_distribution coin(0.5);
+    Vector weights(m);
+    for (int k = 0; k < m; ++k) weights[k] = coin(rng) ? weight(rng) : 0.0;
+    std::vector<int> subset;
+    for (int k = 0; k < m; ++k) {
+      if (coin(rng)) subset.push_back(k);
+    }
+    const Point first = RandomPoint(scene, &rng), second = RandomPoint(scene, &rng);
+    for (Wrt wrt : {Wrt::XT(), Wrt::All()}) {
+      for (const std::vector<int>* rows : {static_cast<const std::vector<int>*>(nullptr),
+                                           static_cast<const std::vector<int>*>(&subset)}) {
+        SparseMatrix jac_first, hess_first, jac_second, hess_second, hess_zero;
+        ASSERT_NO_FATAL_FAILURE(
+            CompareWithDense(f, first, wrt, rows, weights, what, &jac_first, &hess_first));
+        ASSERT_NO_FATAL_FAILURE(
+            CompareWithDense(f, second, wrt, rows, weights, what, &jac_second, &hess_second));
+        if (!f.sparse_derivative_stats().point_dependent) {
+          EXPECT_TRUE(SamePattern(jac_first, jac_second)) << what << ": Jacobian pattern moved";
+          EXPECT_TRUE(SamePattern(hess_first, hess_second)) << what << ": Hessian pattern moved";
+        }
+        if (f.typed() == nullptr) continue;
+        // Zero weights: the same pattern, all zero, and no second-order evaluation.
+        f.SparseWeightedHessian(second.x, second.u, second.t, second.p, wrt, Vector::Zero(m),
+                                &hess_zero, rows);
+        EXPECT_TRUE(SamePattern(hess_zero, hess_second)) << what;
+        EXPECT_EQ(Matrix(hess_zero).lpNorm<Eigen::Infinity>(), 0.0) << what;
+        EXPECT_EQ(f.sparse_derivative_stats().hessian_passes, 0) << what;
+      }
+    }
+    // Catalog functions are branch-free: one detection serves every call.
+    EXPECT_EQ(f.sparse_derivative_stats().num_detections, f.typed() ? 1 : 0) << what;
+  }
+}
+
+class CatalogSparseTest : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(CatalogSparseTest, SparseDerivativesEqualDenseOnEveryModelFunction) {
+  CheckScene(MakeScene(GetParam()), 20240515u);
+}
+
+std::vector<std::string> CatalogNames() {
+  std::vector<std::string> names;
+  for (const SceneDefinition& definition : SceneCatalog()) names.push_back(definition.name);
+  return names;
+}
+
+INSTANTIATE_TEST_SUITE_P(Catalog, CatalogSparseTest, ::testing::ValuesIn(CatalogNames()),
+                         [](const auto& parameter) { return parameter.param; });
+
+class SceneFileSparseTest : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(SceneFileSparseTest, SparseDerivativesEqualDenseOnEveryModelFunction) {
+  const std::string path = std::string(MOREAU_EXAMPLES_DIR) + "/scenes/" + GetParam() + ".toml";
+  CheckScene(LoadScene(path), 777u);
+}
+
+INSTANTIATE_TEST_SUITE_P(ExampleFiles, SceneFileSparseTest,
+                         ::testing::Values("S1", "S2", "S3", "S4", "F1", "F2a", "F2b", "F2c", "F3",
+                                           "F4", "H1", "H2", "H3", "dai_index2", "relay_feedback",
+                                           "sliding_box"),
+                         [](const auto& parameter) { return parameter.param; });
+
+// ---- detection ------------------------------------------------------------------------------
+
+// Entries (i, j) of the upper triangle of the sparse Hessian pattern of output k alone.
+std::vector<std::pair<int, int>> HessianPatternOf(const SmoothFunction& f, int k, const Point& at,
+                                                  Wrt wrt) {
+  Vector weights = Vector::Zero(f.num_outputs());
+  weights[k] = 1.0;
+  const std::vector<int> rows{k};
+  SparseMatrix hess;
+  f.SparseWeightedHessian(at.x, at.u, at.t, at.p, wrt, weights, &hess, &rows);
+  std::vector<std::pair<int, int>> entries;
+  for (int j = 0; j < hess.outerSize(); ++j) {
+    for (SparseMatrix::InnerIterator it(hess, j); it; ++it) {
+      if (it.row() <= j) entries.emplace_back(static_cast<int>(it.row()), j);
+    }
+  }
+  return entries;
+}
+
+TEST(SparsityDetectionTest, PatternsFollowTheOperations) {
+  // Inputs (Wrt::All): x0..x5 -> columns 0..5, u0 -> 6, t -> 7, p0 -> 8.
+  const SmoothFunction f = MakeSmoothFunction(
+      "ops", 7, [](const auto& x, const auto& u, const auto& t, const auto& p, auto& out) {
+        using std::exp;
+        using std::sin;
+        out[0] = x[0] * x[1] + 3.0 * x[2];            // product: only the mixed pair
+        out[1] = sin(x[0]) + 0.0 * x[5];              // nonlinear unary: the square of its argument
+        out[2] = x[3] / x[4];                         // quotient: (3,4) and (4,4)
+        out[3] = 2.0 * x[5] - p[0] + u[0] / 4.0 + t;  // affine
+        out[4] = exp(x[0] + x[1]);                    // nonlinear of a sum: all pairs of {0, 1}
+        out[5] = p[0] * t * x[2];                     // product of three: the three mixed pairs
+        out[6] = 5.0;                                 // constant
+      });
+  Point at;
+  at.x = Vector{{0.3, -0.4, 0.5, 1.5, 2.5, -1.0}};
+  at.u = Vector{{0.2}};
+  at.p = Vector{{1.7}};
+  at.t = 0.6;
+  using Pairs = std::vector<std::pair<int, int>>;
+  EXPECT_EQ(HessianPatternOf(f, 0, at, Wrt::All()), (Pairs{{0, 1}}));
+  EXPECT_EQ(HessianPatternOf(f, 1, at, Wrt::All()), (Pairs{{0, 0}}));
+  EXPECT_EQ(HessianPatternOf(f, 2, at, Wrt::All()), (Pairs{{3, 4}, {4, 4}}));
+  EXPECT_EQ(HessianPatternOf(f, 3, at, Wrt::All()), Pairs{});
+  EXPECT_EQ(HessianPatternOf(f, 4, at, Wrt::All()), (Pairs{{0, 0}, {0, 1}, {1, 1}}));
+  EXPECT_EQ(HessianPatternOf(f, 5, at, Wrt::All()), (Pairs{{2, 7}, {2, 8}, {7, 8}}));
+  EXPECT_EQ(HessianPatternOf(f, 5, at, Wrt::XT()), (Pairs{{2, 6}}));  // x2 t, columns x | t
+  EXPECT_EQ(HessianPatternOf(f, 6, at, Wrt::All()), Pairs{});
+  // Jacobian pattern: structural, including the entry multiplied by the constant 0.
+  Vector value;
+  SparseMatrix jac;
+  f.SparseJacobian(at.x, at.u, at.t, at.p, Wrt::All(), &value, &jac);
+  std::vector<std::vector<int>> rows(7);
+  for (int j = 0; j < jac.outerSize(); ++j) {
+    for (SparseMatrix::InnerIterator it(jac, j); it; ++it) {
+      rows[static_cast<std::size_t>(it.row())].push_back(j);
+    }
+  }
+  EXPECT_EQ(rows[0], (std::vector<int>{0, 1, 2}));
+  EXPECT_EQ(rows[1], (std::vector<int>{0, 5}));
+  EXPECT_EQ(rows[3], (std::vector<int>{5, 6, 7, 8}));
+  EXPECT_EQ(rows[5], (std::vector<int>{2, 7, 8}));
+  EXPECT_TRUE(rows[6].empty());
+  EXPECT_FALSE(f.sparse_derivative_stats().point_dependent);
+}
+
+TEST(SparsityDetectionTest, AffineFunctionsCostNoSecondOrderWork) {
+  // A linear constraint set c(x, t) = A x - b t with a dense-ish A: empty Hessian pattern.
+  const SmoothFunction c = MakeSmoothFunction(
+      "linear", 3, [](const auto& x, const auto&, const auto& t, const auto& p, auto& out) {
+        for (int k = 0; k < 3; ++k) {
+          for (int i = 0; i < x.size(); ++i) out[k] += (k + 1.0) * (i - 2.0) * x[i];
+          out[k] -= p[0] * 2.0 + t / 3.0;
+        }
+      });
+  const Vector x = Vector::LinSpaced(40, -1.0, 1.0), u, p{{0.5}};
+  SparseMatrix hess;
+  c.SparseWeightedHessian(x, u, 0.2, p, Wrt::All(), Vector::Ones(3), &hess);
+  EXPECT_EQ(hess.rows(), 42);
+  EXPECT_EQ(hess.nonZeros(), 0);
+  EXPECT_EQ(c.sparse_derivative_stats().hessian_passes, 0);
+}
+
+TEST(SparsityDetectionTest, BranchesAreFollowedOnBothSidesAndThePatternOnlyGrows) {
+  const SmoothFunction f = MakeSmoothFunction(
+      "branchy", 2, [](const auto& x, const auto&, const auto&, const auto&, auto& out) {
+        using std::sin;
+        if (x[0] > 0.0) {
+          out[0] = x[0] * x[1];
+        } else {
+          out[0] = sin(x[2]);
+        }
+        out[1] = x[3] * x[3];
+      });
+  const Vector u, p;
+  const Vector weights{{1.5, -0.5}};
+  SparseMatrix jac, hess;
+  Vector value;
+  std::vector<std::pair<Vector, std::string>> points = {
+      {Vector{{0.7, 0.2, -0.3, 0.4}}, "x0 > 0"},
+      {Vector{{-0.7, 0.2, -0.3, 0.4}}, "x0 < 0"},
+      {Vector{{0.9, -0.5, 1.3, 0.1}}, "x0 > 0 again"}};
+  for (const auto& [x, side] : points) {
+    Matrix dense_jac, dense_hess;
+    f.Jacobian(x, u, 0.0, p, Wrt::X(), &value, &dense_jac);
+    f.WeightedHessian(x, u, 0.0, p, Wrt::X(), weights, &dense_hess);
+    f.SparseJacobian(x, u, 0.0, p, Wrt::X(), &value, &jac);
+    f.SparseWeightedHessian(x, u, 0.0, p, Wrt::X(), weights, &hess);
+    ASSERT_NO_FATAL_FAILURE(ExpectClose(Matrix(jac), dense_jac, "Jacobian at " + side));
+    ASSERT_NO_FATAL_FAILURE(ExpectClose(Matrix(hess), dense_hess, "Hessian at " + side));
+  }
+  const SparseDerivativeStats stats = f.sparse_derivative_stats();
+  EXPECT_TRUE(stats.point_dependent);
+  EXPECT_EQ(stats.num_detections, 6);       // every sparse call traces again
+  EXPECT_EQ(stats.num_pattern_growths, 1);  // the second side added entries once
+  // The stored pattern is the union of both sides: row 0 has x0, x1 and x2.
+  EXPECT_EQ(jac.nonZeros(), 4);
+  EXPECT_EQ(hess.nonZeros(), 2 + 1 + 1);  // (0,1), (1,0), (2,2), (3,3)
+}
+
+TEST(SparsityDetectionTest, RowSubsetsMustBeSortedOutputs) {
+  const SmoothFunction f = MakeSmoothFunction(
+      "f", 3, [](const auto& x, const auto&, const auto&, const auto&, auto& out) {
+        out[0] = x[0];
+        out[1] = x[1];
+        out[2] = x[0] * x[1];
+      });
+  const Vector x{{1.0, 2.0}}, none;
+  Vector value;
+  SparseMatrix jac;
+  const std::vector<int> unsorted{2, 0}, outside{0, 3};
+  EXPECT_THROW(f.SparseJacobian(x, none, 0.0, none, Wrt::X(), &value, &jac, &unsorted),
+               std::invalid_argument);
+  EXPECT_THROW(f.SparseJacobian(x, none, 0.0, none, Wrt::X(), &value, &jac, &outside),
+               std::invalid_argument);
+}
+
+// ---- cost follows the nonzeros ----------------------------------------------------------------
+
+// N agents in the plane on a jittered grid, one output per pair of neighbours within distance
+// 1.6 (grid spacing 1): |q_i - q_j|^2 - 1, the crowd-motion non-overlap constraint.
+SmoothFunction NeighbourPairs(int agents, Vector* positions) {
+  const int side = static_cast<int>(std::ceil(std::sqrt(agents)));
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> jitter(-0.1, 0.1);
+  positions->resize(2 * agents);
+  for (int i = 0; i < agents; ++i) {
+    (*positions)[2 * i] = i % side + jitter(rng);
+    (*positions)[2 * i + 1] = i / side + jitter(rng);
+  }
+  std::vector<std::pair<int, int>> pairs;
+  for (int i = 0; i < agents; ++i) {
+    for (int j = i + 1; j < agents; ++j) {
+      const double dx = (*positions)[2 * i] - (*positions)[2 * j];
+      const double dy = (*positions)[2 * i + 1] - (*positions)[2 * j + 1];
+      if (dx * dx + dy * dy < 1.6 * 1.6) pairs.emplace_back(i, j);
+    }
+  }
+  return MakeSmoothFunction(
+      "pairs", static_cast<int>(pairs.size()),
+      [pairs](const auto& q, const auto&, const auto&, const auto&, auto& out) {
+        for (std::size_t k = 0; k < pairs.size(); ++k) {
+          const auto [i, j] = pairs[k];
+          const auto dx = q[2 * i] - q[2 * j];
+          const auto dy = q[2 * i + 1] - q[2 * j + 1];
+          out[static_cast<int>(k)] = dx * dx + dy * dy - 1.0;
+        }
+      });
+}
+
+TEST(SparseCostTest, ColoursDoNotGrowWithTheNumberOfInputs) {
+  // The number of compressed directions is set by the neighbourhoods, not by N: the same on a
+  // 36-agent and a 400-agent crowd (checked against the dense AD on the small one).
+  int colors_small = 0;
+  for (int agents : {36, 400}) {
+    Vector q;
+    const SmoothFunction c = NeighbourPairs(agents, &q);
+    const int m = c.num_outputs();
+    const Vector none;
+    Vector value, weights = Vector::LinSpaced(m, -1.0, 2.0);
+    SparseMatrix jac, hess;
+    c.SparseJacobian(q, none, 0.0, none, Wrt::X(), &value, &jac);
+    c.SparseWeightedHessian(q, none, 0.0, none, Wrt::X(), weights, &hess);
+    const SparseDerivativeStats stats = c.sparse_derivative_stats();
+    EXPECT_EQ(jac.nonZeros(), 4 * m);
+    // Per pair: d2/dxi2, d2/dxi dxj, d2/dxj2 and the same for y (no x-y coupling).
+    EXPECT_EQ(hess.nonZeros(), 2 * agents + 4 * m);
+    if (agents == 36) {
+      colors_small = stats.jacobian_colors;
+      Matrix dense_jac, dense_hess;
+      c.Jacobian(q, none, 0.0, none, Wrt::X(), &value, &dense_jac);
+      c.WeightedHessian(q, none, 0.0, none, Wrt::X(), weights, &dense_hess);
+      ASSERT_NO_FATAL_FAILURE(ExpectClose(Matrix(jac), dense_jac, "crowd Jacobian"));
+      ASSERT_NO_FATAL_FAILURE(ExpectClose(Matrix(hess), dense_hess, "crowd Hessian"));
+    } else {
+      // A few more colours at most where the interior neighbourhoods are complete.
+      EXPECT_LE(stats.jacobian_colors, colors_small + 4);
+      EXPECT_LE(stats.jacobian_passes, 2);
+      EXPECT_LE(stats.hessian_passes, 3);
+    }
+  }
+}
+
+TEST(SparseCostTest, ManyColoursSpanSeveralChunksOfDirections) {
+  // Outputs on overlapping windows of 24 of 64 inputs: at least 24 colours, so the compressed
+  // directions span two chunks of Dual1::kCapacity (two Dual1 passes; Dual2 passes for the
+  // chunk pairs (0,0), (0,1), (1,1)). A coupled and a diagonal Hessian per window.
+  constexpr int kInputs = 64, kWindow = 24, kStride = 4;
+  constexpr int kOutputs = (kInputs - kWindow) / kStride + 1;
+  const SmoothFunction coupled = MakeSmoothFunction(
+      "windows", 2 * kOutputs,
+      [](const auto& x, const auto&, const auto& t, const auto&, auto& out) {
+        using std::exp;
+        for (int k = 0; k < kOutputs; ++k) {
+          auto sum = 0.0 * t;
+          auto squares = 0.0 * t;
+          for (int i = k * kStride; i < k * kStride + kWindow; ++i) {
+            sum += (0.01 * i + 0.1) * x[i];
+            squares += x[i] * x[i];
+          }
+          out[2 * k] = exp(sum) * x[k * kStride] + t * x[k * kStride + 1];
+          out[2 * k + 1] = squares;
+        }
+      });
+  Point at;
+  at.x = Vector::LinSpaced(kInputs, -0.8, 0.9);
+  at.t = 0.4;
+  std::vector<int> odd, even;
+  for (int k = 0; k < 2 * kOutputs; ++k) (k % 2 ? odd : even).push_back(k);
+  const Vector weights = Vector::LinSpaced(2 * kOutputs, -1.0, 1.5);
+  SparseMatrix jac, hess;
+  for (Wrt wrt : {Wrt::XT(), Wrt::All()}) {
+    ASSERT_NO_FATAL_FAILURE(
+        CompareWithDense(coupled, at, wrt, nullptr, weights, "windows", &jac, &hess));
+    EXPECT_GE(coupled.sparse_derivative_stats().jacobian_colors, kWindow);
+    EXPECT_EQ(coupled.sparse_derivative_stats().jacobian_passes, 2);
+    EXPECT_EQ(coupled.sparse_derivative_stats().hessian_passes, 3);
+    ASSERT_NO_FATAL_FAILURE(
+        CompareWithDense(coupled, at, wrt, &even, weights, "windows (coupled)", &jac, &hess));
+    ASSERT_NO_FATAL_FAILURE(
+        CompareWithDense(coupled, at, wrt, &odd, weights, "windows (squares)", &jac, &hess));
+    // Diagonal second derivatives only: the off-diagonal chunk pair is skipped.
+    EXPECT_EQ(coupled.sparse_derivative_stats().hessian_passes, 2);
+  }
+}
+
+TEST(SparseCostTest, CopiesDetectOnTheirOwnAndPlansAreCachedPerRowSubset) {
+  Vector q;
+  const SmoothFunction c = NeighbourPairs(16, &q);
+  const Vector none;
+  Vector value;
+  SparseMatrix jac;
+  const std::vector<int> first{0, 2, 5}, second{1, 3};
+  for (int repeat = 0; repeat < 3; ++repeat) {
+    c.SparseJacobian(q, none, 0.0, none, Wrt::X(), &value, &jac, &first);
+    c.SparseJacobian(q, none, 0.0, none, Wrt::X(), &value, &jac, &second);
+  }
+  EXPECT_EQ(c.sparse_derivative_stats().num_detections, 1);
+  EXPECT_EQ(c.sparse_derivative_stats().num_cached_plans, 2);
+  const SmoothFunction copy = c;
+  EXPECT_EQ(copy.sparse_derivative_stats().num_detections, 0);
+  copy.SparseJacobian(q, none, 0.0, none, Wrt::X(), &value, &jac, &first);
+  EXPECT_EQ(copy.sparse_derivative_stats().num_detections, 1);
+  EXPECT_EQ(jac.nonZeros(), 12);  // three pairs, four coordinates each
+}
+
+TEST(SparseCostTest, StackedAndZeroFunctionsKeepTheirPartsPatterns) {
+  Vector q;
+  const SmoothFunction pairs = NeighbourPairs(9, &q);
+  const SmoothFunction stacked =
+      MakeStackedFunction("stacked", {pairs, MakeZeroFunction("zero", 2), pairs});
+  const Vector none;
+  Vector value;
+  SparseMatrix jac_pairs, jac;
+  pairs.SparseJacobian(q, none, 0.0, none, Wrt::XT(), &value, &jac_pairs);
+  stacked.SparseJacobian(q, none, 0.0, none, Wrt::XT(), &value, &jac);
+  EXPECT_EQ(jac.nonZeros(), 2 * jac_pairs.nonZeros());
+  const int m = pairs.num_outputs();
+  EXPECT_EQ(Matrix(jac).middleRows(m, 2).lpNorm<Eigen::Infinity>(), 0.0);
+  EXPECT_EQ(Matrix(jac).bottomRows(m), Matrix(jac_pairs));
+}
+
+}  // namespace
+}  // namespace moreau
