@@ -201,11 +201,10 @@ TEST_P(OcpDerivatives, ExactFirstDerivativesMatchCentralDifferences) {
     const Vector z = RandomPoint(problem, options, param, &random);
     ShootingNlp nlp(problem, options);
     double objective = 0.0;
-    Vector constraints, gradient;
-    Matrix jacobian;
+    Vector constraints, gradient, values;
     std::string message;
-    ASSERT_TRUE(nlp.Evaluate(z, &objective, &constraints, &gradient, &jacobian, &message))
-        << message;
+    ASSERT_TRUE(nlp.Evaluate(z, &objective, &constraints, &gradient, &values, &message)) << message;
+    const Matrix jacobian = Matrix(nlp.JacobianMatrix(values));
     // Switches strictly inside the control intervals (where the sensitivities must carry
     // the switch-time derivatives), away from the grid points by more than the FD step.
     OcpResult described;
@@ -264,6 +263,91 @@ INSTANTIATE_TEST_SUITE_P(
     [](const ::testing::TestParamInfo<DerivativeCase>& case_info) {
       return case_info.param.problem + "_" + ToString(case_info.param.transcription);
     });
+
+// Multiple shooting's derivatives are blocks per interval: the Jacobian's and the block
+// Hessian's structural nonzeros grow linearly in N (the dense Jacobian they replace had
+// m x n = O(N^2) entries).
+TEST(Ocp, SparseDerivativesGrowLinearlyInTheIntervals) {
+  for (const char* name : {"wave_rider", "turbo_car", "doorway"}) {
+    OcpOptions options = MakeOcpOptions(name);
+    options.hessian = OcpHessian::kBlockBfgs;
+    std::vector<double> jacobian, hessian;
+    for (int n : {100, 200, 400}) {
+      OcpProblem problem = MakeOcpProblem(name);
+      problem.intervals = n;
+      problem.initial_controls.resize(0, 0);
+      const ShootingNlp nlp(problem, options);
+      jacobian.push_back(static_cast<double>(nlp.JacobianStructure().size()));
+      hessian.push_back(static_cast<double>(nlp.HessianStructure().size()));
+    }
+    // Exactly linear, a + b N: the increments from N = 100 to 200 and from 200 to 400 are in
+    // the ratio of the increments of N.
+    for (const auto* counts : {&jacobian, &hessian}) {
+      const auto& c = *counts;
+      EXPECT_DOUBLE_EQ(c[2] - c[1], 2.0 * (c[1] - c[0])) << name;
+    }
+  }
+}
+
+// The block quasi-Newton approximation is the Hessian of the Lagrangian's smooth pieces: after
+// enough symmetric rank-one updates along random small steps around a point, it predicts the
+// change of the Lagrangian gradient along a new step to second order. Exercises the block
+// structure (which variables each interval's curvature couples), the exact Hessians of the
+// terminal and path functions, and the multipliers' signs.
+TEST(Ocp, BlockSr1HessianPredictsTheLagrangianGradient) {
+  // Steps of 1e-4: the prediction error is the third-order remainder, O(|s|) relative to the
+  // gradient change (measured 1e-5 to 1e-4); a wrong block or sign gives O(1).
+  constexpr double kStepSize = 1e-4;
+  constexpr double kPredictionTolerance = 1e-3;
+  constexpr int kUpdates = 60;  // more than the largest block's dimension (8)
+  for (const char* name : {"stewart_anitescu", "wave_rider", "turbo_car"}) {
+    OcpProblem problem = MakeOcpProblem(name);
+    problem.intervals = 3;
+    problem.initial_controls.resize(0, 0);
+    OcpOptions options;
+    options.hessian = OcpHessian::kBlockSr1;
+    options.lbfgs_memory = kUpdates;
+    ShootingNlp nlp(problem, options);
+    const Vector z = nlp.InitialGuess();
+    std::mt19937 random(20261122);
+    std::normal_distribution<double> normal(0.0, 1.0);
+    Vector lambda(nlp.num_constraints());
+    for (auto& value : lambda) value = normal(random);
+    Vector gradient, jacobian, hessian;
+    auto lagrangian_gradient = [&](const Vector& point) {
+      double f = 0.0;
+      Vector c;
+      std::string message;
+      EXPECT_TRUE(nlp.Evaluate(point, &f, &c, &gradient, &jacobian, &message)) << message;
+      return Vector(gradient + nlp.JacobianMatrix(jacobian).transpose() * lambda);
+    };
+    auto random_step = [&] {
+      Vector s(z.size());
+      for (auto& value : s) value = kStepSize * normal(random);
+      return s;
+    };
+    for (int i = 0; i < kUpdates; ++i) {
+      const Vector point = z + random_step();
+      lagrangian_gradient(point);
+      ASSERT_TRUE(nlp.HessianApproximation(point, 1.0, lambda, gradient, jacobian, &hessian));
+    }
+    const Vector g0 = lagrangian_gradient(z);
+    ASSERT_TRUE(nlp.HessianApproximation(z, 1.0, lambda, gradient, jacobian, &hessian));
+    Matrix dense = Matrix::Zero(z.size(), z.size());
+    const auto& structure = nlp.HessianStructure();
+    for (std::size_t k = 0; k < structure.size(); ++k) {
+      const auto [row, column] = structure[k];
+      dense(row, column) = hessian[static_cast<Eigen::Index>(k)];
+      dense(column, row) = hessian[static_cast<Eigen::Index>(k)];
+    }
+    for (int trial = 0; trial < 3; ++trial) {
+      const Vector s = random_step();
+      const Vector change = lagrangian_gradient(z + s) - g0;
+      EXPECT_LE((dense * s - change).norm(), kPredictionTolerance * change.norm())
+          << name << " trial " << trial;
+    }
+  }
+}
 
 TEST(Ocp, InvalidProblemsAndOptionsAreNamed) {
   OcpProblem problem = MakeOcpProblem("wave_rider");
