@@ -96,8 +96,14 @@ void OcpOptions::Validate() const {
                         std::isfinite(level.relaxation) && level.relaxation >= 0.0,
                     "homotopy level ", i + 1, ": smoothing and relaxation must be >= 0, got ",
                     level.smoothing, " and ", level.relaxation);
-    RequireArgument(level.smoothing > 0.0 || level.relaxation > 0.0, "homotopy level ", i + 1,
-                    " neither smooths nor relaxes (the exact problem is always solved last)");
+    RequireArgument(level.smoothing > 0.0 || level.relaxation > 0.0 || !level.parameters.empty(),
+                    "homotopy level ", i + 1,
+                    " neither smooths, relaxes nor changes a parameter (the exact problem is "
+                    "always solved last)");
+    for (const auto& [name, value] : level.parameters) {
+      RequireArgument(std::isfinite(value), "homotopy level ", i + 1, ": parameter '", name,
+                      "' must be finite, got ", value);
+    }
   }
 }
 

@@ -106,6 +106,15 @@ class ShootingNlp::Impl {
                         EffectKind(effect), " '", EffectName(effect), "'");
       }
     }
+    // Parameter values of the level (the problem's for the others and on the exact level).
+    Scene values = augmented_.scene;
+    for (const auto& [name, value] : level.parameters) {
+      RequireArgument(values.FindParameter(name) >= 0, problem_.name, ": homotopy parameter '",
+                      name, "' is not a scene parameter");
+      SetSceneValue(&values, name, value);
+    }
+    parameters_ = values.ParameterValues();
+    for (Scene& interval : interval_scenes_) interval.parameters = values.parameters;
     level_ = level;
     for (int r = 0; r < num_terminal_equalities_; ++r) {
       constraint_lower_[TerminalEqualityRow() + r] = -level.relaxation;
@@ -274,6 +283,8 @@ class ShootingNlp::Impl {
     fesd.sensitivities = derivatives;
     fesd.initial_state = y_start;
     fesd.record_trajectory = record;
+    // Node states on active constraint boundaries: keep the map continuous (fesd.hpp).
+    fesd.keep_elements_after_early_switch = true;
     Interval out;
     try {
       out.recorded = SimulateFesd(scene, fesd);

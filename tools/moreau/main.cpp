@@ -339,8 +339,8 @@ int main(int argc, char** argv) {
       "second-order information: limited_memory (default), block_bfgs or block_sr1");
   auto* ocp_homotopy_option = ocp->add_option(
       "--homotopy", ocp_homotopy,
-      "levels before the exact problem, MU:EPS,... (smoothing mu, terminal relaxation eps), "
-      "or none (default: the problem's)");
+      "levels before the exact problem, MU:EPS[:NAME=VALUE...],... (smoothing mu, terminal "
+      "relaxation eps, scene parameters of the level), or none (default: the problem's)");
   auto* ocp_tol_option = ocp->add_option("--tol", ocp_tol, "IPOPT tolerance (tol)");
   auto* ocp_level_tol_option =
       ocp->add_option("--level-tol", ocp_level_tol, "IPOPT tolerance of the homotopy levels");

@@ -66,7 +66,11 @@ void WriteIterationsCsv(const OcpResult& result, const std::string& path) {
 Json HomotopyJson(const std::vector<OcpHomotopyLevel>& homotopy) {
   Json levels = Json::array();
   for (const OcpHomotopyLevel& level : homotopy) {
-    levels.push_back({{"smoothing", level.smoothing}, {"relaxation", level.relaxation}});
+    Json parameters = Json::object();
+    for (const auto& [name, value] : level.parameters) parameters[name] = value;
+    levels.push_back({{"smoothing", level.smoothing},
+                      {"relaxation", level.relaxation},
+                      {"parameters", parameters}});
   }
   return levels;
 }
@@ -89,8 +93,11 @@ Json SummaryJson(const OcpProblem& problem, const OcpOptions& options, const Ocp
   }
   Json levels = Json::array();
   for (const OcpLevelResult& level : result.levels) {
+    Json parameters = Json::object();
+    for (const auto& [name, value] : level.parameters.parameters) parameters[name] = value;
     levels.push_back({{"smoothing", level.parameters.smoothing},
                       {"relaxation", level.parameters.relaxation},
+                      {"parameters", parameters},
                       {"status", ToString(level.status)},
                       {"message", level.message},
                       {"iterations", level.iterations},
@@ -209,29 +216,37 @@ std::string Format(const std::vector<std::string>& names, const Vector& values) 
 std::vector<OcpHomotopyLevel> ParseHomotopy(const std::string& text) {
   std::vector<OcpHomotopyLevel> levels;
   if (text == "none") return levels;
+  const std::string usage = "--homotopy: expected MU:EPS[:NAME=VALUE...][,...] or none, got '";
+  auto number = [](const std::string& field, double* value) {
+    try {
+      std::size_t used = 0;
+      *value = std::stod(field, &used);
+      return used == field.size();
+    } catch (const std::exception&) {
+      return false;
+    }
+  };
   std::stringstream stream(text);
   std::string item;
   while (std::getline(stream, item, ',')) {
-    const auto colon = item.find(':');
+    std::vector<std::string> fields;
+    std::stringstream parts(item);
+    std::string field;
+    while (std::getline(parts, field, ':')) fields.push_back(field);
     OcpHomotopyLevel level;
-    bool ok = colon != std::string::npos;
-    if (ok) {
-      try {
-        std::size_t used = 0;
-        level.smoothing = std::stod(item.substr(0, colon), &used);
-        ok = used == colon;
-        const std::string eps = item.substr(colon + 1);
-        level.relaxation = std::stod(eps, &used);
-        ok = ok && used == eps.size();
-      } catch (const std::exception&) {
-        ok = false;
-      }
+    bool ok = fields.size() >= 2 && number(fields[0], &level.smoothing) &&
+              number(fields[1], &level.relaxation);
+    for (std::size_t i = 2; ok && i < fields.size(); ++i) {
+      const auto equals = fields[i].find('=');
+      double value = 0.0;
+      ok =
+          equals != std::string::npos && equals > 0 && number(fields[i].substr(equals + 1), &value);
+      if (ok) level.parameters.emplace_back(fields[i].substr(0, equals), value);
     }
-    RequireArgument(ok, "--homotopy: expected MU:EPS[,MU:EPS...] or none, got '", item, "'");
+    RequireArgument(ok, usage, item, "'");
     levels.push_back(level);
   }
-  RequireArgument(!levels.empty(), "--homotopy: expected MU:EPS[,MU:EPS...] or none, got '", text,
-                  "'");
+  RequireArgument(!levels.empty(), usage, text, "'");
   return levels;
 }
 
@@ -317,9 +332,14 @@ int RunOcpCommand(const OcpCommandSettings& settings) {
   }
   for (std::size_t i = 0; i + 1 < result.levels.size(); ++i) {
     const OcpLevelResult& level = result.levels[i];
-    std::printf("homotopy     level %zu (smoothing %g, relaxation %g): %s, %d iterations, %.3g s\n",
-                i + 1, level.parameters.smoothing, level.parameters.relaxation,
-                ToString(level.status).c_str(), level.iterations, level.seconds);
+    std::string parameters;
+    for (const auto& [name, value] : level.parameters.parameters) {
+      parameters += ", " + name + " " + std::to_string(value);
+    }
+    std::printf(
+        "homotopy     level %zu (smoothing %g, relaxation %g%s): %s, %d iterations, %.3g s\n",
+        i + 1, level.parameters.smoothing, level.parameters.relaxation, parameters.c_str(),
+        ToString(level.status).c_str(), level.iterations, level.seconds);
   }
   std::printf(
       "ipopt        %d iterations, %ld interval integrations, %.3g s (verification %.3g s)\n",

@@ -126,7 +126,8 @@ std::string ToString(OcpHessian hessian);
 OcpHessian ParseOcpHessian(const std::string& name);
 
 /// One level of a homotopy (OcpOptions::homotopy): an easier problem solved before the exact
-/// one. At least one of the two parameters is positive.
+/// one: smoothed dynamics, relaxed terminal equalities, other values of scene parameters
+/// (natural-parameter continuation), or a combination.
 struct OcpHomotopyLevel {
   /// mu >= 0. With mu > 0 every interval is integrated by the time-stepping scheme
   /// (OcpOptions::finite_elements fixed Radau IIA steps) with smoothed complementarity
@@ -137,6 +138,9 @@ struct OcpHomotopyLevel {
   double smoothing = 0.0;
   /// eps >= 0: the terminal equalities are imposed as -eps <= g <= eps. 0: g = 0.
   double relaxation = 0.0;
+  /// Scene parameters (by name) and their values on this level; the others, and every
+  /// parameter on the exact level, keep the problem's values.
+  std::vector<std::pair<std::string, double>> parameters;
 };
 
 /// Multipliers of an NLP solution (IPOPT's sign conventions), for warm starts.
@@ -228,7 +232,7 @@ struct OcpIteration {
 
 /// One level of the solve (the homotopy levels, then the exact problem).
 struct OcpLevelResult {
-  OcpHomotopyLevel parameters;  ///< (0, 0) for the exact problem
+  OcpHomotopyLevel parameters;  ///< (0, 0, none) for the exact problem
   OcpStatus status = OcpStatus::kSolverFailure;
   std::string message;  ///< IPOPT's return status
   int iterations = 0;
@@ -299,8 +303,9 @@ class ShootingNlp {
   /// Constraint bounds of the current level (relaxed terminal equalities: [-eps, eps]).
   const Vector& constraint_lower() const;
   const Vector& constraint_upper() const;
-  /// Selects the problem of a homotopy level (default: the exact problem, (0, 0)). Throws
-  /// std::invalid_argument if the scene does not allow smoothing (see OcpHomotopyLevel).
+  /// Selects the problem of a homotopy level (default: the exact problem, (0, 0), the
+  /// problem's parameters). Throws std::invalid_argument if the scene does not allow
+  /// smoothing (see OcpHomotopyLevel) or has no parameter of a given name.
   void SetLevel(const OcpHomotopyLevel& level);
   const OcpHomotopyLevel& level() const;
   /// The initial guess: controls and speeds from the problem, node states from a forward
