@@ -4,13 +4,17 @@
 // resident memory (getrusage: everything, IPOPT's factorizations included). One solve per
 // process, so that the peak belongs to that N; scripts/bench-ocp-scaling runs the grid.
 //
-//   ocp_scaling PROBLEM N [--hessian H] [--max-iterations K] [--header]
+//   ocp_scaling PROBLEM N [--hessian H] [--homotopy none] [--no-constraint-regularization]
+//               [--max-iterations K] [--random-start SEED] [--header]
 //
+// --random-start: controls uniform in their bounds per interval from std::mt19937(SEED), as in
+// tests/ocp/ocp_test.cpp (WaveRiderFromRandomStarts). --homotopy none: the exact problem only.
 // Prints one CSV row (with --header, the column names first). Opt-in; never part of the tests.
 #include <sys/resource.h>
 
 #include <cstdio>
 #include <cstdlib>
+#include <random>
 #include <string>
 
 #include "moreau/ocp/catalog.hpp"
@@ -25,6 +29,7 @@ int main(int argc, char** argv) {
   const std::string name = argv[1];
   const int intervals = std::atoi(argv[2]);
   bool header = false;
+  long seed = -1;  // < 0: the problem's initial guess
   OcpOptions options;
   try {
     options = MakeOcpOptions(name);
@@ -34,6 +39,13 @@ int main(int argc, char** argv) {
         options.hessian = ParseOcpHessian(argv[++i]);
       } else if (arg == "--max-iterations" && i + 1 < argc) {
         options.max_iterations = std::atoi(argv[++i]);
+      } else if (arg == "--homotopy" && i + 1 < argc && std::string(argv[i + 1]) == "none") {
+        options.homotopy.clear();
+        ++i;
+      } else if (arg == "--no-constraint-regularization") {
+        options.regularize_constraints = false;
+      } else if (arg == "--random-start" && i + 1 < argc) {
+        seed = std::atol(argv[++i]);
       } else if (arg == "--header") {
         header = true;
       } else {
@@ -44,6 +56,18 @@ int main(int argc, char** argv) {
     OcpProblem problem = MakeOcpProblem(name);
     problem.intervals = intervals;
     problem.initial_controls.resize(0, 0);  // the catalog's guess is for its own N
+    if (seed >= 0) {
+      std::mt19937 random(static_cast<unsigned>(seed));
+      problem.initial_controls.resize(intervals,
+                                      static_cast<Eigen::Index>(problem.controls.size()));
+      for (Eigen::Index k = 0; k < intervals; ++k) {
+        for (Eigen::Index j = 0; j < problem.initial_controls.cols(); ++j) {
+          const InputSpec& u = problem.scene.inputs[problem.controls[static_cast<std::size_t>(j)]];
+          problem.initial_controls(k, j) =
+              std::uniform_real_distribution<double>(u.lower, u.upper)(random);
+        }
+      }
+    }
     const OcpResult result = SolveOcp(problem, options);
     rusage usage{};
     getrusage(RUSAGE_SELF, &usage);
@@ -51,12 +75,14 @@ int main(int argc, char** argv) {
     const double dense = static_cast<double>(nlp.num_constraints()) * nlp.num_variables();
     if (header) {
       std::printf(
-          "problem,N,hessian,status,ipopt_iterations,cpu_seconds,objective,final_time,"
+          "problem,N,seed,homotopy_levels,hessian,status,ipopt_iterations,cpu_seconds,objective,"
+          "final_time,"
           "variables,constraints,jacobian_nonzeros,hessian_nonzeros,dense_jacobian_entries,"
           "max_rss_kb,resimulated_terminal_error\n");
     }
-    std::printf("%s,%d,%s,%s,%d,%.3f,%.12g,%.12g,%d,%d,%ld,%ld,%.0f,%ld,%.3g\n", name.c_str(),
-                intervals, ToString(options.hessian).c_str(), ToString(result.status).c_str(),
+    std::printf("%s,%d,%ld,%zu,%s,%s,%d,%.3f,%.12g,%.12g,%d,%d,%ld,%ld,%.0f,%ld,%.3g\n",
+                name.c_str(), intervals, seed, options.homotopy.size(),
+                ToString(options.hessian).c_str(), ToString(result.status).c_str(),
                 result.stats.iterations, result.stats.cpu_seconds, result.objective,
                 result.final_time, nlp.num_variables(), nlp.num_constraints(),
                 result.stats.jacobian_nonzeros, result.stats.hessian_nonzeros, dense,

@@ -349,6 +349,10 @@ int main(int argc, char** argv) {
   auto* ocp_print_level_option =
       ocp->add_option("--print-level", ocp_print_level, "IPOPT output level 0..12 (0: silent)");
   ocp->add_flag("--no-verify", no_verify, "skip the IDA re-simulation of the optimal controls");
+  bool ocp_no_regularization = false;
+  ocp->add_flag("--no-constraint-regularization", ocp_no_regularization,
+                "IPOPT regularizes the constraint block only after a wrong inertia (default: "
+                "at every iteration, perturb_always_cd)");
   ocp->add_option("--out", ocp_settings.out_directory,
                   "output directory (default: out/ocp/<problem>)");
   ocp->add_flag("--no-plot", no_plot, "do not write solution.png");
@@ -421,6 +425,9 @@ int main(int argc, char** argv) {
         overrides.push_back([=](OcpOptions* o) { o->print_level = ocp_print_level; });
       }
       if (no_verify) overrides.push_back([](OcpOptions* o) { o->verify = false; });
+      if (ocp_no_regularization) {
+        overrides.push_back([](OcpOptions* o) { o->regularize_constraints = false; });
+      }
       ocp_settings.intervals_given = ocp_intervals->count() > 0;
       ocp_settings.plot = !no_plot;
       ocp_settings.quiet = quiet;

@@ -23,7 +23,8 @@
 /// derivatives of Phi_k are FESD's exact sensitivities (implicit function theorem on the
 /// converged element systems, switch-determined element lengths included): no finite
 /// differences. IPOPT gets them as a sparse Jacobian (blocks per interval: memory linear in
-/// N) and, by default, a block-structured Hessian approximation: per interval a quasi-Newton
+/// N) and a Hessian approximation (OcpOptions::hessian): IPOPT's L-BFGS, or a block-structured
+/// one: per interval a quasi-Newton
 /// approximation of the curvature of lambda_k^T Phi_k from these first derivatives, and the
 /// exact second derivatives (automatic differentiation) of the terminal and path functions.
 ///
