@@ -70,7 +70,7 @@ int main(int argc, char** argv) {
       for (int n : intervals) {
         OcpProblem problem = MakeOcpProblem("wave_rider");
         problem.intervals = n;
-        OcpOptions options;
+        OcpOptions options = MakeOcpOptions("wave_rider");
         options.integrator = integrator;
         options.stages = s;
         options.finite_elements = finite_elements;

@@ -48,6 +48,26 @@ OcpIntegrator ParseOcpIntegrator(const std::string& name) {
   ThrowInvalidArgument("unknown OCP integrator '", name, "' (expected fesd or timestepping)");
 }
 
+std::string ToString(OcpHessian hessian) {
+  switch (hessian) {
+    case OcpHessian::kLimitedMemory:
+      return "limited_memory";
+    case OcpHessian::kBlockBfgs:
+      return "block_bfgs";
+    case OcpHessian::kBlockSr1:
+      return "block_sr1";
+  }
+  return "?";
+}
+
+OcpHessian ParseOcpHessian(const std::string& name) {
+  for (OcpHessian h : {OcpHessian::kLimitedMemory, OcpHessian::kBlockBfgs, OcpHessian::kBlockSr1}) {
+    if (ToString(h) == name) return h;
+  }
+  ThrowInvalidArgument("unknown OCP Hessian '", name,
+                       "' (expected limited_memory, block_bfgs or block_sr1)");
+}
+
 void OcpOptions::Validate() const {
   RequireArgument(stages >= 1 && stages <= kMaxRadauStages, "stages must be in [1, ",
                   kMaxRadauStages, "], got ", stages);
@@ -62,6 +82,29 @@ void OcpOptions::Validate() const {
   RequireArgument(bound_relaxation >= 0.0 && bound_relaxation < 1e-3,
                   "bound relaxation must be in [0, 1e-3), got ", bound_relaxation);
   RequireArgument(warm_start.allFinite(), "warm start must be finite");
+  RequireArgument(warm_start_multipliers.constraints.allFinite() &&
+                      warm_start_multipliers.lower_bounds.allFinite() &&
+                      warm_start_multipliers.upper_bounds.allFinite(),
+                  "warm-start multipliers must be finite");
+  RequireArgument(!warm_start_multipliers.empty() ? warm_start.size() > 0 : true,
+                  "warm-start multipliers need a warm start (the primal point)");
+  RequireArgument(std::isfinite(level_tolerance) && level_tolerance > 0.0,
+                  "homotopy level tolerance must be positive, got ", level_tolerance);
+  for (std::size_t i = 0; i < homotopy.size(); ++i) {
+    const OcpHomotopyLevel& level = homotopy[i];
+    RequireArgument(std::isfinite(level.smoothing) && level.smoothing >= 0.0 &&
+                        std::isfinite(level.relaxation) && level.relaxation >= 0.0,
+                    "homotopy level ", i + 1, ": smoothing and relaxation must be >= 0, got ",
+                    level.smoothing, " and ", level.relaxation);
+    RequireArgument(level.smoothing > 0.0 || level.relaxation > 0.0 || !level.parameters.empty(),
+                    "homotopy level ", i + 1,
+                    " neither smooths, relaxes nor changes a parameter (the exact problem is "
+                    "always solved last)");
+    for (const auto& [name, value] : level.parameters) {
+      RequireArgument(std::isfinite(value), "homotopy level ", i + 1, ": parameter '", name,
+                      "' must be finite, got ", value);
+    }
+  }
 }
 
 namespace {

@@ -1,5 +1,6 @@
-// SolveOcp: the shooting NLP handed to IPOPT (exact first derivatives, limited-memory
-// Hessian), then verification of the optimal controls by an IDA re-simulation.
+// SolveOcp: the shooting NLP handed to IPOPT (exact first derivatives as a sparse Jacobian,
+// the Hessian approximation of OcpOptions::hessian), level by level through the homotopy,
+// then verification of the optimal controls by an IDA re-simulation.
 
 #include <IpIpoptApplication.hpp>
 #include <IpTNLP.hpp>
@@ -19,20 +20,35 @@ namespace {
 using Ipopt::Index;
 using Ipopt::Number;
 
-// IPOPT's view of the shooting NLP. IPOPT asks for the objective, its gradient, the
-// constraints and their Jacobian separately at the same point; one evaluation with
-// derivatives serves all of them.
+// Warm starts (a level from the previous level's solution, or OcpOptions::warm_start with
+// multipliers): IPOPT's push of the starting point off the bounds, relative and absolute
+// (warm_start_*_push/frac; IPOPT's default 1e-3 would move a converged point away) and the
+// initial barrier parameter (default 0.1, which re-centers the iterate; a converged
+// neighbouring problem is already close to the central path's end).
+constexpr double kWarmStartPush = 1e-9;
+constexpr double kWarmStartBarrier = 1e-6;
+
+// IPOPT's view of the shooting NLP at one level. IPOPT asks for the objective, its gradient,
+// the constraints and their Jacobian separately at the same point; one evaluation with
+// derivatives serves all of them (and the Hessian approximation, which needs the Jacobian).
 class ShootingTnlp final : public Ipopt::TNLP {
  public:
-  ShootingTnlp(ShootingNlp* nlp, const Vector& start, const OcpOptions& options, OcpResult* result)
-      : nlp_(nlp), start_(start), options_(options), result_(result) {}
+  ShootingTnlp(ShootingNlp* nlp, const Vector& start, const OcpMultipliers* multipliers,
+               const OcpOptions& options, int level, int levels, OcpResult* result)
+      : nlp_(nlp),
+        start_(start),
+        multipliers_(multipliers),
+        options_(options),
+        level_(level),
+        levels_(levels),
+        result_(result) {}
 
   bool get_nlp_info(Index& n, Index& m, Index& nnz_jac_g, Index& nnz_h_lag,
                     IndexStyleEnum& index_style) override {
     n = nlp_->num_variables();
     m = nlp_->num_constraints();
     nnz_jac_g = static_cast<Index>(nlp_->JacobianStructure().size());
-    nnz_h_lag = 0;  // limited-memory Hessian
+    nnz_h_lag = static_cast<Index>(nlp_->HessianStructure().size());  // 0: limited memory
     index_style = C_STYLE;
     return true;
   }
@@ -46,10 +62,18 @@ class ShootingTnlp final : public Ipopt::TNLP {
     return true;
   }
 
-  bool get_starting_point(Index n, bool init_x, Number* x, bool init_z, Number*, Number*, Index,
-                          bool init_lambda, Number*) override {
-    if (!init_x || init_z || init_lambda) return false;  // primal starts only
-    std::copy_n(start_.data(), n, x);
+  bool get_starting_point(Index n, bool init_x, Number* x, bool init_z, Number* z_L, Number* z_U,
+                          Index m, bool init_lambda, Number* lambda) override {
+    if (init_x) std::copy_n(start_.data(), n, x);
+    if (init_z || init_lambda) {
+      // Only asked for with warm_start_init_point, which is set only with multipliers.
+      if (multipliers_ == nullptr || multipliers_->empty()) return false;
+      if (init_z) {
+        std::copy_n(multipliers_->lower_bounds.data(), n, z_L);
+        std::copy_n(multipliers_->upper_bounds.data(), n, z_U);
+      }
+      if (init_lambda) std::copy_n(multipliers_->constraints.data(), m, lambda);
+    }
     return true;
   }
 
@@ -79,31 +103,66 @@ class ShootingTnlp final : public Ipopt::TNLP {
       return true;
     }
     if (!Update(n, x, new_x)) return false;
-    for (std::size_t k = 0; k < structure.size(); ++k) {
-      values[k] = jacobian_(structure[k].first, structure[k].second);
+    std::copy_n(jacobian_.data(), jacobian_.size(), values);
+    return true;
+  }
+  bool eval_h(Index n, const Number* x, bool new_x, Number obj_factor, Index m,
+              const Number* lambda, bool, Index, Index* i_row, Index* j_col,
+              Number* values) override {
+    const auto& structure = nlp_->HessianStructure();
+    if (values == nullptr) {
+      for (std::size_t k = 0; k < structure.size(); ++k) {
+        i_row[k] = structure[k].first;
+        j_col[k] = structure[k].second;
+      }
+      return true;
     }
+    if (!Update(n, x, new_x)) return false;
+    const Eigen::Map<const Vector> multipliers(lambda, m);
+    if (!nlp_->HessianApproximation(point_, obj_factor, multipliers, gradient_, jacobian_,
+                                    &hessian_)) {
+      return false;
+    }
+    std::copy_n(hessian_.data(), hessian_.size(), values);
     return true;
   }
 
   bool intermediate_callback(Ipopt::AlgorithmMode, Index iter, Number obj_value, Number inf_pr,
                              Number inf_du, Number, Number, Number, Number, Number, Index,
                              const Ipopt::IpoptData*, Ipopt::IpoptCalculatedQuantities*) override {
-    result_->log.push_back({iter, obj_value, inf_pr, inf_du});
-    if (options_.progress) options_.progress(iter, obj_value, inf_pr);
+    result_->log.push_back({level_, iter, obj_value, inf_pr, inf_du});
+    iterations_ = iter;
+    if (options_.progress) {
+      OcpProgress progress;
+      progress.level = level_;
+      progress.levels = levels_;
+      progress.parameters = nlp_->level();
+      progress.iteration = iter;
+      progress.objective = obj_value;
+      progress.primal_infeasibility = inf_pr;
+      progress.dual_infeasibility = inf_du;
+      options_.progress(progress);
+    }
     return true;
   }
 
-  void finalize_solution(Ipopt::SolverReturn status, Index n, const Number* x, const Number*,
-                         const Number*, Index, const Number*, const Number*, Number obj_value,
-                         const Ipopt::IpoptData*, Ipopt::IpoptCalculatedQuantities*) override {
+  void finalize_solution(Ipopt::SolverReturn status, Index n, const Number* x, const Number* z_L,
+                         const Number* z_U, Index m, const Number*, const Number* lambda,
+                         Number obj_value, const Ipopt::IpoptData*,
+                         Ipopt::IpoptCalculatedQuantities*) override {
     solver_return_ = status;
     solution_ = Eigen::Map<const Vector>(x, n);
+    solution_multipliers_.lower_bounds = Eigen::Map<const Vector>(z_L, n);
+    solution_multipliers_.upper_bounds = Eigen::Map<const Vector>(z_U, n);
+    solution_multipliers_.constraints = Eigen::Map<const Vector>(lambda, m);
     final_objective_ = obj_value;
   }
 
   Ipopt::SolverReturn solver_return() const { return solver_return_; }
   const Vector& solution() const { return solution_; }
+  const OcpMultipliers& solution_multipliers() const { return solution_multipliers_; }
   double final_objective() const { return final_objective_; }
+  int iterations() const { return iterations_; }
   const std::string& last_failure() const { return last_failure_; }
 
  private:
@@ -120,17 +179,20 @@ class ShootingTnlp final : public Ipopt::TNLP {
 
   ShootingNlp* nlp_;
   Vector start_;
+  const OcpMultipliers* multipliers_;
   OcpOptions options_;
+  int level_, levels_;
   OcpResult* result_;
   Vector point_;
   bool valid_ = false;
   double objective_ = 0.0;
-  Vector constraints_, gradient_;
-  Matrix jacobian_;
+  Vector constraints_, gradient_, jacobian_, hessian_;
   std::string last_failure_;
   Ipopt::SolverReturn solver_return_ = Ipopt::INTERNAL_ERROR;
   Vector solution_;
+  OcpMultipliers solution_multipliers_;
   double final_objective_ = 0.0;
+  int iterations_ = 0;
 };
 
 // IPOPT's name of its return status (IpReturnCodes_inc.h).
@@ -264,50 +326,105 @@ OcpResult SolveOcp(const OcpProblem& problem, const OcpOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   ShootingNlp nlp(problem, options);
   OcpResult result;
-  Vector z0 = nlp.InitialGuess();
+  // The homotopy levels, then the exact problem.
+  std::vector<OcpHomotopyLevel> levels = options.homotopy;
+  levels.push_back(OcpHomotopyLevel{});
+  const int num_levels = static_cast<int>(levels.size());
+  nlp.SetLevel(levels.front());
+  Vector z = nlp.InitialGuess();
   if (options.warm_start.size() > 0) {
-    RequireArgument(options.warm_start.size() == z0.size(), "warm start has ",
-                    options.warm_start.size(), " variables, the NLP ", z0.size());
-    z0 = options.warm_start;
+    RequireArgument(options.warm_start.size() == z.size(), "warm start has ",
+                    options.warm_start.size(), " variables, the NLP ", z.size());
+    z = options.warm_start;
+  }
+  OcpMultipliers multipliers = options.warm_start_multipliers;
+  if (!multipliers.empty()) {
+    RequireArgument(multipliers.constraints.size() == nlp.num_constraints() &&
+                        multipliers.lower_bounds.size() == nlp.num_variables() &&
+                        multipliers.upper_bounds.size() == nlp.num_variables(),
+                    "warm-start multipliers need ", nlp.num_constraints(), " constraint and ",
+                    nlp.num_variables(), " bound multipliers each, got ",
+                    multipliers.constraints.size(), ", ", multipliers.lower_bounds.size(), " and ",
+                    multipliers.upper_bounds.size());
   }
   std::string message;
-  if (!nlp.Evaluate(z0, nullptr, nullptr, nullptr, nullptr, &message)) {
+  if (!nlp.Evaluate(z, nullptr, nullptr, nullptr, nullptr, &message)) {
     result.status = OcpStatus::kSimulationFailure;
     result.message = "the initial guess cannot be simulated: " + message;
     return result;
   }
+  result.stats.jacobian_nonzeros = static_cast<long>(nlp.JacobianStructure().size());
+  result.stats.hessian_nonzeros = static_cast<long>(nlp.HessianStructure().size());
 
-  Ipopt::SmartPtr<Ipopt::IpoptApplication> app = IpoptApplicationFactory();
-  app->Options()->SetNumericValue("tol", options.tolerance);
-  app->Options()->SetNumericValue("constr_viol_tol", options.tolerance);
-  app->Options()->SetIntegerValue("max_iter", options.max_iterations);
-  app->Options()->SetIntegerValue("print_level", options.print_level);
-  app->Options()->SetStringValue("sb", "yes");  // no banner
-  // IPOPT relaxes bounds by 1e-8 (relative) internally; moving the solution back onto the
-  // original bounds afterwards (honor_original_bounds) would break the continuity constraints
-  // it satisfied by ~1e-7 (sensitivities of order 10). The iterate is returned as converged.
-  app->Options()->SetStringValue("honor_original_bounds", "no");
-  app->Options()->SetNumericValue("bound_relax_factor", options.bound_relaxation);
-  app->Options()->SetStringValue("hessian_approximation", "limited-memory");
-  app->Options()->SetIntegerValue("limited_memory_max_history", options.lbfgs_memory);
-  if (options.warm_start.size() > 0) {
-    app->Options()->SetStringValue("warm_start_init_point", "yes");
+  for (int level = 0; level < num_levels; ++level) {
+    const auto level_start = std::chrono::steady_clock::now();
+    const bool exact = level == num_levels - 1;
+    nlp.SetLevel(levels[static_cast<std::size_t>(level)]);
+    Ipopt::SmartPtr<Ipopt::IpoptApplication> app = IpoptApplicationFactory();
+    const double tolerance = exact ? options.tolerance : options.level_tolerance;
+    app->Options()->SetNumericValue("tol", tolerance);
+    app->Options()->SetNumericValue("constr_viol_tol", tolerance);
+    app->Options()->SetIntegerValue("max_iter", options.max_iterations);
+    app->Options()->SetIntegerValue("print_level", options.print_level);
+    app->Options()->SetStringValue("sb", "yes");  // no banner
+    // IPOPT relaxes bounds by 1e-8 (relative) internally; moving the solution back onto the
+    // original bounds afterwards (honor_original_bounds) would break the continuity
+    // constraints it satisfied by ~1e-7 (sensitivities of order 10). The iterate is returned
+    // as converged.
+    app->Options()->SetStringValue("honor_original_bounds", "no");
+    app->Options()->SetNumericValue("bound_relax_factor", options.bound_relaxation);
+    if (options.regularize_constraints) {
+      app->Options()->SetStringValue("perturb_always_cd", "yes");
+    }
+    if (options.hessian == OcpHessian::kLimitedMemory) {
+      app->Options()->SetStringValue("hessian_approximation", "limited-memory");
+      app->Options()->SetIntegerValue("limited_memory_max_history", options.lbfgs_memory);
+    }
+    if (!multipliers.empty()) {
+      // A primal-dual warm start (the previous level's solution): keep the iterate where it
+      // is instead of pushing it into the interior, and start the barrier parameter small.
+      app->Options()->SetStringValue("warm_start_init_point", "yes");
+      app->Options()->SetNumericValue("warm_start_bound_push", kWarmStartPush);
+      app->Options()->SetNumericValue("warm_start_bound_frac", kWarmStartPush);
+      app->Options()->SetNumericValue("warm_start_slack_bound_push", kWarmStartPush);
+      app->Options()->SetNumericValue("warm_start_slack_bound_frac", kWarmStartPush);
+      app->Options()->SetNumericValue("warm_start_mult_bound_push", kWarmStartPush);
+      app->Options()->SetNumericValue("mu_init", kWarmStartBarrier);
+    }
+    MOREAU_ASSERT(app->Initialize() == Ipopt::Solve_Succeeded, "IPOPT initialization failed");
+    auto* tnlp = new ShootingTnlp(&nlp, z, multipliers.empty() ? nullptr : &multipliers, options,
+                                  level, num_levels, &result);
+    Ipopt::SmartPtr<Ipopt::TNLP> holder(tnlp);
+    const Ipopt::ApplicationReturnStatus status = app->OptimizeTNLP(holder);
+    OcpLevelResult level_result;
+    level_result.parameters = levels[static_cast<std::size_t>(level)];
+    level_result.status = StatusOf(status);
+    std::ostringstream s;
+    s << "IPOPT: " << IpoptStatusName(status);
+    if (!tnlp->last_failure().empty() && level_result.status == OcpStatus::kSolverFailure) {
+      s << "; last evaluation failure: " << tnlp->last_failure();
+    }
+    level_result.message = s.str();
+    level_result.iterations = tnlp->iterations();
+    level_result.objective = tnlp->final_objective();
+    level_result.seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - level_start).count();
+    result.levels.push_back(level_result);
+    result.stats.iterations += level_result.iterations;
+    // The next level starts from this one's last iterate (IPOPT reports it also when it
+    // stopped early), primal and dual.
+    if (tnlp->solution().size() == z.size() && tnlp->solution().allFinite()) {
+      z = tnlp->solution();
+      multipliers = tnlp->solution_multipliers();
+    }
+    if (exact) {
+      result.status = level_result.status;
+      result.message = level_result.message;
+      result.objective = level_result.objective;
+    }
   }
-  MOREAU_ASSERT(app->Initialize() == Ipopt::Solve_Succeeded, "IPOPT initialization failed");
-  auto* tnlp = new ShootingTnlp(&nlp, z0, options, &result);
-  Ipopt::SmartPtr<Ipopt::TNLP> holder(tnlp);
-  const Ipopt::ApplicationReturnStatus status = app->OptimizeTNLP(holder);
-  result.status = StatusOf(status);
-  std::ostringstream s;
-  s << "IPOPT: " << IpoptStatusName(status);
-  if (!tnlp->last_failure().empty() && result.status == OcpStatus::kSolverFailure) {
-    s << "; last evaluation failure: " << tnlp->last_failure();
-  }
-  result.message = s.str();
-  result.stats.iterations = result.log.empty() ? 0 : result.log.back().iteration;
-  const Vector solution = tnlp->solution().size() == z0.size() ? tnlp->solution() : z0;
-  result.objective = tnlp->final_objective();
-  nlp.Describe(solution, &result);
+  result.multipliers = multipliers;
+  nlp.Describe(z, &result);
   result.stats.simulations = nlp.simulations();
   result.stats.fesd_elements = nlp.fesd_elements();
   result.stats.cpu_seconds =

@@ -132,6 +132,8 @@ Scene MakeS5() {
   scene.final_time = 12.0;
   const int contact = scene.AddParameter("contact", 2.0, "pusher-slider distance at contact");
   const int radius = scene.AddParameter("radius", 8.0, "radius of the doorway discs");
+  const int gap = scene.AddParameter(
+      "gap", 0.0, "width of the doorway at y = 0 (0: the discs touch, the paper's doorway)");
   for (const char* name : {"u1", "u2"}) {
     InputSpec u;
     u.name = name;
@@ -152,15 +154,16 @@ Scene MakeS5() {
                           "pusher_left"};
   set.constraints = MakeSmoothFunction(
       "S5.c", 5,
-      [contact, radius](const auto& x, const auto&, const auto& t, const auto& p, auto& out) {
+      [contact, radius, gap](const auto& x, const auto&, const auto& t, const auto& p, auto& out) {
         using std::cos;
         auto square = [](const auto& a) { return a * a; };
         const auto centre = cos(t);
+        const auto offset = p[radius] + 0.5 * p[gap];  // disc centres at centre +- offset
         out[0] = square(x[0] - x[2]) + square(x[1] - x[3]) - square(p[contact]);
-        out[1] = square(x[0] - (centre + p[radius])) + square(x[1]) - square(p[radius]);
-        out[2] = square(x[0] - (centre - p[radius])) + square(x[1]) - square(p[radius]);
-        out[3] = square(x[2] - (centre + p[radius])) + square(x[3]) - square(p[radius]);
-        out[4] = square(x[2] - (centre - p[radius])) + square(x[3]) - square(p[radius]);
+        out[1] = square(x[0] - (centre + offset)) + square(x[1]) - square(p[radius]);
+        out[2] = square(x[0] - (centre - offset)) + square(x[1]) - square(p[radius]);
+        out[3] = square(x[2] - (centre + offset)) + square(x[3]) - square(p[radius]);
+        out[4] = square(x[2] - (centre - offset)) + square(x[3]) - square(p[radius]);
       });
   scene.effects.push_back(set);
   return scene;

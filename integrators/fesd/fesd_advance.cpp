@@ -152,7 +152,9 @@ bool FesdRun::Advance(double step_end, int* remaining) {
       return DecideAtBoundary();
     }
     ++result_.stats.num_switches;
-    *remaining = std::max(1, *remaining - m);
+    const bool early = options_.keep_elements_after_early_switch &&
+                       m * h < options_.min_element_fraction * h_trial;
+    if (!early) *remaining = std::max(1, *remaining - m);
     const std::vector<bool> previous = a_zero_;
     if (!Decide(y_[system_.clock_index()], &previous)) return true;
     z_guess_ = ConsistentGuess(y_, v_);

@@ -44,6 +44,8 @@ IntegratorEntry FesdEntry() {
                "remainders shorter than this fraction of H / N_fe merge into the next step, "
                "in (0, 0.5]"),
       BindInteger("max_event_retries", &O::max_event_retries, "re-solves per switch, >= 1"),
+      BindBool("keep_elements_after_early_switch", &O::keep_elements_after_early_switch,
+               "a switch right after a step's start does not use up an element (shooting)"),
       BindBool("sensitivities", &O::sensitivities,
                "dx(T)/dx(0), dx(T)/dp, dx(T)/du through switches (IFT on every group)"),
       BindBool("record_stages", &O::record_stages, "record every collocation stage point"),

@@ -1,5 +1,4 @@
 #include "moreau/integrators/timestepping.hpp"
-#include "moreau/integrators/simulate.hpp"
 
 #include <Eigen/LU>
 #include <chrono>
@@ -8,6 +7,7 @@
 
 #include "../common/collocation.hpp"
 #include "moreau/core/error.hpp"
+#include "moreau/integrators/simulate.hpp"
 
 namespace moreau {
 
@@ -106,13 +106,15 @@ void AddNewtonStats(const SemismoothNewtonResult& solved, TimeSteppingStats* sta
 }
 
 // Continuation on the smoothed Fischer-Burmeister function: mu = 1e-1, 1e-2, ..., 1e-8, then
-// the exact problem (mu = 0) from the last iterate. Each stage warm-starts the next; a stage
-// that does not converge still passes its iterate on.
+// the problem itself (mu = base.smoothing, 0 unless the step is smoothed) from the last
+// iterate. Each stage warm-starts the next; a stage that does not converge still passes its
+// iterate on.
 SemismoothNewtonResult SolveBySmoothing(MixedComplementaritySystem* system, const Vector& guess,
                                         const SemismoothNewtonOptions& base,
                                         TimeSteppingStats* stats) {
   Vector w = guess;
   for (double mu : {1e-1, 1e-2, 1e-3, 1e-4, 1e-6, 1e-8}) {
+    if (mu <= base.smoothing) break;
     SemismoothNewtonOptions options = base;
     options.smoothing = mu;
     options.tolerance = std::max(base.tolerance, 1e-3 * mu);
@@ -129,10 +131,11 @@ SemismoothNewtonResult SolveBySmoothing(MixedComplementaritySystem* system, cons
 
 // Implicit function theorem on a converged step R(w; y0, u, p) = 0: dw = -R_w^{-1} (R_y0 dy0 +
 // R_u du + R_p dp) with R_w the generalized Jacobian (pair rows weighted by the NCP function's
-// derivatives at the solution, as in Newton). Returns d y_end / d(y0, p, u) (n_y rows) with
-// y_end = y0 + Z_s, or false if R_w is singular.
+// derivatives at the solution, as in Newton; the smoothed Fischer-Burmeister function's if
+// the step was solved smoothed, whose derivatives are classical). Returns d y_end / d(y0, p,
+// u) (n_y rows) with y_end = y0 + Z_s, or false if R_w is singular.
 bool StepTransfer(internal::CollocationStages* stages, const Vector& y0, const Vector& w, double h,
-                  NcpFunctionKind ncp, Matrix* transfer) {
+                  const SemismoothNewtonOptions& newton, Matrix* transfer) {
   const int ny = stages->num_states(), s = stages->stages();
   // One evaluation with every derivative gives the pair sides and all Jacobian blocks.
   stages->Evaluate(y0, w, Derivatives::kAll);
@@ -140,7 +143,10 @@ bool StepTransfer(internal::CollocationStages* stages, const Vector& y0, const V
   stages->Residual(h, w, r, a, b);
   Vector da(a.size()), db(b.size());
   for (Eigen::Index k = 0; k < a.size(); ++k) {
-    const NcpValue phi = EvaluateNcp(ncp, a[k], b[k]);
+    const NcpValue phi =
+        newton.smoothing > 0.0 && newton.ncp_function == NcpFunctionKind::kFischerBurmeister
+            ? SmoothedFischerBurmeister(a[k], b[k], newton.smoothing)
+            : EvaluateNcp(newton.ncp_function, a[k], b[k]);
     da[k] = phi.da;
     db[k] = phi.db;
   }
@@ -262,7 +268,7 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
       }
       const Vector& w = solved.solution;
       if (options.sensitivities) {
-        if (!StepTransfer(&stages, y, w, h, options.newton.ncp_function, &transfer)) {
+        if (!StepTransfer(&stages, y, w, h, options.newton, &transfer)) {
           std::ostringstream message;
           message.precision(17);
           message << "newton_failure at t = " << grid[k]

@@ -181,64 +181,72 @@ TEST(TimeSteppingTest, ReportsEventsAtStepResolution) {
 // differences, on the wave-rider S4 (a moving set riding the state, inputs on two control
 // segments) and F4 (a Filippov crossing at t = 1/3). Steps chosen so that no pair is degenerate at
 // the perturbed points: the map is smooth there.
+// Also with smoothed complementarity (a b = mu^2 at every stage, the OCP layer's homotopy
+// levels): then the step map is smooth and its sensitivities are classical derivatives.
 TEST(TimeSteppingTest, SensitivitiesMatchCentralDifferences) {
   constexpr double kStep = 1e-6;
   // Central differences: truncation O(kStep^2) and Newton noise O(1e-13 / kStep).
   constexpr double kTolerance = 1e-6;
-  for (const char* name : {"S4", "F4"}) {
-    for (int stages : {1, 2, 3}) {
-      Scene scene = MakeScene(name);
-      if (std::string(name) == "S4") {
-        scene.inputs[0].signal = PiecewiseConstantSignal{{2.5}, {0.7, -0.4}};
-      }
-      TimeSteppingOptions options;
-      options.stages = stages;
-      options.step_size = std::string(name) == "S4" ? 0.05 : 0.02;
-      options.sensitivities = true;
-      const TimeSteppingResult result = SimulateTimeStepping(scene, options);
-      ASSERT_EQ(result.status, TimeSteppingStatus::kSuccess) << result.message;
-      // Both cross a switch: S4 is pushed by its boundary, F4 crosses x = 0 at t = 1/3.
-      if (std::string(name) == "S4") {
-        ASSERT_FALSE(result.events.empty()) << "the test needs a contact";
-      } else {
-        ASSERT_GT(result.final_state[0], 0.0) << "the test needs the crossing";
-      }
-      const Vector y0 = [&] {
-        Vector y(result.final_lowered_state.size());
-        y << scene.initial_state, scene.initial_time;
-        return y;
-      }();
-      const Eigen::Index ny = y0.size();
-      const Eigen::Index nu = scene.num_inputs();
-      const Eigen::Index np = result.sensitivities.cols() - ny -
-                              nu * static_cast<Eigen::Index>(result.segment_starts.size());
-      for (Eigen::Index j = 0; j < result.sensitivities.cols(); ++j) {
-        TimeSteppingOptions plus = options, minus = options;
-        plus.sensitivities = minus.sensitivities = false;
-        Scene scene_plus = scene, scene_minus = scene;
-        if (j < ny) {
-          plus.initial_state = y0;
-          minus.initial_state = y0;
-          plus.initial_state[j] += kStep;
-          minus.initial_state[j] -= kStep;
-        } else if (j < ny + np) {
-          scene_plus.parameters[static_cast<std::size_t>(j - ny)].value += kStep;
-          scene_minus.parameters[static_cast<std::size_t>(j - ny)].value -= kStep;
-        } else {
-          const Eigen::Index segment = (j - ny - np) / nu;
-          const Eigen::Index input = (j - ny - np) % nu;
-          scene_plus.inputs[static_cast<std::size_t>(input)]
-              .signal.values[static_cast<std::size_t>(segment)] += kStep;
-          scene_minus.inputs[static_cast<std::size_t>(input)]
-              .signal.values[static_cast<std::size_t>(segment)] -= kStep;
+  for (const double smoothing : {0.0, 0.1}) {
+    for (const char* name : {"S4", "F4"}) {
+      for (int stages : {1, 2, 3}) {
+        Scene scene = MakeScene(name);
+        if (std::string(name) == "S4") {
+          scene.inputs[0].signal = PiecewiseConstantSignal{{2.5}, {0.7, -0.4}};
         }
-        const TimeSteppingResult rp = SimulateTimeStepping(scene_plus, plus);
-        const TimeSteppingResult rm = SimulateTimeStepping(scene_minus, minus);
-        const Vector fd = (rp.final_lowered_state - rm.final_lowered_state) / (2.0 * kStep);
-        EXPECT_LE((fd - result.sensitivities.col(j)).lpNorm<Eigen::Infinity>(),
-                  kTolerance * std::max(1.0, fd.lpNorm<Eigen::Infinity>()))
-            << name << " s = " << stages << " column " << j << "\nexact "
-            << result.sensitivities.col(j).transpose() << "\nfd    " << fd.transpose();
+        TimeSteppingOptions options;
+        options.stages = stages;
+        options.step_size = std::string(name) == "S4" ? 0.05 : 0.02;
+        options.sensitivities = true;
+        options.newton.smoothing = smoothing;
+        const TimeSteppingResult result = SimulateTimeStepping(scene, options);
+        ASSERT_EQ(result.status, TimeSteppingStatus::kSuccess) << result.message;
+        // Both cross a switch: S4 is pushed by its boundary, F4 crosses x = 0 at t = 1/3.
+        if (std::string(name) == "S4") {
+          if (smoothing == 0.0) {
+            ASSERT_FALSE(result.events.empty()) << "the test needs a contact";
+          }
+        } else {
+          ASSERT_GT(result.final_state[0], 0.0) << "the test needs the crossing";
+        }
+        const Vector y0 = [&] {
+          Vector y(result.final_lowered_state.size());
+          y << scene.initial_state, scene.initial_time;
+          return y;
+        }();
+        const Eigen::Index ny = y0.size();
+        const Eigen::Index nu = scene.num_inputs();
+        const Eigen::Index np = result.sensitivities.cols() - ny -
+                                nu * static_cast<Eigen::Index>(result.segment_starts.size());
+        for (Eigen::Index j = 0; j < result.sensitivities.cols(); ++j) {
+          TimeSteppingOptions plus = options, minus = options;
+          plus.sensitivities = minus.sensitivities = false;
+          Scene scene_plus = scene, scene_minus = scene;
+          if (j < ny) {
+            plus.initial_state = y0;
+            minus.initial_state = y0;
+            plus.initial_state[j] += kStep;
+            minus.initial_state[j] -= kStep;
+          } else if (j < ny + np) {
+            scene_plus.parameters[static_cast<std::size_t>(j - ny)].value += kStep;
+            scene_minus.parameters[static_cast<std::size_t>(j - ny)].value -= kStep;
+          } else {
+            const Eigen::Index segment = (j - ny - np) / nu;
+            const Eigen::Index input = (j - ny - np) % nu;
+            scene_plus.inputs[static_cast<std::size_t>(input)]
+                .signal.values[static_cast<std::size_t>(segment)] += kStep;
+            scene_minus.inputs[static_cast<std::size_t>(input)]
+                .signal.values[static_cast<std::size_t>(segment)] -= kStep;
+          }
+          const TimeSteppingResult rp = SimulateTimeStepping(scene_plus, plus);
+          const TimeSteppingResult rm = SimulateTimeStepping(scene_minus, minus);
+          const Vector fd = (rp.final_lowered_state - rm.final_lowered_state) / (2.0 * kStep);
+          EXPECT_LE((fd - result.sensitivities.col(j)).lpNorm<Eigen::Infinity>(),
+                    kTolerance * std::max(1.0, fd.lpNorm<Eigen::Infinity>()))
+              << name << " s = " << stages << " smoothing " << smoothing << " column " << j
+              << "\nexact " << result.sensitivities.col(j).transpose() << "\nfd    "
+              << fd.transpose();
+        }
       }
     }
   }

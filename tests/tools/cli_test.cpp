@@ -36,7 +36,9 @@ TEST(CliTest, BadInputGivesClearErrorsAndExitCode2) {
   ExpectUsageError("run S3 --integrator radau", "does not support the moving set 'floor'");
   ExpectUsageError("run hopf --h 0", "step size h must be positive");
   ExpectUsageError("run hopf --stages 0", "stages must be in [1, 7]");
-  ExpectUsageError("run hopf --linear-solver qr", "bad value 'qr' for option 'linear_solver': expected one of auto, dense, sparse");
+  ExpectUsageError(
+      "run hopf --linear-solver qr",
+      "bad value 'qr' for option 'linear_solver': expected one of auto, dense, sparse");
   ExpectUsageError("show nope", "unknown scene 'nope'");
 }
 
@@ -212,8 +214,7 @@ TEST(CliTest, HysteresisScenesReportPhysicalTimeAndRelaySignals) {
   std::getline(csv, header);
   EXPECT_EQ(header.rfind("t,x,thermostat.w,clock,", 0), 0u) << header;
   ExpectUsageError("run S3 --numerical-time", "applies to scenes with hysteresis relays");
-  ExpectUsageError("run H1 --integrator ida --numerical-time",
-                   "simulated by the fesd integrator");
+  ExpectUsageError("run H1 --integrator ida --numerical-time", "simulated by the fesd integrator");
   ExpectUsageError("run H1 --integrator timestepping", "hysteresis relay 'thermostat'");
 }
 
@@ -251,7 +252,9 @@ TEST(CliTest, DaiScenesRunWithAlpha) {
                    "option 'stages' does not apply to integrator 'alpha'");
   ExpectUsageError("run S3 --integrator fesd --rho 0.5",
                    "option 'rho' does not apply to integrator 'fesd'");
-  ExpectUsageError("run D2 --objective nope", "bad value 'nope' for option 'objective': expected one of feasibility, least-change, reference");
+  ExpectUsageError("run D2 --objective nope",
+                   "bad value 'nope' for option 'objective': expected one of feasibility, "
+                   "least-change, reference");
   ExpectUsageError("run D2 --rho 1", "rho must be in [0, 1)");
   ExpectUsageError("run S3 --integrator alpha", "does not support the moving set 'floor'");
 }
@@ -274,6 +277,9 @@ TEST(CliTest, OcpSolvesWritesItsFilesAndNamesBadInput) {
   ExpectUsageError("ocp wave_rider --tol -1", "tolerance must be positive");
   ExpectUsageError("ocp wave_rider --integrator rk4", "unknown OCP integrator 'rk4'");
   ExpectUsageError("ocp turbo_car --integrator timestepping", "does not support a free final time");
+  ExpectUsageError("ocp doorway --homotopy 0.1", "--homotopy: expected MU:EPS[:NAME=VALUE...]");
+  ExpectUsageError("ocp doorway --homotopy 0:0:radius", "--homotopy: expected MU:EPS");
+  ExpectUsageError("ocp doorway --homotopy 0:0:width=1", "homotopy parameter 'width'");
   const std::filesystem::path directory =
       std::filesystem::temp_directory_path() / "moreau_cli_test_ocp";
   std::filesystem::remove_all(directory);
@@ -305,8 +311,8 @@ TEST(CliTest, SceneFilesRunShowCheckAndSweep) {
   std::filesystem::remove_all(directory);
   const Outcome file = RunCli("run " + s3 + " --set floor=-0.5 --no-plot --quiet --out " +
                               (directory / "file").string());
-  const Outcome builtin = RunCli("run S3 --set floor=-0.5 --no-plot --quiet --out " +
-                                 (directory / "builtin").string());
+  const Outcome builtin =
+      RunCli("run S3 --set floor=-0.5 --no-plot --quiet --out " + (directory / "builtin").string());
   ASSERT_EQ(file.exit_code, 0) << file.output;
   ASSERT_EQ(builtin.exit_code, 0) << builtin.output;
   std::ifstream a(directory / "file" / "summary.json"), b(directory / "builtin" / "summary.json");
@@ -323,8 +329,7 @@ TEST(CliTest, SceneFilesRunShowCheckAndSweep) {
   // S3: y = (x1, x2, clock), z = (lambda): s (n_y + n_z) = 2 * 4 unknowns per element.
   EXPECT_NE(check.output.find("3 states y"), std::string::npos) << check.output;
   EXPECT_NE(check.output.find("1 complementarity pairs"), std::string::npos) << check.output;
-  EXPECT_NE(check.output.find("8 unknowns per element (s = 2"), std::string::npos)
-      << check.output;
+  EXPECT_NE(check.output.find("8 unknowns per element (s = 2"), std::string::npos) << check.output;
 
   const Outcome sweep = RunCli("sweep " + s3 + " --grid floor=-1:-0.5:3 --no-plot --quiet --out " +
                                (directory / "sweep").string());
@@ -334,7 +339,8 @@ TEST(CliTest, SceneFilesRunShowCheckAndSweep) {
   const std::filesystem::path bad = directory / "bad.toml";
   std::ofstream(bad) << "name = \"bad\"\nstates = [\"x\"]\nx0 = [1.0]\ntf = 1.0\n"
                         "dynamics = [\"-k*x\"]\n";
-  ExpectUsageError("check " + bad.string(), bad.string() + ":5:15 (dynamics[0]): unknown name 'k' in '-k*x'");
+  ExpectUsageError("check " + bad.string(),
+                   bad.string() + ":5:15 (dynamics[0]): unknown name 'k' in '-k*x'");
   ExpectUsageError("run " + bad.string(), "unknown name 'k'");
   ExpectUsageError("check nope.toml", "cannot read scene file 'nope.toml'");
 }

@@ -324,20 +324,39 @@ int main(int argc, char** argv) {
       ocp->add_option("--N", ocp_settings.intervals,
                       "control intervals (default: the problem's; the problem's control guess is "
                       "then replaced by its constant signal)");
-  ocp->add_option("--stages", ocp_settings.options.stages, "FESD Radau IIA stages s (1..4)");
-  ocp->add_option("--fe", ocp_settings.options.finite_elements,
-                  "FESD finite elements per control interval");
-  std::string ocp_integrator = "fesd";
-  ocp->add_option("--integrator", ocp_integrator,
-                  "discretization of the intervals: fesd (default) or timestepping (fixed "
-                  "steps, for comparisons)");
+  // Flags override the problem's options (MakeOcpOptions): only the given ones are applied.
+  int ocp_stages = 0, ocp_fe = 0, ocp_max_iterations = 0, ocp_print_level = 0;
+  double ocp_tol = 0.0, ocp_level_tol = 0.0;
+  std::string ocp_integrator, ocp_hessian, ocp_homotopy;
+  auto* ocp_stages_option =
+      ocp->add_option("--stages", ocp_stages, "FESD Radau IIA stages s (1..4)");
+  auto* ocp_fe_option =
+      ocp->add_option("--fe", ocp_fe, "FESD finite elements per control interval");
+  auto* ocp_integrator_option = ocp->add_option(
+      "--integrator", ocp_integrator,
+      "discretization of the intervals: fesd (default) or timestepping (fixed steps, for "
+      "comparisons)");
   ocp->add_flag("--single-shooting", single_shooting,
                 "single shooting (default: multiple shooting)");
-  ocp->add_option("--tol", ocp_settings.options.tolerance, "IPOPT tolerance (tol)");
-  ocp->add_option("--max-iterations", ocp_settings.options.max_iterations, "IPOPT iteration limit");
-  ocp->add_option("--print-level", ocp_settings.options.print_level,
-                  "IPOPT output level 0..12 (0: silent)");
+  auto* ocp_hessian_option = ocp->add_option(
+      "--hessian", ocp_hessian,
+      "second-order information: limited_memory (default), block_bfgs or block_sr1");
+  auto* ocp_homotopy_option = ocp->add_option(
+      "--homotopy", ocp_homotopy,
+      "levels before the exact problem, MU:EPS[:NAME=VALUE...],... (smoothing mu, terminal "
+      "relaxation eps, scene parameters of the level), or none (default: the problem's)");
+  auto* ocp_tol_option = ocp->add_option("--tol", ocp_tol, "IPOPT tolerance (tol)");
+  auto* ocp_level_tol_option =
+      ocp->add_option("--level-tol", ocp_level_tol, "IPOPT tolerance of the homotopy levels");
+  auto* ocp_max_iterations_option =
+      ocp->add_option("--max-iterations", ocp_max_iterations, "IPOPT iteration limit per level");
+  auto* ocp_print_level_option =
+      ocp->add_option("--print-level", ocp_print_level, "IPOPT output level 0..12 (0: silent)");
   ocp->add_flag("--no-verify", no_verify, "skip the IDA re-simulation of the optimal controls");
+  bool ocp_no_regularization = false;
+  ocp->add_flag("--no-constraint-regularization", ocp_no_regularization,
+                "IPOPT regularizes the constraint block only after a wrong inertia (default: "
+                "at every iteration, perturb_always_cd)");
   ocp->add_option("--out", ocp_settings.out_directory,
                   "output directory (default: out/ocp/<problem>)");
   ocp->add_flag("--no-plot", no_plot, "do not write solution.png");
@@ -373,11 +392,47 @@ int main(int argc, char** argv) {
       return tool::RunSweepCommand(scene, sweep_settings);
     }
     if (app.got_subcommand("ocp")) {
-      if (single_shooting)
-        ocp_settings.options.transcription = moreau::OcpTranscription::kSingleShooting;
-      ocp_settings.options.verify = !no_verify;
+      auto& overrides = ocp_settings.overrides;
+      using moreau::OcpOptions;
+      if (ocp_stages_option->count() > 0) {
+        overrides.push_back([=](OcpOptions* o) { o->stages = ocp_stages; });
+      }
+      if (ocp_fe_option->count() > 0) {
+        overrides.push_back([=](OcpOptions* o) { o->finite_elements = ocp_fe; });
+      }
+      if (ocp_integrator_option->count() > 0) {
+        const auto integrator = moreau::ParseOcpIntegrator(ocp_integrator);
+        overrides.push_back([=](OcpOptions* o) { o->integrator = integrator; });
+      }
+      if (single_shooting) {
+        overrides.push_back(
+            [](OcpOptions* o) { o->transcription = moreau::OcpTranscription::kSingleShooting; });
+      }
+      if (ocp_hessian_option->count() > 0) {
+        const auto hessian = moreau::ParseOcpHessian(ocp_hessian);
+        overrides.push_back([=](OcpOptions* o) { o->hessian = hessian; });
+      }
+      if (ocp_homotopy_option->count() > 0) {
+        const auto levels = tool::ParseHomotopy(ocp_homotopy);
+        overrides.push_back([=](OcpOptions* o) { o->homotopy = levels; });
+      }
+      if (ocp_tol_option->count() > 0) {
+        overrides.push_back([=](OcpOptions* o) { o->tolerance = ocp_tol; });
+      }
+      if (ocp_level_tol_option->count() > 0) {
+        overrides.push_back([=](OcpOptions* o) { o->level_tolerance = ocp_level_tol; });
+      }
+      if (ocp_max_iterations_option->count() > 0) {
+        overrides.push_back([=](OcpOptions* o) { o->max_iterations = ocp_max_iterations; });
+      }
+      if (ocp_print_level_option->count() > 0) {
+        overrides.push_back([=](OcpOptions* o) { o->print_level = ocp_print_level; });
+      }
+      if (no_verify) overrides.push_back([](OcpOptions* o) { o->verify = false; });
+      if (ocp_no_regularization) {
+        overrides.push_back([](OcpOptions* o) { o->regularize_constraints = false; });
+      }
       ocp_settings.intervals_given = ocp_intervals->count() > 0;
-      ocp_settings.options.integrator = moreau::ParseOcpIntegrator(ocp_integrator);
       ocp_settings.plot = !no_plot;
       ocp_settings.quiet = quiet;
       return tool::RunOcpCommand(ocp_settings);

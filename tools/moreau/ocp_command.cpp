@@ -8,6 +8,7 @@
 #include <fstream>
 #include <iomanip>
 #include <nlohmann/json.hpp>
+#include <sstream>
 
 #include "moreau/core/error.hpp"
 #include "moreau/ocp/catalog.hpp"
@@ -54,11 +55,24 @@ void WriteControlsCsv(const OcpProblem& problem, const OcpResult& result, const 
 void WriteIterationsCsv(const OcpResult& result, const std::string& path) {
   std::ofstream out(path);
   RequireArgument(out.good(), "cannot write '", path, "'");
-  out << "iteration,objective,primal_infeasibility,dual_infeasibility\n" << std::setprecision(17);
+  out << "level,iteration,objective,primal_infeasibility,dual_infeasibility\n"
+      << std::setprecision(17);
   for (const OcpIteration& it : result.log) {
-    out << it.iteration << "," << it.objective << "," << it.primal_infeasibility << ","
-        << it.dual_infeasibility << "\n";
+    out << it.level << "," << it.iteration << "," << it.objective << "," << it.primal_infeasibility
+        << "," << it.dual_infeasibility << "\n";
   }
+}
+
+Json HomotopyJson(const std::vector<OcpHomotopyLevel>& homotopy) {
+  Json levels = Json::array();
+  for (const OcpHomotopyLevel& level : homotopy) {
+    Json parameters = Json::object();
+    for (const auto& [name, value] : level.parameters) parameters[name] = value;
+    levels.push_back({{"smoothing", level.smoothing},
+                      {"relaxation", level.relaxation},
+                      {"parameters", parameters}});
+  }
+  return levels;
 }
 
 Json SummaryJson(const OcpProblem& problem, const OcpOptions& options, const OcpResult& result) {
@@ -77,9 +91,23 @@ Json SummaryJson(const OcpProblem& problem, const OcpOptions& options, const Ocp
     events.push_back(
         {{"t", e.t}, {"kind", ToString(e.kind)}, {"what", e.what}, {"detail", e.detail}});
   }
+  Json levels = Json::array();
+  for (const OcpLevelResult& level : result.levels) {
+    Json parameters = Json::object();
+    for (const auto& [name, value] : level.parameters.parameters) parameters[name] = value;
+    levels.push_back({{"smoothing", level.parameters.smoothing},
+                      {"relaxation", level.parameters.relaxation},
+                      {"parameters", parameters},
+                      {"status", ToString(level.status)},
+                      {"message", level.message},
+                      {"iterations", level.iterations},
+                      {"objective", level.objective},
+                      {"seconds", level.seconds}});
+  }
   Json log = Json::array();
   for (const OcpIteration& it : result.log) {
-    log.push_back({{"iteration", it.iteration},
+    log.push_back({{"level", it.level},
+                   {"iteration", it.iteration},
                    {"objective", it.objective},
                    {"primal_infeasibility", it.primal_infeasibility},
                    {"dual_infeasibility", it.dual_infeasibility}});
@@ -94,6 +122,9 @@ Json SummaryJson(const OcpProblem& problem, const OcpOptions& options, const Ocp
         {"stages", options.stages},
         {"finite_elements", options.finite_elements},
         {"tolerance", options.tolerance},
+        {"level_tolerance", options.level_tolerance},
+        {"hessian", ToString(options.hessian)},
+        {"homotopy", HomotopyJson(options.homotopy)},
         {"max_iterations", options.max_iterations}}},
       {"status", ToString(result.status)},
       {"message", result.message},
@@ -105,11 +136,14 @@ Json SummaryJson(const OcpProblem& problem, const OcpOptions& options, const Ocp
       {"terminal_equality_error", result.terminal_equality_error},
       {"controls", controls},
       {"events", events},
+      {"levels", levels},
       {"iterations", log},
       {"stats",
        {{"ipopt_iterations", result.stats.iterations},
         {"simulations", result.stats.simulations},
         {"fesd_elements", result.stats.fesd_elements},
+        {"jacobian_nonzeros", result.stats.jacobian_nonzeros},
+        {"hessian_nonzeros", result.stats.hessian_nonzeros},
         {"cpu_seconds", result.stats.cpu_seconds},
         {"verification_seconds", result.stats.verification_seconds}}},
   };
@@ -179,6 +213,43 @@ std::string Format(const std::vector<std::string>& names, const Vector& values) 
 
 }  // namespace
 
+std::vector<OcpHomotopyLevel> ParseHomotopy(const std::string& text) {
+  std::vector<OcpHomotopyLevel> levels;
+  if (text == "none") return levels;
+  const std::string usage = "--homotopy: expected MU:EPS[:NAME=VALUE...][,...] or none, got '";
+  auto number = [](const std::string& field, double* value) {
+    try {
+      std::size_t used = 0;
+      *value = std::stod(field, &used);
+      return used == field.size();
+    } catch (const std::exception&) {
+      return false;
+    }
+  };
+  std::stringstream stream(text);
+  std::string item;
+  while (std::getline(stream, item, ',')) {
+    std::vector<std::string> fields;
+    std::stringstream parts(item);
+    std::string field;
+    while (std::getline(parts, field, ':')) fields.push_back(field);
+    OcpHomotopyLevel level;
+    bool ok = fields.size() >= 2 && number(fields[0], &level.smoothing) &&
+              number(fields[1], &level.relaxation);
+    for (std::size_t i = 2; ok && i < fields.size(); ++i) {
+      const auto equals = fields[i].find('=');
+      double value = 0.0;
+      ok =
+          equals != std::string::npos && equals > 0 && number(fields[i].substr(equals + 1), &value);
+      if (ok) level.parameters.emplace_back(fields[i].substr(0, equals), value);
+    }
+    RequireArgument(ok, usage, item, "'");
+    levels.push_back(level);
+  }
+  RequireArgument(!levels.empty(), usage, text, "'");
+  return levels;
+}
+
 void ListOcpProblems() {
   for (const OcpDefinition& definition : OcpCatalog()) {
     std::printf("  %-17s %s\n", definition.name.c_str(), definition.summary.c_str());
@@ -193,7 +264,8 @@ int RunOcpCommand(const OcpCommandSettings& settings) {
     problem.intervals = settings.intervals;
     problem.initial_controls.resize(0, 0);  // the problem's guess is for its own N
   }
-  OcpOptions options = settings.options;
+  OcpOptions options = MakeOcpOptions(settings.problem);
+  for (const auto& apply : settings.overrides) apply(&options);
   options.Validate();
   const std::string directory =
       settings.out_directory.empty() ? "out/ocp/" + problem.name : settings.out_directory;
@@ -203,13 +275,27 @@ int RunOcpCommand(const OcpCommandSettings& settings) {
   const auto start = std::chrono::steady_clock::now();
   auto last = start;
   if (!settings.quiet) {
-    options.progress = [&](int iteration, double objective, double infeasibility) {
+    int reported_level = -1;
+    options.progress = [&, reported_level](const OcpProgress& progress) mutable {
       const auto now = std::chrono::steady_clock::now();
+      const double elapsed = std::chrono::duration<double>(now - start).count();
+      if (progress.level != reported_level && progress.levels > 1) {
+        reported_level = progress.level;
+        if (progress.level + 1 < progress.levels) {
+          std::fprintf(stderr,
+                       "[moreau ocp] homotopy level %d/%d: smoothing %g, terminal relaxation %g\n",
+                       progress.level + 1, progress.levels, progress.parameters.smoothing,
+                       progress.parameters.relaxation);
+        } else {
+          std::fprintf(stderr, "[moreau ocp] level %d/%d: the exact problem\n", progress.level + 1,
+                       progress.levels);
+        }
+      }
       if (!tty && std::chrono::duration<double>(now - last).count() < 5.0) return;
       last = now;
-      std::fprintf(
-          stderr, "[moreau ocp] iteration %4d  objective %-14.8g infeasibility %-9.2e %.1f s\n",
-          iteration, objective, infeasibility, std::chrono::duration<double>(now - start).count());
+      std::fprintf(stderr,
+                   "[moreau ocp] iteration %4d  objective %-14.8g infeasibility %-9.2e %.1f s\n",
+                   progress.iteration, progress.objective, progress.primal_infeasibility, elapsed);
     };
   }
   const OcpResult result = SolveOcp(problem, options);
@@ -243,6 +329,17 @@ int RunOcpCommand(const OcpCommandSettings& settings) {
   } else {
     std::printf("re-simulated no%s%s\n", result.verification_message.empty() ? "" : ": ",
                 result.verification_message.c_str());
+  }
+  for (std::size_t i = 0; i + 1 < result.levels.size(); ++i) {
+    const OcpLevelResult& level = result.levels[i];
+    std::string parameters;
+    for (const auto& [name, value] : level.parameters.parameters) {
+      parameters += ", " + name + " " + std::to_string(value);
+    }
+    std::printf(
+        "homotopy     level %zu (smoothing %g, relaxation %g%s): %s, %d iterations, %.3g s\n",
+        i + 1, level.parameters.smoothing, level.parameters.relaxation, parameters.c_str(),
+        ToString(level.status).c_str(), level.iterations, level.seconds);
   }
   std::printf(
       "ipopt        %d iterations, %ld interval integrations, %.3g s (verification %.3g s)\n",

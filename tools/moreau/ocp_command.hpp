@@ -2,7 +2,9 @@
 // `moreau ocp <problem>`: solve an example optimal control problem (examples/ocp) and write
 // its solution (docs/ocp.md).
 
+#include <functional>
 #include <string>
+#include <vector>
 
 #include "moreau/ocp/ocp.hpp"
 
@@ -12,7 +14,8 @@ struct OcpCommandSettings {
   std::string problem;
   bool intervals_given = false;  ///< false: the problem's own N
   int intervals = 0;
-  OcpOptions options;
+  /// Command-line flags, applied in order to the problem's options (MakeOcpOptions).
+  std::vector<std::function<void(OcpOptions*)>> overrides;
   std::string out_directory;  ///< empty: out/ocp/<problem>
   bool plot = true;
   bool quiet = false;
@@ -24,6 +27,10 @@ struct OcpCommandSettings {
 // solved (also to acceptable tolerances), 1 any other status. Throws std::invalid_argument
 // for an unknown problem or invalid options.
 int RunOcpCommand(const OcpCommandSettings& settings);
+
+// Homotopy levels from "MU:EPS,MU:EPS,..." (smoothing, terminal relaxation) or "none". Throws
+// std::invalid_argument naming the bad entry.
+std::vector<OcpHomotopyLevel> ParseHomotopy(const std::string& text);
 
 // The summary lines of `moreau list` for the optimal control problems.
 void ListOcpProblems();

@@ -99,6 +99,14 @@ struct FesdOptions {
   double min_element_fraction = 1e-3;
   /// Re-solves allowed per switch (other element counts or guesses) before failing, >= 1.
   int max_event_retries = 6;
+  /// A switch located within min_element_fraction of a nominal element after the start of an
+  /// advance does not use up an element of the step: the rest of the step keeps its elements.
+  /// Then the solution map is continuous in the initial state when it starts on a constraint
+  /// boundary (a start just inside reaches the boundary after a vanishing element and
+  /// continues as a start on it would), which multiple shooting needs: its node states lie on
+  /// active boundaries. Off (the default): such a switch counts as an element, and the map
+  /// jumps there by the change of the discretization error (docs/ocp.md).
+  bool keep_elements_after_early_switch = false;
   /// Compute dx(T)/dx(0), dx(T)/dp, dx(T)/du (FesdResult::sensitivities).
   bool sensitivities = false;
   /// Step-size control by the local error estimate (see the file comment and

@@ -37,7 +37,10 @@ struct TimeSteppingOptions {
   /// Lowering of switching surfaces.
   SwitchingForm switching_form = SwitchingForm::kStewart;
   /// Newton options; the tolerance applies to the scaled residual (collocation rows scaled
-  /// by 1 / (1 + |y_n|), algebraic and complementarity rows unscaled).
+  /// by 1 / (1 + |y_n|), algebraic and complementarity rows unscaled). With
+  /// newton.smoothing = mu > 0 every stage pair solves the smoothed complementarity
+  /// a b = mu^2 (a, b > 0; Fischer-Burmeister only): the step map is smooth and the
+  /// sensitivities are its classical derivatives (homotopies of the OCP layer).
   SemismoothNewtonOptions newton = DefaultNewtonOptions();
   /// Record every step in the trajectory (false: only the initial and final points).
   bool record_trajectory = true;

@@ -15,6 +15,10 @@ struct OcpDefinition {
   std::string name;     ///< command-line name, e.g. "wave_rider"
   std::string summary;  ///< one line for `moreau list`
   std::function<OcpProblem()> make;
+  /// The options this problem is solved with by `moreau ocp` (command-line flags override
+  /// them), the tests and the benchmarks: the defaults plus what the problem needs (a
+  /// homotopy, docs/ocp.md).
+  std::function<OcpOptions()> options;
 };
 
 /// All problems, in the order `moreau list` shows them.
@@ -22,5 +26,8 @@ const std::vector<OcpDefinition>& OcpCatalog();
 /// The problem with this name. Throws std::invalid_argument naming the unknown problem and
 /// listing the available ones.
 OcpProblem MakeOcpProblem(const std::string& name);
+/// The options of the problem with this name (OcpDefinition::options). Throws
+/// std::invalid_argument like MakeOcpProblem.
+OcpOptions MakeOcpOptions(const std::string& name);
 
 }  // namespace moreau

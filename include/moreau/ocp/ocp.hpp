@@ -22,7 +22,17 @@
 /// constraints y_{k+1} = Phi_k(y_k, u_k, s_k); single shooting chains the intervals. The
 /// derivatives of Phi_k are FESD's exact sensitivities (implicit function theorem on the
 /// converged element systems, switch-determined element lengths included): no finite
-/// differences. IPOPT uses exact first derivatives and a limited-memory Hessian.
+/// differences. IPOPT gets them as a sparse Jacobian (blocks per interval: memory linear in
+/// N) and a Hessian approximation (OcpOptions::hessian): IPOPT's L-BFGS, or a block-structured
+/// one: per interval a quasi-Newton
+/// approximation of the curvature of lambda_k^T Phi_k from these first derivatives, and the
+/// exact second derivatives (automatic differentiation) of the terminal and path functions.
+///
+/// Homotopy (OcpOptions::homotopy): a sequence of easier problems, each warm-started (primal
+/// and dual) from the previous one, ending on the exact transcription: smoothed dynamics
+/// (every complementarity pair a b = mu^2 instead of 0 <= a ⟂ b >= 0, integrated by the
+/// time-stepping scheme, so that contacts act at a distance and the NLP is smooth) and relaxed
+/// terminal equalities |g| <= eps (docs/ocp.md, "Homotopy").
 ///
 /// Verification: the optimal controls (in physical time) are re-simulated by IDA at
 /// rtol = 1e-12 and the terminal-constraint error of that simulation is reported.
@@ -98,6 +108,61 @@ enum class OcpIntegrator {
 std::string ToString(OcpIntegrator integrator);
 OcpIntegrator ParseOcpIntegrator(const std::string& name);
 
+/// Second-order information for IPOPT (docs/ocp.md, "Second-order information").
+enum class OcpHessian {
+  /// IPOPT's limited-memory BFGS of the whole Lagrangian (hessian_approximation
+  /// limited-memory).
+  kLimitedMemory,
+  /// The Lagrangian's block structure: per shooting interval k a damped (Powell) BFGS
+  /// approximation of the Hessian of lambda_k^T Phi_k(y_k, u_k) over the interval's variables,
+  /// updated from the exact first derivatives at successive iterates; plus the exact Hessians
+  /// (automatic differentiation) of the terminal cost, the terminal constraints and the path
+  /// constraints. Single shooting has one block over all variables (no exact part).
+  kBlockBfgs,
+  /// As kBlockBfgs with symmetric rank-one updates (may be indefinite; IPOPT corrects the
+  /// inertia).
+  kBlockSr1,
+};
+std::string ToString(OcpHessian hessian);
+OcpHessian ParseOcpHessian(const std::string& name);
+
+/// One level of a homotopy (OcpOptions::homotopy): an easier problem solved before the exact
+/// one: smoothed dynamics, relaxed terminal equalities, other values of scene parameters
+/// (natural-parameter continuation), or a combination.
+struct OcpHomotopyLevel {
+  /// mu >= 0. With mu > 0 every interval is integrated by the time-stepping scheme
+  /// (OcpOptions::finite_elements fixed Radau IIA steps) with smoothed complementarity
+  /// a b = mu^2 (a, b > 0) at every stage (Kanzow's smoothed Fischer-Burmeister function):
+  /// constraints push at a distance and the shooting map is smooth. Needs a scene the
+  /// time-stepping scheme supports (moving sets, switching surfaces; no hysteresis, no free
+  /// final time). 0: the transcription's own integrator, unsmoothed.
+  double smoothing = 0.0;
+  /// eps >= 0: the terminal equalities are imposed as -eps <= g <= eps. 0: g = 0.
+  double relaxation = 0.0;
+  /// Scene parameters (by name) and their values on this level; the others, and every
+  /// parameter on the exact level, keep the problem's values.
+  std::vector<std::pair<std::string, double>> parameters;
+};
+
+/// Multipliers of an NLP solution (IPOPT's sign conventions), for warm starts.
+struct OcpMultipliers {
+  Vector constraints;   ///< one per NLP constraint
+  Vector lower_bounds;  ///< one per NLP variable (z_L >= 0)
+  Vector upper_bounds;  ///< one per NLP variable (z_U >= 0)
+  bool empty() const { return constraints.size() == 0; }
+};
+
+/// Progress report, after every IPOPT iteration of every level.
+struct OcpProgress {
+  int level = 0;   ///< 0-based; levels - 1 is the exact problem
+  int levels = 1;  ///< homotopy levels + 1
+  OcpHomotopyLevel parameters;
+  int iteration = 0;  ///< IPOPT's iteration counter within the level
+  double objective = 0.0;
+  double primal_infeasibility = 0.0;
+  double dual_infeasibility = 0.0;
+};
+
 struct OcpOptions {
   OcpTranscription transcription = OcpTranscription::kMultipleShooting;
   OcpIntegrator integrator = OcpIntegrator::kFesd;
@@ -105,24 +170,42 @@ struct OcpOptions {
   /// fixed steps (time-stepping); the other integrator settings are their defaults.
   int stages = 3;
   int finite_elements = 3;
-  /// IPOPT: convergence tolerance (tol, also used as constr_viol_tol), iterations, log level
-  /// (0: silent, 5: IPOPT's default output on stdout).
+  /// IPOPT: convergence tolerance of the exact (last) level (tol, also used as
+  /// constr_viol_tol), iterations per level, log level (0: silent, 5: IPOPT's default output
+  /// on stdout).
   double tolerance = 1e-10;
   int max_iterations = 1000;
   int print_level = 0;
-  /// Limited-memory Hessian history.
+  /// Second-order information (docs/ocp.md, "Second-order information": measured on the
+  /// example problems, IPOPT's limited-memory BFGS is the most robust).
+  OcpHessian hessian = OcpHessian::kLimitedMemory;
+  /// Quasi-Newton history: IPOPT's limited-memory BFGS pairs (kLimitedMemory); the block
+  /// updates rebuild every block from its last this many pairs.
   int lbfgs_memory = 20;
+  /// IPOPT's permanent regularization of the constraint linearization (perturb_always_cd):
+  /// the KKT systems get -delta_c I in the constraint block at every iteration instead of
+  /// only after a wrong inertia. Keeps the multipliers bounded when the constraint Jacobian
+  /// is rank deficient at the solution (the wave-rider's x1(T) = 1, docs/ocp.md).
+  bool regularize_constraints = true;
+  /// Homotopy levels solved, in order, before the exact problem (empty: the exact problem
+  /// only). Each level starts from the previous level's primal-dual solution.
+  std::vector<OcpHomotopyLevel> homotopy;
+  /// IPOPT tolerance of the homotopy levels (their solutions are only starting points).
+  double level_tolerance = 1e-6;
   /// IPOPT's relative relaxation of variable bounds (bound_relax_factor); the solution may
   /// exceed a bound by this fraction, never more (it is returned as converged, not clipped).
   double bound_relaxation = 1e-12;
   /// Warm start: a previous OcpResult::decision (same problem and transcription); empty for a
-  /// cold start from the initial guesses and a forward simulation.
+  /// cold start from the initial guesses and a forward simulation. With
+  /// warm_start_multipliers (a previous OcpResult::multipliers) IPOPT starts from the
+  /// primal-dual point.
   Vector warm_start;
+  OcpMultipliers warm_start_multipliers;
   /// Re-simulate the optimal controls with IDA (reference settings) and report the
   /// terminal-constraint error.
   bool verify = true;
   /// Progress: called after every IPOPT iteration (may be empty).
-  std::function<void(int iteration, double objective, double infeasibility)> progress;
+  std::function<void(const OcpProgress&)> progress;
 
   /// Throws std::invalid_argument naming the first out-of-range option.
   void Validate() const;
@@ -141,25 +224,42 @@ std::string ToString(OcpStatus status);
 
 /// One IPOPT iteration.
 struct OcpIteration {
+  int level = 0;  ///< homotopy level (the last one is the exact problem)
   int iteration = 0;
   double objective = 0.0;
   double primal_infeasibility = 0.0;
   double dual_infeasibility = 0.0;
 };
 
-struct OcpStats {
+/// One level of the solve (the homotopy levels, then the exact problem).
+struct OcpLevelResult {
+  OcpHomotopyLevel parameters;  ///< (0, 0, none) for the exact problem
+  OcpStatus status = OcpStatus::kSolverFailure;
+  std::string message;  ///< IPOPT's return status
   int iterations = 0;
-  long simulations = 0;  ///< FESD interval integrations (each with sensitivities)
+  double objective = 0.0;
+  double seconds = 0.0;
+};
+
+struct OcpStats {
+  int iterations = 0;    ///< IPOPT iterations, all levels
+  long simulations = 0;  ///< interval integrations (each with sensitivities)
   long fesd_elements = 0;
   double cpu_seconds = 0.0;
   double verification_seconds = 0.0;
+  /// Memory of the NLP's derivative data: structural nonzeros of the constraint Jacobian
+  /// and of the Hessian approximation (lower triangle; 0 for limited memory).
+  long jacobian_nonzeros = 0;
+  long hessian_nonzeros = 0;
 };
 
 struct OcpResult {
+  /// Status of the exact (last) level; the homotopy levels are in `levels`.
   OcpStatus status = OcpStatus::kSolverFailure;
   std::string message;
   double objective = 0.0;
   Vector decision;                       ///< the NLP variables (for warm starts)
+  OcpMultipliers multipliers;            ///< their multipliers (for warm starts)
   Vector initial_state;                  ///< x0 (free components optimized)
   Matrix controls;                       ///< N x (number of decision controls)
   Vector speeds;                         ///< N speeds of time (free final time), else empty
@@ -173,6 +273,7 @@ struct OcpResult {
   std::vector<Event> events;             ///< switches of that trajectory
   std::vector<RelaySignal> relays;       ///< relay memories of that trajectory
   std::vector<OcpIteration> log;
+  std::vector<OcpLevelResult> levels;
   /// Verification by re-simulation (IDA at rtol 1e-12, controls piecewise constant in
   /// physical time): x(T) of the re-simulation, max(|g|, h^+) there, and |x_sim(T) - x(T)|.
   bool verified = false;
@@ -187,8 +288,8 @@ struct OcpResult {
 OcpResult SolveOcp(const OcpProblem& problem, const OcpOptions& options = {});
 
 /// The NLP of the transcription, for solvers and tests: variables, bounds and constraint
-/// bounds, and an evaluation of the objective, the constraints and their exact first
-/// derivatives (dense). Layout in docs/ocp.md.
+/// bounds, the objective, the constraints and their exact first derivatives (a sparse
+/// Jacobian), and the Hessian approximation of OcpOptions::hessian. Layout in docs/ocp.md.
 class ShootingNlp {
  public:
   ShootingNlp(const OcpProblem& problem, const OcpOptions& options);
@@ -200,18 +301,42 @@ class ShootingNlp {
   int num_constraints() const;
   const Vector& variable_lower() const;
   const Vector& variable_upper() const;
+  /// Constraint bounds of the current level (relaxed terminal equalities: [-eps, eps]).
   const Vector& constraint_lower() const;
   const Vector& constraint_upper() const;
+  /// Selects the problem of a homotopy level (default: the exact problem, (0, 0), the
+  /// problem's parameters). Throws std::invalid_argument if the scene does not allow
+  /// smoothing (see OcpHomotopyLevel) or has no parameter of a given name.
+  void SetLevel(const OcpHomotopyLevel& level);
+  const OcpHomotopyLevel& level() const;
   /// The initial guess: controls and speeds from the problem, node states from a forward
   /// simulation with them.
   Vector InitialGuess();
-  /// Objective, constraints and (with non-null outputs) their gradients. Returns false with a
-  /// message if an interval integration fails (the NLP is not defined there).
+  /// Objective, constraints and (with non-null outputs) the objective gradient and the
+  /// constraint Jacobian's values in JacobianStructure() order. Returns false with a message
+  /// if an interval integration fails (the NLP is not defined there).
   bool Evaluate(const Vector& z, double* objective, Vector* constraints, Vector* gradient,
-                Matrix* jacobian, std::string* message);
-  /// Structural nonzeros of the constraint Jacobian (row, column), row-major by block.
+                Vector* jacobian_values, std::string* message);
+  /// Structural nonzeros of the constraint Jacobian (row, column): dense blocks per interval
+  /// (multiple shooting; linear in N) or per constraint group (single shooting).
   const std::vector<std::pair<int, int>>& JacobianStructure() const;
-  /// Unpacks a solution into the result fields (controls, grid, node states, trajectory).
+  /// The Jacobian as a sparse matrix from values in JacobianStructure() order.
+  SparseMatrix JacobianMatrix(const Vector& jacobian_values) const;
+  /// Structural nonzeros (row >= column) of the Hessian approximation (empty for
+  /// OcpHessian::kLimitedMemory).
+  const std::vector<std::pair<int, int>>& HessianStructure() const;
+  /// Values (HessianStructure() order) of the approximation of the Hessian of
+  /// objective_factor * f + lambda^T c at z. Stateful: at a point other than the previous
+  /// call's, the quasi-Newton blocks are first updated with the step between the two points
+  /// (the previous call's Jacobian values are kept for that). `jacobian_values` and
+  /// `gradient` are Evaluate's at z. Returns false if the exact parts cannot be evaluated.
+  bool HessianApproximation(const Vector& z, double objective_factor, const Vector& lambda,
+                            const Vector& gradient, const Vector& jacobian_values,
+                            Vector* hessian_values);
+  /// Forgets the quasi-Newton updates (blocks back to their initial scaling).
+  void ResetHessian();
+  /// Unpacks a solution into the result fields (controls, grid, node states, trajectory),
+  /// re-integrating with the exact integrator.
   void Describe(const Vector& z, OcpResult* result);
   long simulations() const;
   long fesd_elements() const;
