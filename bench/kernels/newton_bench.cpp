@@ -75,16 +75,16 @@ class ImplicitEulerStep : public MixedComplementaritySystem {
   void AssembleJacobian(const Vector& da, const Vector& db, SystemMatrix* jacobian) override {
     const int ng = system_.num_equations();
     jacobian->AddDiagonal(0, 0, ny_, 1.0);
-    jacobian->AddBlock(0, 0, point_.F_y, -h_);
-    jacobian->AddBlock(0, ny_, point_.F_z, -h_);
+    jacobian->AddDerivative(0, 0, point_.F_y, -h_);
+    jacobian->AddDerivative(0, ny_, point_.F_z, -h_);
     if (ng > 0) {
-      jacobian->AddBlock(ny_, 0, point_.G_y);
-      jacobian->AddBlock(ny_, ny_, point_.G_z);
+      jacobian->AddDerivative(ny_, 0, point_.G_y);
+      jacobian->AddDerivative(ny_, ny_, point_.G_z);
     }
-    const Matrix pairs_y = da.asDiagonal() * point_.A_y + db.asDiagonal() * point_.B_y;
-    const Matrix pairs_z = da.asDiagonal() * point_.A_z + db.asDiagonal() * point_.B_z;
-    jacobian->AddBlock(ny_ + ng, 0, pairs_y);
-    jacobian->AddBlock(ny_ + ng, ny_, pairs_z);
+    jacobian->AddWeightedRows(ny_ + ng, 0, da, point_.A_y);
+    jacobian->AddWeightedRows(ny_ + ng, 0, db, point_.B_y);
+    jacobian->AddWeightedRows(ny_ + ng, ny_, da, point_.A_z);
+    jacobian->AddWeightedRows(ny_ + ng, ny_, db, point_.B_z);
   }
 
  private:

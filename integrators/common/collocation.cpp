@@ -14,6 +14,22 @@ CollocationStages::CollocationStages(LoweredSystem* system, int stages)
       np_(system->num_pairs()),
       stages_(static_cast<std::size_t>(stages)) {}
 
+double CollocationStages::EstimatedJacobianNonzeros() const {
+  const double n = unknowns();
+  if (!system_->sparse()) return n * n;
+  const LoweredSystem::Nonzeros& nz = system_->nonzeros();
+  const double s = s_;
+  return s * s * (nz.F_y + nz.F_z) + s * ny_ +
+         s * (nz.G_y + nz.G_z + nz.A_y + nz.A_z + nz.B_y + nz.B_z);
+}
+
+double CollocationStages::EstimatedStartNonzeros() const {
+  const double n = unknowns();
+  if (!system_->sparse()) return n * ny_;
+  const LoweredSystem::Nonzeros& nz = system_->nonzeros();
+  return s_ * (s_ * nz.F_y + nz.G_y + nz.A_y + nz.B_y);
+}
+
 void CollocationStages::Evaluate(const ConstVectorRef& y0, const ConstVectorRef& w,
                                  Derivatives derivatives) {
   for (int i = 0; i < s_; ++i) {
@@ -50,27 +66,24 @@ void CollocationStages::AddJacobian(double h, const ConstVectorRef& da, const Co
       const PointEvaluation& e = stage(j);
       const double weight = -h * coefficients(i, j);
       // d collocation_i / d Z_j = delta_ij I - h a_ij F_y(Y_j);  d / d z_j = -h a_ij F_z.
-      if (e.has_sparse_F_y) {
-        jacobian->AddSparseBlock(row, col0 + state_offset(j), e.F_y_sparse, weight);
-      } else {
-        jacobian->AddBlock(row, col0 + state_offset(j), e.F_y, weight);
-      }
-      if (nz_ > 0) jacobian->AddBlock(row, col0 + algebraic_offset(j), e.F_z, weight);
+      jacobian->AddDerivative(row, col0 + state_offset(j), e.F_y, weight);
+      if (nz_ > 0) jacobian->AddDerivative(row, col0 + algebraic_offset(j), e.F_z, weight);
     }
     jacobian->AddDiagonal(row, col0 + state_offset(i), ny_, 1.0);
     const PointEvaluation& e = stage(i);
     if (ng_ > 0) {
-      jacobian->AddBlock(row + ny_, col0 + state_offset(i), e.G_y);
-      jacobian->AddBlock(row + ny_, col0 + algebraic_offset(i), e.G_z);
+      jacobian->AddDerivative(row + ny_, col0 + state_offset(i), e.G_y);
+      jacobian->AddDerivative(row + ny_, col0 + algebraic_offset(i), e.G_z);
     }
     if (np_ > 0) {
       // Pair rows: da dA + db dB.
-      const auto wa = da.segment(i * np_, np_).asDiagonal();
-      const auto wb = db.segment(i * np_, np_).asDiagonal();
-      const Matrix rows_y = wa * e.A_y + wb * e.B_y;
-      const Matrix rows_z = wa * e.A_z + wb * e.B_z;
-      jacobian->AddBlock(pair_row0 + i * np_, col0 + state_offset(i), rows_y);
-      jacobian->AddBlock(pair_row0 + i * np_, col0 + algebraic_offset(i), rows_z);
+      const auto wa = da.segment(i * np_, np_);
+      const auto wb = db.segment(i * np_, np_);
+      const int pair_row = pair_row0 + i * np_;
+      jacobian->AddWeightedRows(pair_row, col0 + state_offset(i), wa, e.A_y);
+      jacobian->AddWeightedRows(pair_row, col0 + state_offset(i), wb, e.B_y);
+      jacobian->AddWeightedRows(pair_row, col0 + algebraic_offset(i), wa, e.A_z);
+      jacobian->AddWeightedRows(pair_row, col0 + algebraic_offset(i), wb, e.B_z);
     }
   }
 }
@@ -92,19 +105,13 @@ void CollocationStages::AddStartJacobian(double h, const ConstVectorRef& da,
   for (int i = 0; i < s_; ++i) {
     const int row = row0 + i * (ny_ + ng_);
     for (int j = 0; j < s_; ++j) {
-      const PointEvaluation& e = stage(j);
-      if (e.has_sparse_F_y) {
-        jacobian->AddSparseBlock(row, col0, e.F_y_sparse, -h * coefficients(i, j));
-      } else {
-        jacobian->AddBlock(row, col0, e.F_y, -h * coefficients(i, j));
-      }
+      jacobian->AddDerivative(row, col0, stage(j).F_y, -h * coefficients(i, j));
     }
     const PointEvaluation& e = stage(i);
-    if (ng_ > 0) jacobian->AddBlock(row + ny_, col0, e.G_y);
+    if (ng_ > 0) jacobian->AddDerivative(row + ny_, col0, e.G_y);
     if (np_ > 0) {
-      const Matrix rows = da.segment(i * np_, np_).asDiagonal() * e.A_y +
-                          db.segment(i * np_, np_).asDiagonal() * e.B_y;
-      jacobian->AddBlock(pair_row0 + i * np_, col0, rows);
+      jacobian->AddWeightedRows(pair_row0 + i * np_, col0, da.segment(i * np_, np_), e.A_y);
+      jacobian->AddWeightedRows(pair_row0 + i * np_, col0, db.segment(i * np_, np_), e.B_y);
     }
   }
 }
@@ -112,23 +119,24 @@ void CollocationStages::AddStartJacobian(double h, const ConstVectorRef& da,
 void CollocationStages::ParameterJacobian(double h, const ConstVectorRef& da,
                                           const ConstVectorRef& db, Matrix* d_u,
                                           Matrix* d_p) const {
-  const int nu = static_cast<int>(stage(0).F_u.cols());
-  const int np = static_cast<int>(stage(0).F_p.cols());
+  // Dense: sensitivities with respect to a few inputs and parameters (n_u, n_p columns).
+  const int nu = stage(0).F_u.cols();
+  const int np = stage(0).F_p.cols();
   d_u->setZero(equation_rows() + pair_rows(), nu);
   d_p->setZero(equation_rows() + pair_rows(), np);
   for (int i = 0; i < s_; ++i) {
     const int row = i * (ny_ + ng_);
     for (int j = 0; j < s_; ++j) {
-      d_u->middleRows(row, ny_) -= h * tableau_.a(i, j) * stage(j).F_u;
-      d_p->middleRows(row, ny_) -= h * tableau_.a(i, j) * stage(j).F_p;
+      d_u->middleRows(row, ny_) -= h * tableau_.a(i, j) * stage(j).F_u.ToDense();
+      d_p->middleRows(row, ny_) -= h * tableau_.a(i, j) * stage(j).F_p.ToDense();
     }
     const PointEvaluation& e = stage(i);
-    d_u->middleRows(row + ny_, ng_) = e.G_u;
-    d_p->middleRows(row + ny_, ng_) = e.G_p;
+    d_u->middleRows(row + ny_, ng_) = e.G_u.ToDense();
+    d_p->middleRows(row + ny_, ng_) = e.G_p.ToDense();
     const auto wa = da.segment(i * np_, np_).asDiagonal();
     const auto wb = db.segment(i * np_, np_).asDiagonal();
-    d_u->middleRows(equation_rows() + i * np_, np_) = wa * e.A_u + wb * e.B_u;
-    d_p->middleRows(equation_rows() + i * np_, np_) = wa * e.A_p + wb * e.B_p;
+    d_u->middleRows(equation_rows() + i * np_, np_) = wa * e.A_u.ToDense() + wb * e.B_u.ToDense();
+    d_p->middleRows(equation_rows() + i * np_, np_) = wa * e.A_p.ToDense() + wb * e.B_p.ToDense();
   }
 }
 

@@ -37,6 +37,12 @@ class CollocationStages {
   int state_offset(int i) const { return i * (ny_ + nz_); }
   int algebraic_offset(int i) const { return i * (ny_ + nz_) + ny_; }
 
+  // Structural nonzeros of one step's Jacobian (AddJacobian): unknowns() squared with dense
+  // storage; from the lowered system's block patterns with sparse storage.
+  double EstimatedJacobianNonzeros() const;
+  // Nonzeros that an earlier element's end adds to this element's rows (AddStartJacobian).
+  double EstimatedStartNonzeros() const;
+
   // Evaluates all stages at Y_i = y0 + Z_i, z_i taken from w.
   void Evaluate(const ConstVectorRef& y0, const ConstVectorRef& w, Derivatives derivatives);
   const PointEvaluation& stage(int i) const { return stages_[static_cast<std::size_t>(i)]; }

@@ -13,8 +13,7 @@ SmoothCollocationSolver::SmoothCollocationSolver(LoweredSystem* system, int stag
   const double nonzeros = s_ * static_cast<double>(s_) * system->EstimatedNonzerosFy() + s_ * n_;
   solver_ = MakeLinearSolver(kind, s_ * n_, nonzeros);
   stage_f_.resize(n_, s_);
-  stage_jacobians_.resize(static_cast<std::size_t>(s_));
-  stage_sparse_.resize(static_cast<std::size_t>(s_));
+  stage_eval_.resize(static_cast<std::size_t>(s_));
   rhs_.resize(s_ * n_);
 }
 
@@ -28,16 +27,11 @@ SmoothCollocationSolver::Outcome SmoothCollocationSolver::Solve(double h, const 
     ++newton_iterations_;
     for (int j = 0; j < s_; ++j) {
       point_ = y0 + z->col(j);
-      system_->Evaluate(point_, no_algebraic, Derivatives::kStates, &eval_);
+      PointEvaluation& eval = stage_eval_[static_cast<std::size_t>(j)];
+      system_->Evaluate(point_, no_algebraic, Derivatives::kStates, &eval);
       ++function_evaluations_;
-      if (!eval_.F.allFinite()) return Outcome::kNonFinite;
-      stage_f_.col(j) = eval_.F;
-      sparse_jacobians_ = eval_.has_sparse_F_y;
-      if (sparse_jacobians_) {
-        stage_sparse_[static_cast<std::size_t>(j)] = eval_.F_y_sparse;
-      } else {
-        stage_jacobians_[static_cast<std::size_t>(j)] = eval_.F_y;
-      }
+      if (!eval.F.allFinite()) return Outcome::kNonFinite;
+      stage_f_.col(j) = eval.F;
     }
     // (Radau IIA collocation) residual -(Z_i - h sum_j a_ij F_j), stacked stage by stage.
     for (int i = 0; i < s_; ++i) {
@@ -50,12 +44,8 @@ SmoothCollocationSolver::Outcome SmoothCollocationSolver::Solve(double h, const 
     for (int i = 0; i < s_; ++i) {
       matrix_.AddDiagonal(i * n_, i * n_, n_, 1.0);
       for (int j = 0; j < s_; ++j) {
-        const auto index = static_cast<std::size_t>(j);
-        if (sparse_jacobians_) {
-          matrix_.AddSparseBlock(i * n_, j * n_, stage_sparse_[index], -h * tableau_.a(i, j));
-        } else {
-          matrix_.AddBlock(i * n_, j * n_, stage_jacobians_[index], -h * tableau_.a(i, j));
-        }
+        matrix_.AddDerivative(i * n_, j * n_, stage_eval_[static_cast<std::size_t>(j)].F_y,
+                              -h * tableau_.a(i, j));
       }
     }
     matrix_.Finalize();

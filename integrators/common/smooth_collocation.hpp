@@ -50,11 +50,8 @@ class SmoothCollocationSolver {
   int n_, s_;
   std::unique_ptr<LinearSolver> solver_;
   SystemMatrix matrix_;
-  PointEvaluation eval_;
+  std::vector<PointEvaluation> stage_eval_;  // per stage: F and F_y (dense or sparse)
   Matrix stage_f_;
-  std::vector<Matrix> stage_jacobians_;
-  std::vector<SparseMatrix> stage_sparse_;
-  bool sparse_jacobians_ = false;
   Vector rhs_, point_;
   long newton_iterations_ = 0;
   long function_evaluations_ = 0;

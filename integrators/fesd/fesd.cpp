@@ -180,6 +180,7 @@ LoweringOptions FesdRun::Lowering(const FesdOptions& options) {
   lowering.switching_form = options.switching_form;
   // A given initial state may lie outside the moving sets: it is projected (Run).
   lowering.require_feasible_initial_state = options.initial_state.size() == 0;
+  lowering.storage = StorageForLinearSolver(options.newton.linear_solver);
   return lowering;
 }
 
@@ -303,6 +304,7 @@ FesdIntegrator::FesdIntegrator(const Scene& scene, const FesdOptions& options) :
   RequireSupportedEffects(scene, "fesd");
   LoweringOptions lowering;
   lowering.switching_form = options_.switching_form;
+  lowering.storage = StorageForLinearSolver(options_.newton.linear_solver);
   system_ = std::make_unique<LoweredSystem>(scene, lowering);
 }
 

@@ -25,15 +25,16 @@ void FesdRun::ApplySaltation(const std::vector<bool>& before, const Vector& v_be
   VelocityLevelEvaluation velocity;
   system_.EvaluateVelocityLevel(y_, v_before, LoweredSystem::RolesFor(before), Derivatives::kAll,
                                 &velocity);
-  Eigen::RowVectorXd g_y = indicator.d_y.row(k), g_p = indicator.d_p.row(k),
-                     g_u = indicator.d_u.row(k);
-  if (nz_ > 0 && indicator.d_v.row(k).lpNorm<Eigen::Infinity>() > 0.0) {
-    const Eigen::PartialPivLU<Matrix> lu(velocity.equations_v.transpose());
-    const Eigen::RowVectorXd weights =
-        lu.solve(Vector(indicator.d_v.row(k).transpose())).transpose();
-    g_y -= weights * velocity.equations_y;
-    g_p -= weights * velocity.equations_p;
-    g_u -= weights * velocity.equations_u;
+  // Dense: sensitivities carry dense n_y-column matrices anyway.
+  Eigen::RowVectorXd g_y = indicator.d_y.Row(k), g_p = indicator.d_p.Row(k),
+                     g_u = indicator.d_u.Row(k);
+  const Eigen::RowVectorXd g_v = nz_ > 0 ? indicator.d_v.Row(k) : Eigen::RowVectorXd();
+  if (nz_ > 0 && g_v.lpNorm<Eigen::Infinity>() > 0.0) {
+    const Eigen::PartialPivLU<Matrix> lu(velocity.equations_v.ToDense().transpose());
+    const Eigen::RowVectorXd weights = lu.solve(Vector(g_v.transpose())).transpose();
+    g_y -= weights * velocity.equations_y.ToDense();
+    g_p -= weights * velocity.equations_p.ToDense();
+    g_u -= weights * velocity.equations_u.ToDense();
   }
   PointEvaluation before_switch, after_switch;
   system_.Evaluate(y_, ConsistentGuess(y_, v_before), Derivatives::kNone, &before_switch);

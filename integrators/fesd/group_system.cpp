@@ -61,7 +61,22 @@ int GroupSystem::num_equations() const {
 
 double GroupSystem::EstimatedJacobianNonzeros() const {
   const double n = num_unknowns();
-  return n * n;
+  if (!system_->sparse()) return n * n;
+  // Elements, the coupling of every element to the ends of the earlier ones, and with an
+  // event the velocity-level rows at the end state (their y-part once per element: the end
+  // state is the sum of the elements' last increments; products like A_y F_z give about
+  // twice the entries of their factors) and the event row.
+  const double m = setup_.elements;
+  const CollocationStages& stages = elements_.front();
+  const LoweredSystem::Nonzeros& nz = system_->nonzeros();
+  double estimate = m * stages.EstimatedJacobianNonzeros() +
+                    m * (m - 1) / 2 * stages.EstimatedStartNonzeros();
+  if (setup_.with_event) {
+    estimate += 2.0 * (m * (nz.A_y + nz.B_y + nz.G_y + nz.F_y) + nz.A_z + nz.B_z + nz.G_z +
+                       nz.F_z) +
+                m * ny_ + nz_ + 1.0;
+  }
+  return estimate;
 }
 
 Vector GroupSystem::ElementStart(const ConstVectorRef& w, int e) const {
@@ -169,9 +184,9 @@ void GroupSystem::AssembleJacobian(const Vector& da, const Vector& db, SystemMat
   }
   if (!setup_.with_event) return;
   const int velocity_row = m * element_rows_;
-  jacobian->AddBlock(velocity_row, v_offset(), velocity_.equations_v);
+  jacobian->AddDerivative(velocity_row, v_offset(), velocity_.equations_v);
   for (int e = 0; e < m; ++e) {
-    jacobian->AddBlock(velocity_row, element_offset(e) + last, velocity_.equations_y);
+    jacobian->AddDerivative(velocity_row, element_offset(e) + last, velocity_.equations_y);
   }
   const int event_row = num_equations();
   jacobian->AddEntry(event_row, h_index(), da[0] * (-1.0 / setup_.h_max));
@@ -179,9 +194,15 @@ void GroupSystem::AssembleJacobian(const Vector& da, const Vector& db, SystemMat
     const int k = event_pair_;
     const int power = setup_.indicator_power[static_cast<std::size_t>(k)];
     const double weight = setup_.indicator_weights[k] / std::pow(tau_, power);
-    const Matrix dy = db[0] * weight * indicators_.d_y.row(k);
-    for (int e = 0; e < m; ++e) jacobian->AddBlock(event_row, element_offset(e) + last, dy);
-    jacobian->AddBlock(event_row, v_offset(), db[0] * weight * indicators_.d_v.row(k));
+    // Row k of the indicator derivatives (the smallest indicator); with sparse storage the
+    // other rows enter with weight zero, so that the pattern stays when the minimum moves.
+    event_weights_.setZero(np_);
+    event_weights_[k] = db[0] * weight;
+    for (int e = 0; e < m; ++e) {
+      jacobian->AddRowCombination(event_row, element_offset(e) + last, event_weights_,
+                                  indicators_.d_y);
+    }
+    jacobian->AddRowCombination(event_row, v_offset(), event_weights_, indicators_.d_v);
     if (power > 0) {
       // d/dh of iota / tau^p with tau = h / h_ref.
       const double d_tau = -power * weight * indicators_.values[k] / tau_ / setup_.h_reference;
@@ -243,18 +264,18 @@ void GroupSystem::SensitivityBlocks(const Vector& w, double event_da, double eve
   }
   if (!setup_.with_event) return;
   const int velocity_row = setup_.elements * element_rows_;
-  out->y_start.middleRows(velocity_row, nz_) = velocity_.equations_y;
-  out->u.middleRows(velocity_row, nz_) = velocity_.equations_u;
-  out->p.middleRows(velocity_row, nz_) = velocity_.equations_p;
+  out->y_start.middleRows(velocity_row, nz_) = velocity_.equations_y.ToDense();
+  out->u.middleRows(velocity_row, nz_) = velocity_.equations_u.ToDense();
+  out->p.middleRows(velocity_row, nz_) = velocity_.equations_p.ToDense();
   const int event_row = num_equations();
   out->h_max[event_row] = event_da * h / (setup_.h_max * setup_.h_max);
   if (event_pair_ >= 0) {
     const int k = event_pair_;
     const int power = setup_.indicator_power[static_cast<std::size_t>(k)];
     const double weight = setup_.indicator_weights[k] / std::pow(tau_, power);
-    out->y_start.row(event_row) = event_db * weight * indicators_.d_y.row(k);
-    out->u.row(event_row) = event_db * weight * indicators_.d_u.row(k);
-    out->p.row(event_row) = event_db * weight * indicators_.d_p.row(k);
+    out->y_start.row(event_row) = event_db * weight * indicators_.d_y.Row(k);
+    out->u.row(event_row) = event_db * weight * indicators_.d_u.Row(k);
+    out->p.row(event_row) = event_db * weight * indicators_.d_p.Row(k);
     if (power > 0) {
       // d/dh_ref of w iota (h_ref / h)^p = p w iota tau^{-p} / h_ref.
       out->h_reference[event_row] =

@@ -113,7 +113,7 @@ Eigen::Map<Vector> View(N_Vector v) {
 class IdaRun {
  public:
   IdaRun(const Scene& scene, const IdaOptions& options, const ProgressCallback& progress)
-      : options_(options), progress_(progress), system_(scene, Lowering(options)) {
+      : options_(options), progress_(progress), system_(scene, Lowering(scene, options)) {
     ny_ = system_.num_states();
     nx_ = system_.num_scene_states();
     nz_ = system_.num_algebraic();
@@ -197,10 +197,14 @@ class IdaRun {
   }
 
  private:
-  static LoweringOptions Lowering(const IdaOptions& options) {
+  static LoweringOptions Lowering(const Scene& scene, const IdaOptions& options) {
     LoweringOptions lowering;
     lowering.switching_form = options.switching_form;
     lowering.relay_form = RelayForm::kDiscreteMemory;
+    // The phase Jacobian below is assembled dense (then copied into KLU's CSC matrix when the
+    // sparse solver is used); hand-written sparse dynamics (no effects) are read sparse.
+    lowering.storage = scene.dynamics.has_sparse_state_jacobian() ? DerivativeStorage::kSparse
+                                                                  : DerivativeStorage::kDense;
     return lowering;
   }
 
@@ -513,8 +517,8 @@ class IdaRun {
       if (!system_.differentiated_equations()[static_cast<std::size_t>(r)]) continue;
       (*p)[r] = point.G[r];
       if (with_jacobian) {
-        p_y->row(r) = point.G_y.row(r);
-        p_z->row(r) = point.G_z.row(r);
+        p_y->row(r) = point.G_y.dense().row(r);
+        p_z->row(r) = point.G_z.dense().row(r);
       }
     }
     for (int k = 0; k < np_; ++k) {
@@ -524,8 +528,8 @@ class IdaRun {
       if (side != ContinuousSide::kBoth && keeps_a != (side == ContinuousSide::kA)) continue;
       (*p)[ng_ + k] = keeps_a ? point.A[k] : point.B[k];
       if (with_jacobian) {
-        p_y->row(ng_ + k) = keeps_a ? point.A_y.row(k) : point.B_y.row(k);
-        p_z->row(ng_ + k) = keeps_a ? point.A_z.row(k) : point.B_z.row(k);
+        p_y->row(ng_ + k) = keeps_a ? point.A_y.dense().row(k) : point.B_y.dense().row(k);
+        p_z->row(ng_ + k) = keeps_a ? point.A_z.dense().row(k) : point.B_z.dense().row(k);
       }
     }
   }
@@ -566,18 +570,18 @@ class IdaRun {
     Vector y, z, v;
     Unpack(Y, &y, &z, &v);
     system_.Evaluate(y, z, Derivatives::kStates, &point_);
-    if (point_.has_sparse_F_y) return SparseDynamicsJacobian(c_j, J);
+    if (point_.F_y.is_sparse()) return SparseDynamicsJacobian(c_j, J);
     Matrix& jac = jacobian_;
     jac.setZero(n_, n_);
     // y' - F(y, z): F depends on y, z_c (continuous columns) and v_J (jump columns).
-    jac.topLeftCorner(ny_, ny_) = c_j * Matrix::Identity(ny_, ny_) - point_.F_y;
+    jac.topLeftCorner(ny_, ny_) = c_j * Matrix::Identity(ny_, ny_) - point_.F_y.dense();
     for (int c = 0; c < nc_; ++c) {
       const int i = continuous_[static_cast<std::size_t>(c)];
-      jac.block(0, ny_ + c, ny_, 1) = -point_.F_z.col(i);
+      jac.block(0, ny_ + c, ny_, 1) = -point_.F_z.dense().col(i);
       jac(ny_ + c, ny_ + c) = c_j;  // z_c' - v_c
       jac(ny_ + c, ny_ + nc_ + i) = -1.0;
     }
-    for (int i : jump_) jac.block(0, ny_ + nc_ + i, ny_, 1) = -point_.F_z.col(i);
+    for (int i : jump_) jac.block(0, ny_ + nc_ + i, ny_, 1) = -point_.F_z.dense().col(i);
     if (nz_ > 0) {
       system_.EvaluateVelocityLevel(y, v, roles_, Derivatives::kStates, &velocity_);
       Vector p;
@@ -596,8 +600,8 @@ class IdaRun {
       }
       const double kappa = options_.drift_rate;
       const int row = ny_ + nc_;
-      jac.block(row, 0, nz_, ny_) = velocity_.equations_y + kappa * p_y;
-      jac.block(row, row, nz_, nz_) = velocity_.equations_v;
+      jac.block(row, 0, nz_, ny_) = velocity_.equations_y.dense() + kappa * p_y;
+      jac.block(row, row, nz_, nz_) = velocity_.equations_v.dense();
       for (int c = 0; c < nc_; ++c) {
         jac.block(row, ny_ + c, nz_, 1) = kappa * p_z.col(continuous_[static_cast<std::size_t>(c)]);
       }
@@ -613,7 +617,7 @@ class IdaRun {
   int SparseDynamicsJacobian(double c_j, SUNMatrix J) {
     SparseMatrix identity(n_, n_);
     identity.setIdentity();
-    SparseMatrix jac = c_j * identity - point_.F_y_sparse;
+    SparseMatrix jac = c_j * identity - point_.F_y.sparse();
     return CopySparse(jac, J);
   }
 

@@ -278,11 +278,7 @@ class RadauRun {
     const Vector f0 = eval_.F;
     filter_matrix_.Reset(n_, filter_solver_->wants_sparse());
     filter_matrix_.AddDiagonal(0, 0, n_, 1.0);
-    if (eval_.has_sparse_F_y) {
-      filter_matrix_.AddSparseBlock(0, 0, eval_.F_y_sparse, -h * tableau_.gamma0);
-    } else {
-      filter_matrix_.AddBlock(0, 0, eval_.F_y, -h * tableau_.gamma0);
-    }
+    filter_matrix_.AddDerivative(0, 0, eval_.F_y, -h * tableau_.gamma0);
     filter_matrix_.Finalize();
     if (filter_solver_->Factorize(filter_matrix_) != FactorizationStatus::kSuccess) {
       return std::numeric_limits<double>::infinity();

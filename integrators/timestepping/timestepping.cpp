@@ -79,6 +79,9 @@ class StepSystem final : public MixedComplementaritySystem {
   void AssembleJacobian(const Vector& da, const Vector& db, SystemMatrix* jacobian) override {
     stages_->AddJacobian(h_, da, db, 0, num_equations(), 0, jacobian);
   }
+  double EstimatedJacobianNonzeros() const override {
+    return stages_->EstimatedJacobianNonzeros();
+  }
   void ResidualScale(const Vector&, Vector* scale) override {
     scale->setOnes(num_unknowns());
     const int ny = stages_->num_states(), ng = stages_->num_equations();
@@ -187,6 +190,7 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
   LoweringOptions lowering;
   lowering.switching_form = options.switching_form;
   lowering.require_feasible_initial_state = options.initial_state.size() == 0;
+  lowering.storage = StorageForLinearSolver(options.newton.linear_solver);
   LoweredSystem system(scene, lowering);
   internal::CollocationStages stages(&system, options.stages);
   StepSystem step_system(&stages);

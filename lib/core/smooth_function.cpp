@@ -39,6 +39,15 @@ void TypedFunction::SparseWeightedHessian(const ConstVectorRef& x, const ConstVe
   sparse_->WeightedHessian(this, x, u, t, p, wrt, weights, hess, rows);
 }
 
+void TypedFunction::SparseHessianDirection(const ConstVectorRef& x, const ConstVectorRef& u,
+                                           double t, const ConstVectorRef& p, Wrt wrt,
+                                           const ConstVectorRef& direction,
+                                           SparseMatrix* rows_matrix,
+                                           const std::vector<int>* rows) {
+  if (!sparse_) sparse_ = std::make_unique<SparseDerivatives>();
+  sparse_->HessianDirection(this, x, u, t, p, wrt, direction, rows_matrix, rows);
+}
+
 SparseDerivativeStats TypedFunction::sparse_derivative_stats() const {
   return sparse_ ? sparse_->stats() : SparseDerivativeStats{};
 }
@@ -249,6 +258,49 @@ void SmoothFunction::SparseWeightedHessian(const ConstVectorRef& x, const ConstV
                   "': Hessian weights need ", impl_->num_outputs(), " entries, got ",
                   weights.size());
   impl_->SparseWeightedHessian(x, u, t, p, wrt, weights, hess, rows);
+}
+
+void SmoothFunction::SparseHessianDirection(const ConstVectorRef& x, const ConstVectorRef& u,
+                                            double t, const ConstVectorRef& p, Wrt wrt,
+                                            const ConstVectorRef& direction,
+                                            SparseMatrix* rows_matrix,
+                                            const std::vector<int>* rows) const {
+  RequireNonEmpty(*this);
+  RequireArgument(direction.size() == wrt.Columns(static_cast<int>(x.size()),
+                                                  static_cast<int>(u.size()),
+                                                  static_cast<int>(p.size())),
+                  "function '", impl_->name(), "': direction has ", direction.size(),
+                  " entries, expected one per selected column");
+  impl_->SparseHessianDirection(x, u, t, p, wrt, direction, rows_matrix, rows);
+}
+
+// Reference implementation from the dense derivatives: row k from the Hessian of output k
+// alone (every selected column stored). Implementations that detect sparsity override it.
+void SmoothFunction::Concept::SparseHessianDirection(const ConstVectorRef& x,
+                                                     const ConstVectorRef& u, double t,
+                                                     const ConstVectorRef& p, Wrt wrt,
+                                                     const ConstVectorRef& direction,
+                                                     SparseMatrix* rows_matrix,
+                                                     const std::vector<int>* rows) {
+  const int m = num_outputs();
+  std::vector<int> all;
+  if (rows == nullptr) {
+    for (int k = 0; k < m; ++k) all.push_back(k);
+    rows = &all;
+  }
+  std::vector<Eigen::Triplet<double, int>> entries;
+  Vector weights = Vector::Zero(m);
+  Matrix hessian;
+  for (int k : *rows) {
+    weights.setZero();
+    weights[k] = 1.0;
+    WeightedHessian(x, u, t, p, wrt, weights, &hessian);
+    const Vector row = hessian * direction;
+    for (Eigen::Index j = 0; j < row.size(); ++j) entries.emplace_back(k, j, row[j]);
+  }
+  rows_matrix->resize(m, direction.size());
+  rows_matrix->setFromTriplets(entries.begin(), entries.end());
+  rows_matrix->makeCompressed();
 }
 
 // Reference implementation from the dense derivatives: every entry of the selected rows is

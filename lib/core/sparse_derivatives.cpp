@@ -331,6 +331,11 @@ struct SparseDerivatives::HessianPlan {
   // Pairs of output outputs[o]: pair_i/pair_j (inputs, i <= j) for e in
   // [pair_start[o], pair_start[o + 1]), with the positions of (i, j) and (j, i) in the pattern.
   std::vector<int> pair_start, pair_i, pair_j, position_ij, position_ji;
+  // SparseHessianDirection (built at its first use): the outputs x columns pattern whose row
+  // k holds the columns of k's support, and per support entry its column and value position.
+  bool direction_ready = false;
+  SparseMatrix direction_pattern;
+  std::vector<int> support_column, support_position;
 };
 
 SparseDerivatives::SparseDerivatives() = default;
@@ -775,6 +780,124 @@ void SparseDerivatives::WeightedHessian(TypedFunction* function, const ConstVect
       for (int i : seeded_)
         inputs2_[static_cast<std::size_t>(i)] = Dual2(input_values_[static_cast<std::size_t>(i)]);
     }
+  }
+}
+
+// ---- second derivatives along a direction ----------------------------------------------
+
+void SparseDerivatives::HessianDirection(TypedFunction* function, const ConstVectorRef& x,
+                                         const ConstVectorRef& u, double t,
+                                         const ConstVectorRef& p, Wrt wrt,
+                                         const ConstVectorRef& direction,
+                                         SparseMatrix* rows_matrix,
+                                         const std::vector<int>* rows) {
+  UpdatePattern(function, x, u, t, p);
+  HessianPlan& plan = FindHessianPlan(*function, wrt, rows);
+  const int m = function->num_outputs();
+  if (!plan.direction_ready) {
+    // Row k of the result holds the selected columns of k's support (sorted inputs give
+    // sorted columns: the selected blocks keep the input order).
+    int num_columns = 0;
+    const std::vector<int> column_of = ColumnsOfInputs(pattern_, wrt, &num_columns);
+    std::vector<std::pair<int, int>> entries;  // (column, row)
+    plan.support_column.resize(plan.support_input.size());
+    for (std::size_t o = 0; o < plan.outputs.size(); ++o) {
+      for (int s = plan.support_start[o]; s < plan.support_start[o + 1]; ++s) {
+        const int column =
+            column_of[static_cast<std::size_t>(plan.support_input[static_cast<std::size_t>(s)])];
+        plan.support_column[static_cast<std::size_t>(s)] = column;
+        entries.emplace_back(column, plan.outputs[o]);
+      }
+    }
+    std::sort(entries.begin(), entries.end());
+    std::vector<int> column_start(static_cast<std::size_t>(num_columns) + 1, 0);
+    std::vector<int> row_index(entries.size());
+    for (std::size_t e = 0; e < entries.size(); ++e) {
+      ++column_start[static_cast<std::size_t>(entries[e].first) + 1];
+      row_index[e] = entries[e].second;
+    }
+    for (int c = 0; c < num_columns; ++c) {
+      column_start[static_cast<std::size_t>(c) + 1] += column_start[static_cast<std::size_t>(c)];
+    }
+    plan.direction_pattern = PatternMatrix(m, num_columns, column_start, row_index);
+    plan.support_position.resize(plan.support_input.size());
+    for (std::size_t o = 0; o < plan.outputs.size(); ++o) {
+      for (int s = plan.support_start[o]; s < plan.support_start[o + 1]; ++s) {
+        const int column = plan.support_column[static_cast<std::size_t>(s)];
+        const auto begin = row_index.begin() + column_start[static_cast<std::size_t>(column)];
+        const auto end = row_index.begin() + column_start[static_cast<std::size_t>(column) + 1];
+        const auto found = std::lower_bound(begin, end, plan.outputs[o]);
+        MOREAU_ASSERT(found != end && *found == plan.outputs[o], "support entry missing");
+        plan.support_position[static_cast<std::size_t>(s)] =
+            static_cast<int>(found - row_index.begin());
+      }
+    }
+    plan.direction_ready = true;
+  }
+  AdoptPattern(plan.direction_pattern, rows_matrix);
+  double* values = rows_matrix->valuePtr();
+  std::fill(values, values + rows_matrix->nonZeros(), 0.0);
+  if (plan.outputs.empty() || plan.num_colors == 0) return;
+
+  // Outer level: the colours of chunk a (inputs of one output have distinct colours); inner
+  // level: the one direction, so that d/d(colour c) of (grad g_k . direction) is entry
+  // (k, i_c) of H_k direction, i_c the input of colour c in k's support.
+  const int nx = pattern_.nx, nu = pattern_.nu, np = pattern_.np;
+  FillInputs2(x, u, t, p);
+  outputs2_.resize(static_cast<std::size_t>(m));
+  const int chunks = (plan.num_colors + kChunk - 1) / kChunk;
+  // Inputs in some support, each once (their inner seed is the direction's entry).
+  if (++mark_stamp_ == 0) {
+    std::fill(input_mark_.begin(), input_mark_.end(), 0);
+    std::fill(color_mark_.begin(), color_mark_.end(), 0);
+    mark_stamp_ = 1;
+  }
+  seeded_.clear();
+  std::vector<int>& seeded_column = seeded_column_;
+  seeded_column.clear();
+  for (std::size_t s = 0; s < plan.support_input.size(); ++s) {
+    const int i = plan.support_input[s];
+    if (input_mark_[static_cast<std::size_t>(i)] == mark_stamp_) continue;
+    input_mark_[static_cast<std::size_t>(i)] = mark_stamp_;
+    seeded_.push_back(i);
+    seeded_column.push_back(plan.support_column[s]);
+  }
+  stats_.hessian_colors = plan.num_colors;
+  stats_.hessian_passes = 0;
+  for (int a = 0; a < chunks; ++a) {
+    const int outer_size = std::min(kChunk, plan.num_colors - a * kChunk);
+    for (std::size_t q = 0; q < seeded_.size(); ++q) {
+      const auto i = static_cast<std::size_t>(seeded_[q]);
+      const double d = direction[seeded_column[q]];
+      const int color = plan.input_color[i];
+      Dual1 inner(input_values_[i]);
+      if (d != 0.0) {
+        inner = Dual1(input_values_[i], 1);
+        inner.d(0) = d;
+      }
+      inputs2_[i] = color / kChunk == a ? Dual2::Variable(inner, outer_size, color % kChunk)
+                                        : Dual2(inner);
+    }
+    std::fill(outputs2_.begin(), outputs2_.end(), Dual2(0.0));
+    const Dual2* base = inputs2_.data();
+    function->Call(base, nx, base + nx, nu, base[static_cast<std::size_t>(nx + nu)],
+                   base + nx + nu + 1, np, outputs2_.data());
+    ++stats_.hessian_passes;
+    for (std::size_t o = 0; o < plan.outputs.size(); ++o) {
+      const Dual2& g = outputs2_[static_cast<std::size_t>(plan.outputs[o])];
+      for (int s = plan.support_start[o]; s < plan.support_start[o + 1]; ++s) {
+        const int color =
+            plan.input_color[static_cast<std::size_t>(plan.support_input[static_cast<std::size_t>(s)])];
+        if (color / kChunk != a) continue;
+        const int outer = color % kChunk;
+        if (outer >= g.size()) continue;
+        const Dual1& row = g.d(outer);
+        if (row.size() > 0) values[plan.support_position[static_cast<std::size_t>(s)]] = row.d(0);
+      }
+    }
+  }
+  for (int i : seeded_) {
+    inputs2_[static_cast<std::size_t>(i)] = Dual2(input_values_[static_cast<std::size_t>(i)]);
   }
 }
 

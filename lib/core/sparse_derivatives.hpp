@@ -51,6 +51,10 @@ class SparseDerivatives {
   void WeightedHessian(TypedFunction* function, const ConstVectorRef& x, const ConstVectorRef& u,
                        double t, const ConstVectorRef& p, Wrt wrt, const ConstVectorRef& weights,
                        SparseMatrix* hess, const std::vector<int>* rows);
+  void HessianDirection(TypedFunction* function, const ConstVectorRef& x,
+                        const ConstVectorRef& u, double t, const ConstVectorRef& p, Wrt wrt,
+                        const ConstVectorRef& direction, SparseMatrix* rows_matrix,
+                        const std::vector<int>* rows);
   SparseDerivativeStats stats() const;
 
   // Least recently used plans beyond this number are dropped (active sets change over a run;
@@ -87,6 +91,7 @@ class SparseDerivatives {
   std::vector<Dual2> inputs2_, outputs2_;
   std::vector<int> input_mark_, color_mark_, compact_color_, seeded_, active_outputs_;
   std::vector<int> used_colors_;
+  std::vector<int> seeded_column_;  // HessianDirection: the column of every seeded input
   std::vector<char> needed_chunk_pairs_;
   int mark_stamp_ = 0;
 

@@ -82,6 +82,67 @@ void SystemMatrix::AddSparseBlock(int row0, int col0, const SparseMatrix& block,
   }
 }
 
+void SystemMatrix::AddDerivative(int row0, int col0, const DerivativeMatrix& m, double scale) {
+  if (m.is_sparse()) {
+    AddSparseBlock(row0, col0, m.sparse(), scale);
+  } else {
+    AddBlock(row0, col0, m.dense(), scale);
+  }
+}
+
+void SystemMatrix::AddWeightedRows(int row0, int col0, const ConstVectorRef& row_weights,
+                                   const DerivativeMatrix& m) {
+  MOREAU_ASSERT(row_weights.size() == m.rows(), "AddWeightedRows: one weight per row");
+  if (!m.is_sparse()) {
+    MOREAU_ASSERT(row0 + m.rows() <= n_ && col0 + m.cols() <= n_, "block outside the matrix");
+    if (!sparse_) {
+      dense_.block(row0, col0, m.rows(), m.cols()).noalias() +=
+          row_weights.asDiagonal() * m.dense();
+    } else {
+      AddBlock(row0, col0, row_weights.asDiagonal() * m.dense());
+    }
+    return;
+  }
+  const SparseMatrix& block = m.sparse();
+  MOREAU_ASSERT(row0 + block.rows() <= n_ && col0 + block.cols() <= n_,
+                "sparse block outside the system matrix");
+  for (int j = 0; j < block.outerSize(); ++j) {
+    for (SparseMatrix::InnerIterator it(block, j); it; ++it) {
+      // Entries of rows with weight zero stay structural (the pattern must not depend on
+      // the weights, which change between Newton iterations).
+      const double value = row_weights[it.row()] * it.value();
+      if (sparse_) {
+        triplets_.emplace_back(row0 + it.row(), col0 + it.col(), value);
+      } else {
+        dense_(row0 + it.row(), col0 + it.col()) += value;
+      }
+    }
+  }
+}
+
+void SystemMatrix::AddRowCombination(int row, int col0, const ConstVectorRef& weights,
+                                     const DerivativeMatrix& m) {
+  MOREAU_ASSERT(weights.size() == m.rows() && row < n_ && col0 + m.cols() <= n_,
+                "AddRowCombination: wrong sizes");
+  if (!m.is_sparse()) {
+    for (Eigen::Index k = 0; k < weights.size(); ++k) {
+      if (weights[k] == 0.0) continue;
+      if (!sparse_) {
+        dense_.row(row).segment(col0, m.cols()) += weights[k] * m.dense().row(k);
+      } else {
+        AddBlock(row, col0, weights[k] * m.dense().row(k));
+      }
+    }
+    return;
+  }
+  const SparseMatrix& block = m.sparse();
+  for (int j = 0; j < block.outerSize(); ++j) {
+    for (SparseMatrix::InnerIterator it(block, j); it; ++it) {
+      AddEntry(row, col0 + j, weights[it.row()] * it.value());
+    }
+  }
+}
+
 void SystemMatrix::AddDiagonal(int row0, int col0, int count, double value) {
   MOREAU_ASSERT(row0 + count <= n_ && col0 + count <= n_, "diagonal outside the system matrix");
   for (int i = 0; i < count; ++i) AddEntry(row0 + i, col0 + i, value);

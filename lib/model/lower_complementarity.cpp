@@ -98,16 +98,16 @@ class ComplementarityBlock final : public LoweredBlock {
     // d(B lambda) with lambda held, plus B dlambda_bar through the consistent values.
     Matrix f_jacobian = ContractRows(jac_b_, lambda_);  // n_x x columns
     if (consistent) f_jacobian += b * d_lambda_bar_;
-    if (!consistent) out->F_z.block(0, z0, nx_, m_) += b;
-    Scatter(context, f_jacobian, 0, all, &out->F_y, &out->F_u, &out->F_p, /*add=*/true);
+    if (!consistent) out->F_z.AddBlock(0, z0, b);
+    Scatter(context, f_jacobian, 0, all, &out->F_y, &out->F_u, &out->F_p);
     // dw with lambda held (the partial derivative; the velocity level adds the rest).
     Matrix a_jacobian = jac_g_;
     if (index_one_) {
       a_jacobian += ContractRows(jac_d_, lambda_);
-      out->A_z.block(k0, z0, m_, m_) = RowMajor(d_values_, m_, m_);
+      out->A_z.AddBlock(k0, z0, RowMajor(d_values_, m_, m_));
     }
-    Scatter(context, a_jacobian, k0, all, &out->A_y, &out->A_u, &out->A_p, /*add=*/false);
-    out->B_z.block(k0, z0, m_, m_).setIdentity();
+    Scatter(context, a_jacobian, k0, all, &out->A_y, &out->A_u, &out->A_p);
+    for (int k = 0; k < m_; ++k) out->B_z.Add(k0 + k, z0 + k, 1.0);
   }
 
   // Index 2: lambda from `previous` (not determined by the state), else 0. Index 1: the
@@ -155,10 +155,8 @@ class ComplementarityBlock final : public LoweredBlock {
                     CurvatureTerms* out) override {
     const int k0 = layout.pair_offset;
     const bool all = derivatives == Derivatives::kAll;
-    for (int k = 0; k < m_; ++k) {
-      AddHessianDirection(context, effect_.output, k, y, direction, derivatives, 1.0, &out->pair_y,
-                          &out->pair_u, &out->pair_p, k0 + k);
-    }
+    directions_.HessianDirections(context, effect_.output, y, direction, derivatives);
+    directions_.AddRows(0, m_, 1.0, k0, &out->pair_y, &out->pair_u, &out->pair_p);
     if (!index_one_) return;
     MOREAU_ASSERT(context.velocity_roles != nullptr && context.velocity != nullptr,
                   "complementarity curvature terms need the velocity-level roles and values");
@@ -178,12 +176,11 @@ class ComplementarityBlock final : public LoweredBlock {
     d_cols.head(nx_) = direction.head(nx_);
     d_cols[t_col] = direction[context.clock_index];
     const Matrix m_matrix = RowMajor(jac_d_ * d_cols, m_, m_);
-    Scatter(context, m_matrix * d_lambda_bar_, k0, all, &out->pair_y, &out->pair_u, &out->pair_p,
-            /*add=*/true);
+    Scatter(context, m_matrix * d_lambda_bar_, k0, all, &out->pair_y, &out->pair_u, &out->pair_p);
     // (c) d/d(y, u, p) of D(y) v_lambda.
     const Vector rates = context.velocity->segment(layout.z_offset, m_);
-    Scatter(context, ContractRows(jac_d_, rates), k0, all, &out->pair_y, &out->pair_u, &out->pair_p,
-            /*add=*/true);
+    Scatter(context, ContractRows(jac_d_, rates), k0, all, &out->pair_y, &out->pair_u,
+            &out->pair_p);
   }
 
   // Free side of each pair. Index 2: the multiplier of an active pair (velocity level), g of
@@ -201,13 +198,12 @@ class ComplementarityBlock final : public LoweredBlock {
       for (int k = 0; k < m_; ++k) {
         if (a_zero[static_cast<std::size_t>(k0 + k)]) {
           out->values[k0 + k] = v[z0 + k];
-          if (with_states) out->d_v(k0 + k, z0 + k) = 1.0;
+          if (with_states) out->d_v.Add(k0 + k, z0 + k, 1.0);
           continue;
         }
         out->values[k0 + k] = g_[k];
         if (with_states) {
-          Scatter(context, jac_g_.middleRows(k, 1), k0 + k, all, &out->d_y, &out->d_u, &out->d_p,
-                  /*add=*/false);
+          Scatter(context, jac_g_.middleRows(k, 1), k0 + k, all, &out->d_y, &out->d_u, &out->d_p);
         }
       }
       return;
@@ -228,7 +224,7 @@ class ComplementarityBlock final : public LoweredBlock {
       if (!with_states) continue;
       const Matrix row =
           conducting ? Matrix(d_lambda_bar_.middleRows(k, 1)) : Matrix(w_jacobian.middleRows(k, 1));
-      Scatter(context, row, k0 + k, all, &out->d_y, &out->d_u, &out->d_p, /*add=*/false);
+      Scatter(context, row, k0 + k, all, &out->d_y, &out->d_u, &out->d_p);
     }
   }
 
@@ -298,34 +294,26 @@ class ComplementarityBlock final : public LoweredBlock {
     return out;
   }
 
-  // Writes (add = false) or adds J (columns x, [u], t, [p]) into rows [row, row + J.rows()) of
-  // (dy, du, dp): x columns and the clock column of dy.
-  void Scatter(const BlockContext& context, const Matrix& j, int row, bool all, Matrix* dy,
-               Matrix* du, Matrix* dp, bool add) const {
-    const int rows = static_cast<int>(j.rows());
+  // Adds J (columns x, [u], t, [p]) into rows [row, row + J.rows()) of (dy, du, dp): x
+  // columns and the clock column of dy. (Each row of the block's pairs is written once.)
+  void Scatter(const BlockContext& context, const Matrix& j, int row, bool all,
+               DerivativeMatrix* dy, DerivativeMatrix* du, DerivativeMatrix* dp) const {
     const int nu = static_cast<int>(context.inputs->size());
     const int np = static_cast<int>(context.parameters->size());
     const int t_col = TimeColumn(context, all);
-    if (!add) {
-      dy->block(row, 0, rows, nx_).setZero();
-      dy->block(row, context.clock_index, rows, 1).setZero();
-    }
-    dy->block(row, 0, rows, nx_) += j.leftCols(nx_);
-    dy->block(row, context.clock_index, rows, 1) += j.col(t_col);
+    dy->AddBlock(row, 0, j.leftCols(nx_));
+    dy->AddBlock(row, context.clock_index, j.col(t_col));
     if (!all) return;
-    if (!add) {
-      du->middleRows(row, rows).setZero();
-      dp->middleRows(row, rows).setZero();
-    }
-    du->middleRows(row, rows) += j.middleCols(nx_, nu);
-    dp->middleRows(row, rows) += j.rightCols(np);
+    du->AddBlock(row, 0, j.middleCols(nx_, nu));
+    dp->AddBlock(row, 0, j.rightCols(np));
   }
 
   // Adds d/d(y, u, p) [grad_y (sum_o weights_o f_o) . direction] into row `row`.
   void AddWeightedHessianDirection(const BlockContext& context, const SmoothFunction& function,
                                    const Vector& weights, const ConstVectorRef& y,
                                    const ConstVectorRef& direction, Derivatives derivatives,
-                                   int row, Matrix* dy, Matrix* du, Matrix* dp) {
+                                   int row, DerivativeMatrix* dy, DerivativeMatrix* du,
+                                   DerivativeMatrix* dp) {
     const bool all = derivatives == Derivatives::kAll;
     function.WeightedHessian(y.head(nx_), *context.inputs, y[context.clock_index],
                              *context.parameters, all ? Wrt::All() : Wrt::XT(), weights, &hessian_);
@@ -334,7 +322,7 @@ class ComplementarityBlock final : public LoweredBlock {
     d.head(nx_) = direction.head(nx_);
     d[t_col] = direction[context.clock_index];
     const Vector hd = hessian_ * d;
-    Scatter(context, hd.transpose(), row, all, dy, du, dp, /*add=*/true);
+    Scatter(context, hd.transpose(), row, all, dy, du, dp);
   }
 
   // lambda on the active set S: D_SS lambda_S = -g_S, lambda = 0 elsewhere; true if the result
@@ -416,6 +404,7 @@ class ComplementarityBlock final : public LoweredBlock {
   bool index_one_;
   Vector x_, g_, b_values_, d_values_, lambda_, lambda_bar_;
   Matrix jac_g_, jac_b_, jac_d_, d_lambda_bar_, hessian_;
+  ArgumentMatrix directions_;
 };
 
 }  // namespace

@@ -123,33 +123,14 @@ class RelayBlockBase : public LoweredBlock {
   void EvaluateModes(const BlockContext& context, const ConstVectorRef& y, int i,
                      Derivatives derivatives) {
     const HysteresisRelay& relay = relays_[static_cast<std::size_t>(i)];
-    const double t = y[context.clock_index];
-    const Vector& u = *context.inputs;
-    const Vector& params = *context.parameters;
-    if (derivatives == Derivatives::kNone) {
-      relay.mode_a.Evaluate(x_, u, t, params, &mode_a_);
-      relay.mode_b.Evaluate(x_, u, t, params, &mode_b_);
-      return;
-    }
-    const Wrt wrt = derivatives == Derivatives::kAll ? Wrt::All() : Wrt::XT();
-    relay.mode_a.Jacobian(x_, u, t, params, wrt, &mode_a_, &mode_a_jacobian_);
-    relay.mode_b.Jacobian(x_, u, t, params, wrt, &mode_b_, &mode_b_jacobian_);
+    mode_a_jacobian_.Jacobian(context, relay.mode_a, y, derivatives, &mode_a_);
+    mode_b_jacobian_.Jacobian(context, relay.mode_b, y, derivatives, &mode_b_);
   }
 
   // Adds weight * d(mode field)/d(y, u, p) into the x rows of F_y (x and clock columns),
   // F_u and F_p.
-  void AddModeJacobian(const BlockContext& context, const Matrix& jacobian, double weight,
-                       Derivatives derivatives, PointEvaluation* out) const {
-    const int nx = num_states_;
-    const int nu = static_cast<int>(context.inputs->size());
-    const int np = static_cast<int>(context.parameters->size());
-    const bool all = derivatives == Derivatives::kAll;
-    const int t_col = all ? nx + nu : nx;
-    out->F_y.topLeftCorner(nx, nx) += weight * jacobian.leftCols(nx);
-    out->F_y.block(0, context.clock_index, nx, 1) += weight * jacobian.col(t_col);
-    if (!all) return;
-    out->F_u.topRows(nx) += weight * jacobian.middleCols(nx, nu);
-    out->F_p.topRows(nx) += weight * jacobian.rightCols(np);
+  void AddModeJacobian(const ArgumentMatrix& jacobian, double weight, PointEvaluation* out) const {
+    jacobian.AddRows(0, num_states_, weight, 0, &out->F_y, &out->F_u, &out->F_p);
   }
 
   std::vector<HysteresisRelay> relays_;
@@ -157,7 +138,8 @@ class RelayBlockBase : public LoweredBlock {
   int num_relays_;
   std::vector<Psi> psi_;
   Vector x_, input_, mode_a_, mode_b_;
-  Matrix input_jacobian_, mode_a_jacobian_, mode_b_jacobian_;
+  Matrix input_jacobian_;
+  ArgumentMatrix mode_a_jacobian_, mode_b_jacobian_, directions_;
 };
 
 class HysteresisBlock final : public RelayBlockBase {
@@ -240,29 +222,29 @@ class HysteresisBlock final : public RelayBlockBase {
       const Psi& p = psi_[static_cast<std::size_t>(i)];
       const bool all = derivatives == Derivatives::kAll;
       for (int k = 0; k < kRegions; ++k) {
-        out->G_y.row(Row(i, k)) += -2.0 * kPointPsi[k] * p.d_y;
-        out->G_y(Row(i, k), MemoryIndex(i)) += -2.0 * kPointW[k];
+        out->G_y.AddBlock(Row(i, k), 0, p.d_y, -2.0 * kPointPsi[k]);
+        out->G_y.Add(Row(i, k), MemoryIndex(i), -2.0 * kPointW[k]);
         if (all) {
-          out->G_u.row(Row(i, k)) += -2.0 * kPointPsi[k] * p.d_u;
-          out->G_p.row(Row(i, k)) += -2.0 * kPointPsi[k] * p.d_p;
+          out->G_u.AddBlock(Row(i, k), 0, p.d_u, -2.0 * kPointPsi[k]);
+          out->G_p.AddBlock(Row(i, k), 0, p.d_p, -2.0 * kPointPsi[k]);
         }
-        out->G_z(Row(i, k), Lambda(i, k)) = -1.0;
-        out->G_z(Row(i, k), Mu(i)) = -1.0;
-        out->G_z(Row(i, kRegions), Theta(i, k)) = 1.0;
-        out->A_z(Pair(i, k), Theta(i, k)) = 1.0;
-        out->B_z(Pair(i, k), Lambda(i, k)) = 1.0;
-        out->F_z(MemoryIndex(i), Theta(i, k)) += relay.auxiliary_gain * kMemoryDirection[k];
+        out->G_z.Add(Row(i, k), Lambda(i, k), -1.0);
+        out->G_z.Add(Row(i, k), Mu(i), -1.0);
+        out->G_z.Add(Row(i, kRegions), Theta(i, k), 1.0);
+        out->A_z.Add(Pair(i, k), Theta(i, k), 1.0);
+        out->B_z.Add(Pair(i, k), Lambda(i, k), 1.0);
+        out->F_z.Add(MemoryIndex(i), Theta(i, k), relay.auxiliary_gain * kMemoryDirection[k]);
       }
-      AddModeJacobian(context, mode_a_jacobian_, q * weight_a, derivatives, out);
-      AddModeJacobian(context, mode_b_jacobian_, q * weight_b, derivatives, out);
-      out->F_z.block(0, Theta(i, kModeA), nx, 1) += 2.0 * q * mode_a_;
-      out->F_z.block(0, Theta(i, kModeB), nx, 1) += 2.0 * q * mode_b_;
+      AddModeJacobian(mode_a_jacobian_, q * weight_a, out);
+      AddModeJacobian(mode_b_jacobian_, q * weight_b, out);
+      out->F_z.AddBlock(0, Theta(i, kModeA), mode_a_, 2.0 * q);
+      out->F_z.AddBlock(0, Theta(i, kModeB), mode_b_, 2.0 * q);
       // Q_i depends on the other relays' theta_j1, theta_j4.
       for (int j = 0; j < num_relays_; ++j) {
         if (j == i) continue;
         const double dq = 2.0 * ProductExcept(i, j);
-        out->F_z.block(0, Theta(j, kModeA), nx, 1) += dq * field_;
-        out->F_z.block(0, Theta(j, kModeB), nx, 1) += dq * field_;
+        out->F_z.AddBlock(0, Theta(j, kModeA), field_, dq);
+        out->F_z.AddBlock(0, Theta(j, kModeB), field_, dq);
       }
     }
   }
@@ -300,23 +282,27 @@ class HysteresisBlock final : public RelayBlockBase {
     for (int i = 0; i < num_relays_; ++i) {
       const HysteresisRelay& relay = relays_[static_cast<std::size_t>(i)];
       const Psi& p = psi_[static_cast<std::size_t>(i)];
-      Matrix dy = Matrix::Zero(1, ny), du = Matrix::Zero(1, nu), dp = Matrix::Zero(1, np);
-      AddHessianDirection(context, relay.input, 0, y, direction, derivatives, 1.0 / p.width, &dy,
-                          &du, &dp, 0);
+      // The relay input's second derivatives along d, as dense rows (one output).
+      DerivativeMatrix dy, du, dp;
+      dy.SetZero(1, ny, false);
+      du.SetZero(1, nu, false);
+      dp.SetZero(1, np, false);
+      directions_.HessianDirections(context, relay.input, y, direction, derivatives);
+      directions_.AddRow(0, 1.0 / p.width, 0, &dy, &du, &dp);
       if (all) {
         // d(1/(U - L))/dL = 1/(U - L)^2, d/dU = -1/(U - L)^2, times grad input . d.
         const double input_rate =
             p.width * (p.d_y.head(nx).dot(direction.head(nx)) +
                        p.d_y[context.clock_index] * direction[context.clock_index]);
-        dp(0, relay.lower_threshold) += input_rate / (p.width * p.width);
-        dp(0, relay.upper_threshold) -= input_rate / (p.width * p.width);
+        dp.Add(0, relay.lower_threshold, input_rate / (p.width * p.width));
+        dp.Add(0, relay.upper_threshold, -input_rate / (p.width * p.width));
       }
       for (int k = 0; k < kRegions; ++k) {
         const double weight = -2.0 * kPointPsi[k];
-        out->equation_y.row(Row(i, k)) += weight * dy.row(0);
+        out->equation_y.AddBlock(Row(i, k), 0, dy.dense(), weight);
         if (!all) continue;
-        out->equation_u.row(Row(i, k)) += weight * du.row(0);
-        out->equation_p.row(Row(i, k)) += weight * dp.row(0);
+        out->equation_u.AddBlock(Row(i, k), 0, du.dense(), weight);
+        out->equation_p.AddBlock(Row(i, k), 0, dp.dense(), weight);
       }
     }
   }
@@ -340,17 +326,17 @@ class HysteresisBlock final : public RelayBlockBase {
         const int pair = Pair(i, k);
         if (!a_zero[static_cast<std::size_t>(pair)]) {
           out->values[pair] = v[Theta(i, k)];
-          if (derivatives != Derivatives::kNone) out->d_v(pair, Theta(i, k)) = 1.0;
+          if (derivatives != Derivatives::kNone) out->d_v.Add(pair, Theta(i, k), 1.0);
           continue;
         }
         out->values[pair] = Indicator(k, p.value, w) - Indicator(active, p.value, w);
         if (derivatives == Derivatives::kNone) continue;
         const double d_psi = -2.0 * (kPointPsi[k] - kPointPsi[active]);
-        out->d_y.row(pair) += d_psi * p.d_y;
-        out->d_y(pair, MemoryIndex(i)) += -2.0 * (kPointW[k] - kPointW[active]);
+        out->d_y.AddBlock(pair, 0, p.d_y, d_psi);
+        out->d_y.Add(pair, MemoryIndex(i), -2.0 * (kPointW[k] - kPointW[active]));
         if (all) {
-          out->d_u.row(pair) += d_psi * p.d_u;
-          out->d_p.row(pair) += d_psi * p.d_p;
+          out->d_u.AddBlock(pair, 0, p.d_u, d_psi);
+          out->d_p.AddBlock(pair, 0, p.d_p, d_psi);
         }
       }
     }
@@ -514,9 +500,9 @@ class DiscreteRelayBlock final : public RelayBlockBase {
       // x' += (1 - w) f_A + w f_B (w is 0 or 1 along solutions).
       out->F.head(nx) += (1.0 - w) * mode_a_ + w * mode_b_;
       if (derivatives == Derivatives::kNone) continue;
-      AddModeJacobian(context, mode_a_jacobian_, 1.0 - w, derivatives, out);
-      AddModeJacobian(context, mode_b_jacobian_, w, derivatives, out);
-      out->F_y.block(0, MemoryIndex(i), nx, 1) += mode_b_ - mode_a_;
+      AddModeJacobian(mode_a_jacobian_, 1.0 - w, out);
+      AddModeJacobian(mode_b_jacobian_, w, out);
+      out->F_y.AddBlock(0, MemoryIndex(i), mode_b_ - mode_a_);
     }
   }
 

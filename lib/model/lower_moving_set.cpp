@@ -20,9 +20,8 @@ class MovingSetBlock final : public LoweredBlock {
     RequireArgument(!set.constraints.has_sparse_state_jacobian(), "moving set '", set.name,
                     "': constraint functions need second derivatives; write them as generic "
                     "lambdas (MakeSmoothFunction), not with a hand-written Jacobian");
-    projection_ = set.projection_basis.size() == 0
-                      ? Matrix(Matrix::Identity(num_states_, num_states_))
-                      : Matrix(set.projection_basis * set.projection_basis.transpose());
+    has_projection_ = set.projection_basis.size() != 0;
+    if (has_projection_) projection_ = set.projection_basis * set.projection_basis.transpose();
   }
   std::unique_ptr<LoweredBlock> Clone() const override {
     return std::make_unique<MovingSetBlock>(*this);
@@ -47,44 +46,26 @@ class MovingSetBlock final : public LoweredBlock {
                 Derivatives derivatives, PointEvaluation* out) override {
     const int nx = num_states_;
     const int nc = num_constraints_;
-    const int clock = context.clock_index;
-    const int nu = static_cast<int>(context.inputs->size());
-    const int np = static_cast<int>(context.parameters->size());
     const int z0 = layout.z_offset;
     const int k0 = layout.pair_offset;
-    x_ = y.head(nx);
-    const double t = y[clock];
     const auto lambda = z.segment(z0, nc);
-    const Vector& u = *context.inputs;
-    const Vector& p = *context.parameters;
-
-    // Columns of the Jacobian/Hessian: x, [u], t, [p].
-    const bool all = derivatives == Derivatives::kAll;
-    const Wrt wrt = all ? Wrt::All() : Wrt::XT();
-    set_.constraints.Jacobian(x_, u, t, p, wrt, &c_, &jacobian_);
-    const int t_col = all ? nx + nu : nx;
-    const auto jx = jacobian_.leftCols(nx);  // nc x nx: row k is grad c_k^T
-
+    const Matrix* projection = has_projection_ ? &projection_ : nullptr;
+    // grad c is needed for the values too (x' += P grad c lambda).
+    jacobian_.Jacobian(context, set_.constraints, y,
+                       derivatives == Derivatives::kNone ? Derivatives::kStates : derivatives, &c_);
     // (gradient form) x' += P grad c lambda.
-    out->F.head(nx) += projection_ * (jx.transpose() * lambda);
+    jacobian_.AddStateGradientProduct(lambda, projection, out->F.head(nx));
     // complementarity pair k: a = c_k(x, t), b = lambda_k.
     out->A.segment(k0, nc) = c_;
     out->B.segment(k0, nc) = lambda;
     if (derivatives == Derivatives::kNone) return;
 
-    // d/dy of P grad c lambda = P sum_k lambda_k Hess c_k (x and clock columns).
-    set_.constraints.WeightedHessian(x_, u, t, p, wrt, lambda, &hessian_);
-    out->F_y.topLeftCorner(nx, nx) += projection_ * hessian_.topLeftCorner(nx, nx);
-    out->F_y.col(clock).head(nx) += projection_ * hessian_.block(0, t_col, nx, 1);
-    out->F_z.block(0, z0, nx, nc) += projection_ * jx.transpose();
-    out->A_y.block(k0, 0, nc, nx) = jx;
-    out->A_y.block(k0, clock, nc, 1) = jacobian_.col(t_col);
-    out->B_z.block(k0, z0, nc, nc).setIdentity();
-    if (!all) return;
-    out->F_u.topRows(nx) += projection_ * hessian_.block(0, nx, nx, nu);
-    out->F_p.topRows(nx) += projection_ * hessian_.block(0, t_col + 1, nx, np);
-    out->A_u.middleRows(k0, nc) = jacobian_.middleCols(nx, nu);
-    out->A_p.middleRows(k0, nc) = jacobian_.rightCols(np);
+    // d/dy of P grad c lambda = P sum_k lambda_k Hess c_k (x rows; x, clock, u, p columns).
+    hessian_.WeightedHessian(context, set_.constraints, y, lambda, derivatives);
+    hessian_.AddStateRows(projection, 1.0, &out->F_y, &out->F_u, &out->F_p);
+    jacobian_.AddStateGradients(z0, projection, 1.0, &out->F_z);
+    jacobian_.AddRows(0, nc, 1.0, k0, &out->A_y, &out->A_u, &out->A_p);
+    for (int k = 0; k < nc; ++k) out->B_z.Add(k0 + k, z0 + k, 1.0);
   }
 
   // lambda from `previous` (multipliers are not determined by the state alone), else 0.
@@ -108,40 +89,27 @@ class MovingSetBlock final : public LoweredBlock {
   void AddCurvature(const BlockContext& context, const ConstVectorRef& y,
                     const ConstVectorRef& direction, Derivatives derivatives,
                     CurvatureTerms* out) override {
-    const int k0 = layout.pair_offset;
-    for (int k = 0; k < num_constraints_; ++k) {
-      AddHessianDirection(context, set_.constraints, k, y, direction, derivatives, 1.0,
-                          &out->pair_y, &out->pair_u, &out->pair_p, k0 + k);
-    }
+    directions_.HessianDirections(context, set_.constraints, y, direction, derivatives);
+    directions_.AddRows(0, num_constraints_, 1.0, layout.pair_offset, &out->pair_y, &out->pair_u,
+                        &out->pair_p);
   }
 
   // Active constraint (c = 0 kept): its multiplier lambda (velocity level); inactive: c.
   void EventIndicators(const BlockContext& context, const ConstVectorRef& y,
                        const ConstVectorRef& v, const std::vector<bool>& a_zero,
                        Derivatives derivatives, IndicatorEvaluation* out) override {
-    const int nx = num_states_;
-    const int nu = static_cast<int>(context.inputs->size());
-    const int np = static_cast<int>(context.parameters->size());
     const int k0 = layout.pair_offset;
     const int z0 = layout.z_offset;
-    const bool all = derivatives == Derivatives::kAll;
-    x_ = y.head(nx);
-    set_.constraints.Jacobian(x_, *context.inputs, y[context.clock_index], *context.parameters,
-                              all ? Wrt::All() : Wrt::XT(), &c_, &jacobian_);
-    const int t_col = all ? nx + nu : nx;
+    jacobian_.Jacobian(context, set_.constraints, y, derivatives, &c_);
     for (int k = 0; k < num_constraints_; ++k) {
       if (a_zero[static_cast<std::size_t>(k0 + k)]) {
         out->values[k0 + k] = v[z0 + k];
-        if (derivatives != Derivatives::kNone) out->d_v(k0 + k, z0 + k) = 1.0;
+        if (derivatives != Derivatives::kNone) out->d_v.Add(k0 + k, z0 + k, 1.0);
         continue;
       }
       out->values[k0 + k] = c_[k];
-      if (derivatives == Derivatives::kNone) continue;
-      out->d_y.block(k0 + k, 0, 1, nx) = jacobian_.block(k, 0, 1, nx);
-      out->d_y(k0 + k, context.clock_index) = jacobian_(k, t_col);
-      if (all) {
-        out->d_u.row(k0 + k) = jacobian_.block(k, nx, 1, nu);
-        out->d_p.row(k0 + k) = jacobian_.block(k, t_col + 1, 1, np);
+      if (derivatives != Derivatives::kNone) {
+        jacobian_.AddRow(k, 1.0, k0 + k, &out->d_y, &out->d_u, &out->d_p);
       }
     }
   }
@@ -164,9 +132,10 @@ class MovingSetBlock final : public LoweredBlock {
   MovingSet set_;
   int num_states_;
   int num_constraints_;
-  Matrix projection_;  // P = E E^T
-  Vector x_, c_;
-  Matrix jacobian_, hessian_;
+  bool has_projection_ = false;
+  Matrix projection_;  // P = E E^T (only with a projection basis E; P = I otherwise)
+  Vector c_;
+  ArgumentMatrix jacobian_, hessian_, directions_;
 };
 
 }  // namespace

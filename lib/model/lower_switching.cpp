@@ -30,47 +30,17 @@ class SwitchingBlockBase : public LoweredBlock {
   void EvaluateSurfaces(const BlockContext& context, const ConstVectorRef& y,
                         Derivatives derivatives) {
     x_ = y.head(num_states_);
-    const double t = y[context.clock_index];
-    if (derivatives == Derivatives::kNone) {
-      effect_.surfaces.Evaluate(x_, *context.inputs, t, *context.parameters, &c_);
-    } else {
-      effect_.surfaces.Jacobian(x_, *context.inputs, t, *context.parameters,
-                                derivatives == Derivatives::kAll ? Wrt::All() : Wrt::XT(), &c_,
-                                &c_jacobian_);
-    }
+    c_jacobian_.Jacobian(context, effect_.surfaces, y, derivatives, &c_);
   }
   // Evaluates mode k's vector field into f_[k] (and its Jacobian into f_jacobian_[k]).
   void EvaluateModes(const BlockContext& context, const ConstVectorRef& y,
                      Derivatives derivatives) {
     f_.resize(static_cast<std::size_t>(num_modes_));
     f_jacobian_.resize(static_cast<std::size_t>(num_modes_));
-    const double t = y[context.clock_index];
     for (int k = 0; k < num_modes_; ++k) {
       const auto i = static_cast<std::size_t>(k);
-      if (derivatives == Derivatives::kNone) {
-        effect_.modes[i].Evaluate(x_, *context.inputs, t, *context.parameters, &f_[i]);
-      } else {
-        effect_.modes[i].Jacobian(x_, *context.inputs, t, *context.parameters,
-                                  derivatives == Derivatives::kAll ? Wrt::All() : Wrt::XT(), &f_[i],
-                                  &f_jacobian_[i]);
-      }
+      f_jacobian_[i].Jacobian(context, effect_.modes[i], y, derivatives, &f_[i]);
     }
-  }
-  // Adds weight * d(function)/d(y, u, p) from a Jacobian with columns x, [u], t, [p] into
-  // the rows of (dy, du, dp) starting at `row` (x columns and the clock column of dy).
-  void AddJacobian(const BlockContext& context, const Matrix& jacobian, double weight, int row,
-                   Derivatives derivatives, Matrix* dy, Matrix* du, Matrix* dp) const {
-    const int nx = num_states_;
-    const int nu = static_cast<int>(context.inputs->size());
-    const int np = static_cast<int>(context.parameters->size());
-    const int rows = static_cast<int>(jacobian.rows());
-    const bool all = derivatives == Derivatives::kAll;
-    const int t_col = all ? nx + nu : nx;
-    dy->block(row, 0, rows, nx) += weight * jacobian.leftCols(nx);
-    dy->block(row, context.clock_index, rows, 1) += weight * jacobian.col(t_col);
-    if (!all) return;
-    du->middleRows(row, rows) += weight * jacobian.middleCols(nx, nu);
-    dp->middleRows(row, rows) += weight * jacobian.rightCols(np);
   }
   // True if some switching function vanishes to round-off at the last evaluated point.
   bool OnSurface() const {
@@ -92,9 +62,9 @@ class SwitchingBlockBase : public LoweredBlock {
   int num_surfaces_;
   int num_modes_;
   Vector x_, c_;
-  Matrix c_jacobian_;
+  ArgumentMatrix c_jacobian_, directions_;
   std::vector<Vector> f_;
-  std::vector<Matrix> f_jacobian_;
+  std::vector<ArgumentMatrix> f_jacobian_;
 };
 
 // Stewart: regions R_k = {g_k(x) = min_i g_i(x)} with g = -S c (S_kj = sign of surface j in
@@ -155,18 +125,16 @@ class StewartBlock final : public SwitchingBlockBase {
 
     for (int k = 0; k < m; ++k) {
       const auto i = static_cast<std::size_t>(k);
-      AddJacobian(context, f_jacobian_[i], theta[k], 0, derivatives, &out->F_y, &out->F_u,
-                  &out->F_p);
-      out->F_z.block(0, z0 + k, nx, 1) += f_[i];
+      f_jacobian_[i].AddRows(0, nx, theta[k], 0, &out->F_y, &out->F_u, &out->F_p);
+      out->F_z.AddBlock(0, z0 + k, f_[i]);
       for (int j = 0; j < num_surfaces_; ++j) {
-        AddJacobian(context, c_jacobian_.middleRows(j, 1), -Sign(k, j), g0 + k, derivatives,
-                    &out->G_y, &out->G_u, &out->G_p);
+        c_jacobian_.AddRow(j, -Sign(k, j), g0 + k, &out->G_y, &out->G_u, &out->G_p);
       }
-      out->G_z(g0 + k, z0 + m + k) = -1.0;
-      out->G_z(g0 + k, z0 + 2 * m) = -1.0;
-      out->G_z(g0 + m, z0 + k) = 1.0;
-      out->A_z(k0 + k, z0 + k) = 1.0;
-      out->B_z(k0 + k, z0 + m + k) = 1.0;
+      out->G_z.Add(g0 + k, z0 + m + k, -1.0);
+      out->G_z.Add(g0 + k, z0 + 2 * m, -1.0);
+      out->G_z.Add(g0 + m, z0 + k, 1.0);
+      out->A_z.Add(k0 + k, z0 + k, 1.0);
+      out->B_z.Add(k0 + k, z0 + m + k, 1.0);
     }
   }
 
@@ -187,11 +155,11 @@ class StewartBlock final : public SwitchingBlockBase {
   void AddCurvature(const BlockContext& context, const ConstVectorRef& y,
                     const ConstVectorRef& direction, Derivatives derivatives,
                     CurvatureTerms* out) override {
+    directions_.HessianDirections(context, effect_.surfaces, y, direction, derivatives);
     for (int j = 0; j < num_surfaces_; ++j) {
       for (int k = 0; k < num_modes_; ++k) {
-        AddHessianDirection(context, effect_.surfaces, j, y, direction, derivatives, -Sign(k, j),
-                            &out->equation_y, &out->equation_u, &out->equation_p,
-                            layout.g_offset + k);
+        directions_.AddRow(j, -Sign(k, j), layout.g_offset + k, &out->equation_y,
+                           &out->equation_u, &out->equation_p);
       }
     }
   }
@@ -212,7 +180,7 @@ class StewartBlock final : public SwitchingBlockBase {
     for (int k = 0; k < num_modes_; ++k) {
       if (!a_zero[static_cast<std::size_t>(k0 + k)]) {
         out->values[k0 + k] = v[z0 + k];
-        if (derivatives != Derivatives::kNone) out->d_v(k0 + k, z0 + k) = 1.0;
+        if (derivatives != Derivatives::kNone) out->d_v.Add(k0 + k, z0 + k, 1.0);
         continue;
       }
       double value = 0.0;
@@ -220,8 +188,8 @@ class StewartBlock final : public SwitchingBlockBase {
       out->values[k0 + k] = value;
       if (derivatives == Derivatives::kNone) continue;
       for (int j = 0; j < num_surfaces_; ++j) {
-        AddJacobian(context, c_jacobian_.middleRows(j, 1), -(Sign(k, j) - Sign(active, j)), k0 + k,
-                    derivatives, &out->d_y, &out->d_u, &out->d_p);
+        const double weight = -(Sign(k, j) - Sign(active, j));
+        if (weight != 0.0) c_jacobian_.AddRow(j, weight, k0 + k, &out->d_y, &out->d_u, &out->d_p);
       }
     }
   }
@@ -337,22 +305,20 @@ class HeavisideBlock final : public SwitchingBlockBase {
 
     for (int k = 0; k < num_modes_; ++k) {
       const auto i = static_cast<std::size_t>(k);
-      AddJacobian(context, f_jacobian_[i], Weight(k, alpha, -1), 0, derivatives, &out->F_y,
-                  &out->F_u, &out->F_p);
+      f_jacobian_[i].AddRows(0, nx, Weight(k, alpha, -1), 0, &out->F_y, &out->F_u, &out->F_p);
       for (int j = 0; j < nc; ++j) {
         // d w_k / d alpha_j = sign * prod_{l != j} (...)
-        out->F_z.block(0, z0 + j, nx, 1) += Sign(k, j) * Weight(k, alpha, j) * f_[i];
+        out->F_z.AddBlock(0, z0 + j, f_[i], Sign(k, j) * Weight(k, alpha, j));
       }
     }
     for (int j = 0; j < nc; ++j) {
-      AddJacobian(context, c_jacobian_.middleRows(j, 1), 1.0, g0 + j, derivatives, &out->G_y,
-                  &out->G_u, &out->G_p);
-      out->G_z(g0 + j, z0 + 2 * nc + j) = -1.0;
-      out->G_z(g0 + j, z0 + nc + j) = 1.0;
-      out->A_z(k0 + 2 * j, z0 + j) = 1.0;
-      out->B_z(k0 + 2 * j, z0 + nc + j) = 1.0;
-      out->A_z(k0 + 2 * j + 1, z0 + j) = -1.0;
-      out->B_z(k0 + 2 * j + 1, z0 + 2 * nc + j) = 1.0;
+      c_jacobian_.AddRow(j, 1.0, g0 + j, &out->G_y, &out->G_u, &out->G_p);
+      out->G_z.Add(g0 + j, z0 + 2 * nc + j, -1.0);
+      out->G_z.Add(g0 + j, z0 + nc + j, 1.0);
+      out->A_z.Add(k0 + 2 * j, z0 + j, 1.0);
+      out->B_z.Add(k0 + 2 * j, z0 + nc + j, 1.0);
+      out->A_z.Add(k0 + 2 * j + 1, z0 + j, -1.0);
+      out->B_z.Add(k0 + 2 * j + 1, z0 + 2 * nc + j, 1.0);
     }
   }
 
@@ -370,11 +336,9 @@ class HeavisideBlock final : public SwitchingBlockBase {
   void AddCurvature(const BlockContext& context, const ConstVectorRef& y,
                     const ConstVectorRef& direction, Derivatives derivatives,
                     CurvatureTerms* out) override {
-    for (int j = 0; j < num_surfaces_; ++j) {
-      AddHessianDirection(context, effect_.surfaces, j, y, direction, derivatives, 1.0,
-                          &out->equation_y, &out->equation_u, &out->equation_p,
-                          layout.g_offset + j);
-    }
+    directions_.HessianDirections(context, effect_.surfaces, y, direction, derivatives);
+    directions_.AddRows(0, num_surfaces_, 1.0, layout.g_offset, &out->equation_y,
+                        &out->equation_u, &out->equation_p);
   }
 
   // Pair 2j (alpha ⟂ lambda_n): alpha = 0 kept -> lambda_n = -c_j; else alpha. Pair 2j+1
@@ -392,12 +356,11 @@ class HeavisideBlock final : public SwitchingBlockBase {
         if (a_zero[static_cast<std::size_t>(pair)]) {
           out->values[pair] = sign * c_[j];
           if (derivatives != Derivatives::kNone) {
-            AddJacobian(context, c_jacobian_.middleRows(j, 1), sign, pair, derivatives, &out->d_y,
-                        &out->d_u, &out->d_p);
+            c_jacobian_.AddRow(j, sign, pair, &out->d_y, &out->d_u, &out->d_p);
           }
         } else {
           out->values[pair] = side == 0 ? v[z0 + j] : 1.0 - v[z0 + j];
-          if (derivatives != Derivatives::kNone) out->d_v(pair, z0 + j) = side == 0 ? 1.0 : -1.0;
+          if (derivatives != Derivatives::kNone) out->d_v.Add(pair, z0 + j, side == 0 ? 1.0 : -1.0);
         }
       }
     }

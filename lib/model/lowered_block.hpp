@@ -31,6 +31,60 @@ struct BlockContext {
   // consistent values for these roles, because v holds the rates of such unknowns.
   const std::vector<PairRole>* velocity_roles = nullptr;
   const ConstVectorRef* velocity = nullptr;
+  // Derivative storage of the system (LoweredSystem::sparse()): blocks differentiate their
+  // model functions with sparse AD and add sparse blocks when set.
+  bool sparse = false;
+};
+
+// A matrix whose columns follow a smooth model function's argument layout x, [u], t, [p]
+// (Wrt::XT, or Wrt::All with Derivatives::kAll), dense or sparse, and whose rows the blocks
+// scatter into the y (x columns and the clock column), u and p derivative blocks of the
+// lowered system: a model function's Jacobian, or its second derivatives along a direction.
+class ArgumentMatrix {
+ public:
+  // Jacobian of `function` at the block's point x = y[0..n_x), t = y[clock] (values into
+  // *values); with Derivatives::kNone only the values. Dense AD or sparse AD per context.
+  void Jacobian(const BlockContext& context, const SmoothFunction& function,
+                const ConstVectorRef& y, Derivatives derivatives, Vector* values);
+  // Row k = (d^2 g_k / d(args)^2 . d)^T, d the direction in y-space (x and clock components
+  // taken), for the outputs in `outputs` (nullptr: all; dense storage computes them all).
+  void HessianDirections(const BlockContext& context, const SmoothFunction& function,
+                         const ConstVectorRef& y, const ConstVectorRef& direction,
+                         Derivatives derivatives, const std::vector<int>* outputs = nullptr);
+  int rows() const { return rows_; }
+  // Adds weight * row k into row `row` of dy (x and clock columns) and, with kAll, of du, dp.
+  void AddRow(int k, double weight, int row, DerivativeMatrix* dy, DerivativeMatrix* du,
+              DerivativeMatrix* dp) const;
+  // Rows [first, first + count) into rows [row0, row0 + count).
+  void AddRows(int first, int count, double weight, int row0, DerivativeMatrix* dy,
+               DerivativeMatrix* du, DerivativeMatrix* dp) const;
+  // target += P (dg/dx)^T weights (moving sets: x' += P grad c lambda); P null: identity.
+  void AddStateGradientProduct(const ConstVectorRef& weights, const Matrix* projection,
+                               VectorRef target) const;
+  // The x columns transposed, premultiplied by P (null: identity) and weighted:
+  // target(0..n_x, col0 + k) += weight * P (dg_k/dx)^T (moving sets: F_z = P grad c).
+  void AddStateGradients(int col0, const Matrix* projection, double weight,
+                         DerivativeMatrix* target) const;
+  // x rows of a weighted Hessian (the matrix is then square over the arguments): F_y, F_u and
+  // F_p of x' += P grad g w get P sum_k w_k Hess g_k (x rows; x, clock, u and p columns).
+  void WeightedHessian(const BlockContext& context, const SmoothFunction& function,
+                       const ConstVectorRef& y, const ConstVectorRef& weights,
+                       Derivatives derivatives);
+  void AddStateRows(const Matrix* projection, double weight, DerivativeMatrix* dy,
+                    DerivativeMatrix* du, DerivativeMatrix* dp) const;
+
+ private:
+  void Layout(const BlockContext& context, Derivatives derivatives);
+  // Target of argument column j: 0 = y, 1 = u, 2 = p; *index its column there.
+  int Target(int j, int* index) const;
+
+  bool is_sparse_ = false, all_ = false;
+  int rows_ = 0, nx_ = 0, nu_ = 0, np_ = 0, clock_ = 0;
+  Matrix dense_;
+  SparseMatrix columns_;                                    // sparse AD result
+  Eigen::SparseMatrix<double, Eigen::RowMajor, int> rows_sparse_;  // the same, by rows
+  Vector x_, direction_, weights_;
+  mutable Vector gradient_;
 };
 
 class LoweredBlock {
@@ -128,13 +182,6 @@ class LoweredBlock {
   BlockLayout layout;
 };
 
-// Adds weight * d/d(y, u, p) [grad_y g_k(y) . direction] for output k of `function`
-// (evaluated at x = y[0..n_x), t = y[clock]) into row `row` of dy (and du, dp with kAll):
-// the second derivative of g_k contracted with the direction (x and clock components).
-void AddHessianDirection(const BlockContext& context, const SmoothFunction& function, int k,
-                         const ConstVectorRef& y, const ConstVectorRef& direction,
-                         Derivatives derivatives, double weight, Matrix* dy, Matrix* du, Matrix* dp,
-                         int row);
 
 // Factories, one per lowering (lower_*.cpp).
 std::unique_ptr<LoweredBlock> LowerMovingSet(const Scene& scene, const MovingSet& set);

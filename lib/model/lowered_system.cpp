@@ -15,6 +15,18 @@ SwitchingForm ParseSwitchingForm(const std::string& name) {
   ThrowInvalidArgument("unknown switching form '", name, "'; expected stewart or heaviside");
 }
 
+std::string ToString(DerivativeStorage storage) {
+  switch (storage) {
+    case DerivativeStorage::kAutomatic:
+      return "auto";
+    case DerivativeStorage::kDense:
+      return "dense";
+    case DerivativeStorage::kSparse:
+      return "sparse";
+  }
+  return "?";
+}
+
 namespace internal {
 // Defined next to each lowering (lib/model/lower_*.cpp); returns nullptr for effects that
 // are not lowered to complementarity form (path constraints are handled by the DAI stepper).
@@ -49,6 +61,7 @@ LoweredSystem& LoweredSystem::operator=(const LoweredSystem& other) {
 }
 
 void LoweredSystem::Build() {
+  dynamics_jacobian_holder_ = std::make_unique<internal::ArgumentMatrix>();
   blocks_.clear();
   clock_rate_block_ = -1;
   num_algebraic_ = num_equations_ = num_pairs_ = 0;
@@ -100,16 +113,34 @@ void LoweredSystem::Build() {
   inputs_ = scene_.InputValues(scene_.initial_time);
   parameters_ = scene_.ParameterValues();
   sparse_dynamics_ = scene_.dynamics.has_sparse_state_jacobian();
-  const double n = num_states_;
-  nonzeros_fy_ = n * n;
   if (sparse_dynamics_) {
     RequireArgument(blocks_.empty(), scene_.name,
                     ": dynamics with a hand-written sparse Jacobian cannot be combined with "
                     "effects (their lowering needs automatic differentiation)");
-    Vector f;
-    scene_.dynamics.SparseStateJacobian(scene_.initial_state, inputs_, scene_.initial_time,
-                                        parameters_, &f, &sparse_scratch_);
-    nonzeros_fy_ = static_cast<double>(sparse_scratch_.nonZeros());
+    RequireArgument(options_.storage != DerivativeStorage::kDense, scene_.name,
+                    ": dynamics with a hand-written sparse Jacobian need sparse derivative storage");
+  }
+  switch (options_.storage) {
+    case DerivativeStorage::kAutomatic:
+      sparse_ = sparse_dynamics_ || num_states_ + num_algebraic_ > kSparseStorageThreshold;
+      break;
+    case DerivativeStorage::kDense:
+      sparse_ = false;
+      break;
+    case DerivativeStorage::kSparse:
+      sparse_ = true;
+      break;
+  }
+  // Structural nonzeros from one evaluation at the initial point (sparse storage; the
+  // pattern does not depend on the point), every entry with dense storage.
+  const double ny = num_states_, nz = num_algebraic_, ng = num_equations_, np = num_pairs_;
+  nonzeros_ = {ny * ny, ny * nz, ng * ny, ng * nz, np * ny, np * nz, np * ny, np * nz};
+  if (sparse_) {
+    PointEvaluation e;
+    EvaluatePoint(InitialState(), InitialAlgebraicGuess(InitialState()), Derivatives::kStates,
+                  nullptr, &e);
+    nonzeros_ = {e.F_y.NonZeros(), e.F_z.NonZeros(), e.G_y.NonZeros(), e.G_z.NonZeros(),
+                 e.A_y.NonZeros(), e.A_z.NonZeros(), e.B_y.NonZeros(), e.B_z.NonZeros()};
   }
 }
 
@@ -143,6 +174,7 @@ Vector LoweredSystem::MemorySwitchingFunctions(const Vector& y) const {
   auto& block = *blocks_[static_cast<std::size_t>(memory_block_)];
   Vector out(block.num_memory_switches());
   internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
+  context.sparse = sparse_;
   block.MemorySwitchingFunctions(context, y, out);
   return out;
 }
@@ -178,6 +210,7 @@ Vector LoweredSystem::InitialAlgebraicGuess(const Vector& y, const Vector* previ
                 "InitialAlgebraicGuess: previous has the wrong size");
   Vector z = Vector::Zero(num_algebraic_);
   internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
+  context.sparse = sparse_;
   for (const auto& block : blocks_) block->InitialGuess(context, y, previous, z);
   return z;
 }
@@ -216,8 +249,6 @@ void LoweredSystem::UpdateValues(const Scene& scene) {
   parameters_ = scene_.ParameterValues();
 }
 
-double LoweredSystem::EstimatedNonzerosFy() const { return nonzeros_fy_; }
-
 std::vector<Event> LoweredSystem::StatusEvents(double t, const std::vector<bool>& before,
                                                const std::vector<bool>& after) const {
   MOREAU_ASSERT(before.size() == pairs_.size() && after.size() == pairs_.size(),
@@ -244,72 +275,45 @@ void LoweredSystem::EvaluatePoint(const ConstVectorRef& y, const ConstVectorRef&
   const int nu = scene_.num_inputs();
   const int np = scene_.num_parameters();
   const int clock = clock_index();
-  const double t = y[clock];
 
   out->F.setZero(ny);
   out->G.setZero(num_equations_);
   out->A.setZero(num_pairs_);
   out->B.setZero(num_pairs_);
-  out->has_sparse_F_y = false;
   const bool with_states = derivatives != Derivatives::kNone;
   const bool with_all = derivatives == Derivatives::kAll;
   if (with_states) {
-    // Sparse dynamics fill F_y_sparse instead (no dense n_y x n_y allocation).
-    if (sparse_dynamics_) {
-      out->F_y.resize(0, 0);
-    } else {
-      out->F_y.setZero(ny, ny);
-    }
-    out->F_z.setZero(ny, nz);
-    out->G_y.setZero(num_equations_, ny);
-    out->G_z.setZero(num_equations_, nz);
-    out->A_y.setZero(num_pairs_, ny);
-    out->A_z.setZero(num_pairs_, nz);
-    out->B_y.setZero(num_pairs_, ny);
-    out->B_z.setZero(num_pairs_, nz);
+    out->F_y.SetZero(ny, ny, sparse_);
+    out->F_z.SetZero(ny, nz, sparse_);
+    out->G_y.SetZero(num_equations_, ny, sparse_);
+    out->G_z.SetZero(num_equations_, nz, sparse_);
+    out->A_y.SetZero(num_pairs_, ny, sparse_);
+    out->A_z.SetZero(num_pairs_, nz, sparse_);
+    out->B_y.SetZero(num_pairs_, ny, sparse_);
+    out->B_z.SetZero(num_pairs_, nz, sparse_);
   }
   if (with_all) {
-    out->F_u.setZero(ny, nu);
-    out->G_u.setZero(num_equations_, nu);
-    out->A_u.setZero(num_pairs_, nu);
-    out->B_u.setZero(num_pairs_, nu);
-    out->F_p.setZero(ny, np);
-    out->G_p.setZero(num_equations_, np);
-    out->A_p.setZero(num_pairs_, np);
-    out->B_p.setZero(num_pairs_, np);
-  }
-
-  // Smooth dynamics: x' = f(x, u, clock, p); clock' = 1.
-  out->F[clock] = 1.0;
-  if (!scene_.dynamics.empty()) {
-    x_scratch_ = y.head(nx);
-    if (sparse_dynamics_ && with_states) {
-      scene_.dynamics.SparseStateJacobian(x_scratch_, inputs_, t, parameters_, &f_scratch_,
-                                          &out->F_y_sparse);
-      out->F.head(nx) = f_scratch_;
-      out->F_y_sparse.conservativeResize(ny, ny);
-      out->has_sparse_F_y = true;
-    } else if (!with_states) {
-      scene_.dynamics.Evaluate(x_scratch_, inputs_, t, parameters_, &f_scratch_);
-      out->F.head(nx) = f_scratch_;
-    } else {
-      const Wrt wrt = with_all ? Wrt::All() : Wrt::XT();
-      scene_.dynamics.Jacobian(x_scratch_, inputs_, t, parameters_, wrt, &f_scratch_,
-                               &jac_scratch_);
-      out->F.head(nx) = f_scratch_;
-      // Columns of jac_scratch_: x, [u], t, [p].
-      out->F_y.topLeftCorner(nx, nx) = jac_scratch_.leftCols(nx);
-      if (with_all) {
-        out->F_u.topRows(nx) = jac_scratch_.middleCols(nx, nu);
-        out->F_y.col(clock).head(nx) = jac_scratch_.col(nx + nu);
-        out->F_p.topRows(nx) = jac_scratch_.rightCols(np);
-      } else {
-        out->F_y.col(clock).head(nx) = jac_scratch_.col(nx);
-      }
-    }
+    out->F_u.SetZero(ny, nu, sparse_);
+    out->G_u.SetZero(num_equations_, nu, sparse_);
+    out->A_u.SetZero(num_pairs_, nu, sparse_);
+    out->B_u.SetZero(num_pairs_, nu, sparse_);
+    out->F_p.SetZero(ny, np, sparse_);
+    out->G_p.SetZero(num_equations_, np, sparse_);
+    out->A_p.SetZero(num_pairs_, np, sparse_);
+    out->B_p.SetZero(num_pairs_, np, sparse_);
   }
 
   internal::BlockContext context{nx, clock, &inputs_, &parameters_};
+  context.sparse = sparse_;
+  // Smooth dynamics: x' = f(x, u, clock, p); clock' = 1.
+  out->F[clock] = 1.0;
+  if (!scene_.dynamics.empty()) {
+    internal::ArgumentMatrix& jacobian = *dynamics_jacobian_holder_;
+    jacobian.Jacobian(context, scene_.dynamics, y, derivatives, &f_scratch_);
+    out->F.head(nx) = f_scratch_;
+    if (with_states) jacobian.AddRows(0, nx, 1.0, 0, &out->F_y, &out->F_u, &out->F_p);
+  }
+
   if (velocity_roles != nullptr) {
     context.velocity_roles = velocity_roles;
     context.velocity = &z;
@@ -317,6 +321,7 @@ void LoweredSystem::EvaluatePoint(const ConstVectorRef& y, const ConstVectorRef&
   const int speed = scene_.time_scale_input;
   if (clock_rate_block_ < 0 && speed < 0) {
     for (const auto& block : blocks_) block->Evaluate(context, y, z, derivatives, out);
+    FinalizeEvaluation(derivatives, out);
     return;
   }
   // Physical-time dynamics: f, the clock and the switching modes (and discrete relay fields).
@@ -329,13 +334,13 @@ void LoweredSystem::EvaluatePoint(const ConstVectorRef& y, const ConstVectorRef&
     const auto& relays = *blocks_[static_cast<std::size_t>(clock_rate_block_)];
     const double rate = relays.ClockRate(z, with_states ? &rate_gradient_ : nullptr);
     if (with_states) {
-      out->F_z *= rate;
-      out->F_z.noalias() += out->F * rate_gradient_;
-      out->F_y *= rate;
+      out->F_z.Scale(rate);
+      out->F_z.AddOuter(0, 0, out->F, rate_gradient_.transpose());
+      out->F_y.Scale(rate);
     }
     if (with_all) {
-      out->F_u *= rate;
-      out->F_p *= rate;
+      out->F_u.Scale(rate);
+      out->F_p.Scale(rate);
     }
     out->F *= rate;
     blocks_[static_cast<std::size_t>(clock_rate_block_)]->Evaluate(context, y, z, derivatives, out);
@@ -345,17 +350,13 @@ void LoweredSystem::EvaluatePoint(const ConstVectorRef& y, const ConstVectorRef&
     // time it is multiplied by s (dF/ds = F before the scaling).
     const double s = inputs_[speed];
     if (with_states) {
-      out->F_z *= s;
-      if (out->has_sparse_F_y) {
-        out->F_y_sparse *= s;
-      } else {
-        out->F_y *= s;
-      }
+      out->F_z.Scale(s);
+      out->F_y.Scale(s);
     }
     if (with_all) {
-      out->F_u *= s;
-      out->F_u.col(speed) += out->F;
-      out->F_p *= s;
+      out->F_u.Scale(s);
+      out->F_u.AddBlock(0, speed, out->F);
+      out->F_p.Scale(s);
     }
     out->F *= s;
   }
@@ -364,6 +365,20 @@ void LoweredSystem::EvaluatePoint(const ConstVectorRef& y, const ConstVectorRef&
     if (!block->ScaledByClockRate() && !block->HasClockRate()) {
       block->Evaluate(context, y, z, derivatives, out);
     }
+  }
+  FinalizeEvaluation(derivatives, out);
+}
+
+void LoweredSystem::FinalizeEvaluation(Derivatives derivatives, PointEvaluation* out) const {
+  if (!sparse_ || derivatives == Derivatives::kNone) return;
+  for (DerivativeMatrix* m : {&out->F_y, &out->F_z, &out->G_y, &out->G_z, &out->A_y, &out->A_z,
+                              &out->B_y, &out->B_z}) {
+    m->Finalize();
+  }
+  if (derivatives != Derivatives::kAll) return;
+  for (DerivativeMatrix* m : {&out->F_u, &out->G_u, &out->A_u, &out->B_u, &out->F_p, &out->G_p,
+                              &out->A_p, &out->B_p}) {
+    m->Finalize();
   }
 }
 

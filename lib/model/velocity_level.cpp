@@ -13,37 +13,6 @@
 
 namespace moreau {
 
-namespace internal {
-
-void AddHessianDirection(const BlockContext& context, const SmoothFunction& function, int k,
-                         const ConstVectorRef& y, const ConstVectorRef& direction,
-                         Derivatives derivatives, double weight, Matrix* dy, Matrix* du, Matrix* dp,
-                         int row) {
-  const int nx = context.num_scene_states;
-  const int nu = static_cast<int>(context.inputs->size());
-  const int np = static_cast<int>(context.parameters->size());
-  const int clock = context.clock_index;
-  const bool all = derivatives == Derivatives::kAll;
-  const Wrt wrt = all ? Wrt::All() : Wrt::XT();
-  Vector weights = Vector::Zero(function.num_outputs());
-  weights[k] = 1.0;
-  Matrix hessian;
-  function.WeightedHessian(y.head(nx), *context.inputs, y[clock], *context.parameters, wrt, weights,
-                           &hessian);
-  // Direction in the Hessian's columns (x, [u], t, [p]): x and clock components only.
-  const int t_col = all ? nx + nu : nx;
-  Vector d = Vector::Zero(hessian.cols());
-  d.head(nx) = direction.head(nx);
-  d[t_col] = direction[clock];
-  const Vector hd = hessian * d;
-  dy->block(row, 0, 1, nx) += weight * hd.head(nx).transpose();
-  (*dy)(row, clock) += weight * hd[t_col];
-  if (!all) return;
-  du->row(row) += weight * hd.segment(nx, nu).transpose();
-  dp->row(row) += weight * hd.segment(t_col + 1, np).transpose();
-}
-
-}  // namespace internal
 
 std::vector<PairRole> LoweredSystem::RolesFor(const std::vector<bool>& a_zero) {
   std::vector<PairRole> roles;
@@ -52,17 +21,210 @@ std::vector<PairRole> LoweredSystem::RolesFor(const std::vector<bool>& a_zero) {
   return roles;
 }
 
+namespace {
+
+// The storage type of a finished DerivativeMatrix (Matrix or SparseMatrix).
+template <class M>
+const M& Get(const DerivativeMatrix& d) {
+  if constexpr (std::is_same_v<M, SparseMatrix>) {
+    return d.sparse();
+  } else {
+    return d.dense();
+  }
+}
+
+// Selects rows of candidate sources into an output: out row i = row source_row[i] of source
+// source_id[i]. Built once per evaluation as sparse selection matrices (one per source), so
+// that dense and sparse sources go through the same products.
+class RowSelection {
+ public:
+  RowSelection(int num_sources, const std::vector<int>& source_rows_count)
+      : entries_(static_cast<std::size_t>(num_sources)), source_rows_(source_rows_count) {}
+  void Take(int source, int row) {
+    entries_[static_cast<std::size_t>(source)].emplace_back(rows_++, row, 1.0);
+  }
+  int rows() const { return rows_; }
+  // Selection matrix of one source (rows() x rows of the source).
+  SparseMatrix Selector(int source) const {
+    SparseMatrix s(rows_, source_rows_[static_cast<std::size_t>(source)]);
+    const auto& e = entries_[static_cast<std::size_t>(source)];
+    s.setFromTriplets(e.begin(), e.end());
+    return s;
+  }
+
+ private:
+  std::vector<std::vector<Eigen::Triplet<double, int>>> entries_;
+  std::vector<int> source_rows_;
+  int rows_ = 0;
+};
+
+// Candidate rows of the velocity-level problem (docs/fesd-formulation.md), for all rows of a
+// kind at once: a value with its derivatives with respect to v, y, u and p.
+template <class M>
+struct Rows {
+  Vector value;
+  M d_v, d_y, d_u, d_p;
+};
+
+}  // namespace
+
+template <class M>
+static void AssembleVelocityLevel(const LoweredSystem& system, const PointEvaluation& e,
+                                  const CurvatureTerms& curvature, const Vector& mask,
+                                  const Vector& rates, const std::vector<PairRole>& roles,
+                                  Derivatives derivatives, VelocityLevelEvaluation* out) {
+  const bool with_y = derivatives != Derivatives::kNone;
+  const bool all = derivatives == Derivatives::kAll;
+  const int ng = system.num_equations(), np = system.num_pairs();
+  const auto& pairs = system.pairs();
+  const auto& differentiated = system.differentiated_equations();
+  // Per pair: continuous side a (kA, kBoth) or b (kB); the other side is the jump side.
+  Vector cont_a(np), cont_b(np);
+  bool any_both = false;
+  for (int k = 0; k < np; ++k) {
+    const ContinuousSide side = pairs[static_cast<std::size_t>(k)].continuous;
+    cont_a[k] = side != ContinuousSide::kB ? 1.0 : 0.0;
+    cont_b[k] = 1.0 - cont_a[k];
+    any_both |= side == ContinuousSide::kBoth;
+  }
+  const auto Da = cont_a.asDiagonal();
+  const auto Db = cont_b.asDiagonal();
+  const auto mask_diag = mask.asDiagonal();
+  const M& F_z = Get<M>(e.F_z);
+  // Rate of quantities X with derivatives x_y, x_z: X_y F + X_z v_c (curvature: the terms of
+  // d/d(y, u, p) [X_y . F] with F held, given by the blocks).
+  auto rate = [&](const M& x_y, const M& x_z, const DerivativeMatrix* c_y,
+                  const DerivativeMatrix* c_u, const DerivativeMatrix* c_p) {
+    Rows<M> r;
+    r.value = x_y * e.F + x_z * rates;
+    r.d_v = M(x_y * F_z) + M(x_z * mask_diag);
+    if (with_y) {
+      r.d_y = M(x_y * Get<M>(e.F_y));
+      if (c_y != nullptr) r.d_y += Get<M>(*c_y);
+    }
+    if (all) {
+      r.d_u = M(x_y * Get<M>(e.F_u));
+      r.d_p = M(x_y * Get<M>(e.F_p));
+      if (c_u != nullptr) r.d_u += Get<M>(*c_u);
+      if (c_p != nullptr) r.d_p += Get<M>(*c_p);
+    }
+    return r;
+  };
+  auto value = [&](const Vector& x, const M& x_z, const M* x_y, const M* x_u, const M* x_p) {
+    Rows<M> r;
+    r.value = x;
+    r.d_v = x_z;
+    if (with_y) r.d_y = *x_y;
+    if (all) {
+      r.d_u = *x_u;
+      r.d_p = *x_p;
+    }
+    return r;
+  };
+  // Sources: 0 G values, 1 G rates, 2 continuous-side rates, 3 jump-side values, 4 rates of b
+  // (kBoth pairs: both sides continuous, the "jump" row is b's rate).
+  std::vector<Rows<M>> sources(5);
+  const M empty_y, empty_u, empty_p;
+  if (ng > 0) {
+    sources[0] = value(e.G, Get<M>(e.G_z), with_y ? &Get<M>(e.G_y) : &empty_y,
+                       all ? &Get<M>(e.G_u) : &empty_u, all ? &Get<M>(e.G_p) : &empty_p);
+    sources[1] = rate(Get<M>(e.G_y), Get<M>(e.G_z), with_y ? &curvature.equation_y : nullptr,
+                      all ? &curvature.equation_u : nullptr, all ? &curvature.equation_p : nullptr);
+  }
+  if (np > 0) {
+    const M x_y = M(Da * Get<M>(e.A_y)) + M(Db * Get<M>(e.B_y));
+    const M x_z = M(Da * Get<M>(e.A_z)) + M(Db * Get<M>(e.B_z));
+    sources[2] = rate(x_y, x_z, with_y ? &curvature.pair_y : nullptr,
+                      all ? &curvature.pair_u : nullptr, all ? &curvature.pair_p : nullptr);
+    const Vector j_value = Db * e.A + Da * e.B;
+    const M j_z = M(Db * Get<M>(e.A_z)) + M(Da * Get<M>(e.B_z));
+    M j_y, j_u, j_p;
+    if (with_y) j_y = M(Db * Get<M>(e.A_y)) + M(Da * Get<M>(e.B_y));
+    if (all) {
+      j_u = M(Db * Get<M>(e.A_u)) + M(Da * Get<M>(e.B_u));
+      j_p = M(Db * Get<M>(e.A_p)) + M(Da * Get<M>(e.B_p));
+    }
+    sources[3] = value(j_value, j_z, &j_y, &j_u, &j_p);
+    if (any_both) sources[4] = rate(Get<M>(e.B_y), Get<M>(e.B_z), nullptr, nullptr, nullptr);
+  }
+  const std::vector<int> source_rows = {ng, ng, np, np, any_both ? np : 0};
+  RowSelection equations(5, source_rows), a_rows(5, source_rows), b_rows(5, source_rows);
+  for (int r = 0; r < ng; ++r) equations.Take(differentiated[static_cast<std::size_t>(r)] ? 1 : 0, r);
+  for (int k = 0; k < np; ++k) {
+    const ContinuousSide side = pairs[static_cast<std::size_t>(k)].continuous;
+    const bool continuous_a = side != ContinuousSide::kB;
+    const int jump_source = side == ContinuousSide::kBoth ? 4 : 3;
+    const PairRole role = roles[static_cast<std::size_t>(k)];
+    if (role == PairRole::kComplementary) {
+      a_rows.Take(jump_source, k);
+      b_rows.Take(2, k);
+      continue;
+    }
+    // The kept side: its rate if continuous, its value if a jump variable.
+    const bool keeps_a = role == PairRole::kAZero;
+    equations.Take(keeps_a == continuous_a ? 2 : jump_source, k);
+  }
+  auto select = [&](const RowSelection& selection, Vector* values, DerivativeMatrix* dv,
+                    DerivativeMatrix* dy, DerivativeMatrix* du, DerivativeMatrix* dp) {
+    values->setZero(selection.rows());
+    M v_sum, y_sum, u_sum, p_sum;
+    bool first = true;
+    for (int source = 0; source < 5; ++source) {
+      if (source_rows[static_cast<std::size_t>(source)] == 0) continue;
+      const Rows<M>& r = sources[static_cast<std::size_t>(source)];
+      const SparseMatrix s = selection.Selector(source);
+      if (s.nonZeros() == 0) continue;
+      *values += s * r.value;
+      if (first) {
+        v_sum = M(s * r.d_v);
+        if (with_y) y_sum = M(s * r.d_y);
+        if (all) {
+          u_sum = M(s * r.d_u);
+          p_sum = M(s * r.d_p);
+        }
+        first = false;
+      } else {
+        v_sum += M(s * r.d_v);
+        if (with_y) y_sum += M(s * r.d_y);
+        if (all) {
+          u_sum += M(s * r.d_u);
+          p_sum += M(s * r.d_p);
+        }
+      }
+    }
+    const int rows = selection.rows();
+    auto assign = [&](DerivativeMatrix* target, const M& m, int cols) {
+      if (first) {
+        target->SetZero(rows, cols, std::is_same_v<M, SparseMatrix>);
+        target->Finalize();
+      } else {
+        target->SetZero(rows, cols, std::is_same_v<M, SparseMatrix>);
+        target->Assign(m);
+      }
+    };
+    assign(dv, v_sum, system.num_algebraic());
+    if (with_y) assign(dy, y_sum, system.num_states());
+    if (all) {
+      assign(du, u_sum, system.num_inputs());
+      assign(dp, p_sum, system.num_parameters());
+    }
+  };
+  select(equations, &out->equations, &out->equations_v, &out->equations_y, &out->equations_u,
+         &out->equations_p);
+  select(a_rows, &out->a, &out->a_v, &out->a_y, &out->a_u, &out->a_p);
+  select(b_rows, &out->b, &out->b_v, &out->b_y, &out->b_u, &out->b_p);
+}
+
 void LoweredSystem::EvaluateVelocityLevel(const ConstVectorRef& y, const ConstVectorRef& v,
                                           const std::vector<PairRole>& roles,
                                           Derivatives derivatives,
                                           VelocityLevelEvaluation* out) const {
   MOREAU_ASSERT(static_cast<int>(roles.size()) == num_pairs_, "wrong number of pair roles");
-  MOREAU_ASSERT(!sparse_dynamics_ || num_algebraic_ == 0, "velocity level needs dense Jacobians");
   const int ny = num_states_, nz = num_algebraic_, ng = num_equations_;
   const int nu = scene_.num_inputs(), np = scene_.num_parameters();
   const bool with_y = derivatives != Derivatives::kNone;
   const bool all = derivatives == Derivatives::kAll;
-  PointEvaluation e;
+  PointEvaluation& e = velocity_point_;
   EvaluatePoint(y, v, all ? Derivatives::kAll : Derivatives::kStates, &roles, &e);
 
   // Rates of continuous variables sit in v's continuous slots; jump variables are values.
@@ -70,138 +232,28 @@ void LoweredSystem::EvaluateVelocityLevel(const ConstVectorRef& y, const ConstVe
   for (int i = 0; i < nz; ++i)
     mask[i] = continuous_algebraic_[static_cast<std::size_t>(i)] ? 1.0 : 0.0;
   const Vector rates = mask.cwiseProduct(v);
-  CurvatureTerms curvature;
+  CurvatureTerms& curvature = curvature_;
   if (with_y) {
-    curvature.pair_y.setZero(num_pairs_, ny);
-    curvature.equation_y.setZero(ng, ny);
-    curvature.pair_u.setZero(num_pairs_, nu);
-    curvature.equation_u.setZero(ng, nu);
-    curvature.pair_p.setZero(num_pairs_, np);
-    curvature.equation_p.setZero(ng, np);
+    curvature.pair_y.SetZero(num_pairs_, ny, sparse_);
+    curvature.equation_y.SetZero(ng, ny, sparse_);
+    curvature.pair_u.SetZero(num_pairs_, nu, sparse_);
+    curvature.equation_u.SetZero(ng, nu, sparse_);
+    curvature.pair_p.SetZero(num_pairs_, np, sparse_);
+    curvature.equation_p.SetZero(ng, np, sparse_);
     internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
     context.velocity_roles = &roles;
     context.velocity = &v;
+    context.sparse = sparse_;
     for (const auto& block : blocks_) block->AddCurvature(context, y, e.F, derivatives, &curvature);
+    for (DerivativeMatrix* m : {&curvature.pair_y, &curvature.equation_y, &curvature.pair_u,
+                                &curvature.equation_u, &curvature.pair_p, &curvature.equation_p}) {
+      m->Finalize();
+    }
   }
-
-  int num_complementary = 0;
-  for (PairRole role : roles) num_complementary += role == PairRole::kComplementary ? 1 : 0;
-  const int rows = ng + num_pairs_ - num_complementary;
-  out->equations.resize(rows);
-  out->a.resize(num_complementary);
-  out->b.resize(num_complementary);
-  out->equations_v.setZero(rows, nz);
-  out->a_v.setZero(num_complementary, nz);
-  out->b_v.setZero(num_complementary, nz);
-  if (with_y) {
-    out->equations_y.setZero(rows, ny);
-    out->a_y.setZero(num_complementary, ny);
-    out->b_y.setZero(num_complementary, ny);
-  }
-  if (all) {
-    out->equations_u.setZero(rows, nu);
-    out->a_u.setZero(num_complementary, nu);
-    out->b_u.setZero(num_complementary, nu);
-    out->equations_p.setZero(rows, np);
-    out->a_p.setZero(num_complementary, np);
-    out->b_p.setZero(num_complementary, np);
-  }
-  // A velocity-level quantity with its derivatives, written into row `row` of a target.
-  struct Row {
-    double value = 0.0;
-    Eigen::RowVectorXd d_v, d_y, d_u, d_p;
-  };
-  auto write = [&](const Row& r, int row, Vector* value, Matrix* dv, Matrix* dy, Matrix* du,
-                   Matrix* dp) {
-    (*value)[row] = r.value;
-    dv->row(row) = r.d_v;
-    if (with_y) dy->row(row) = r.d_y;
-    if (all) {
-      du->row(row) = r.d_u;
-      dp->row(row) = r.d_p;
-    }
-  };
-  // Rate of a continuous quantity X: X_y F + X_z v_c (X_z touches continuous slots only).
-  auto rate = [&](const auto& x_y, const auto& x_z, const auto& c_y, const auto& c_u,
-                  const auto& c_p, const auto& x_u, const auto& x_p) {
-    Row r;
-    r.value = x_y.dot(e.F) + x_z.dot(rates);
-    r.d_v = x_y * e.F_z + x_z.cwiseProduct(mask.transpose());
-    if (with_y) r.d_y = c_y + x_y * e.F_y;
-    if (all) {
-      r.d_u = c_u + x_y * e.F_u + x_u;
-      r.d_p = c_p + x_y * e.F_p + x_p;
-    }
-    return r;
-  };
-  // Value of a jump quantity X at (y, v).
-  auto value = [&](double x, const auto& x_y, const auto& x_z, const auto& x_u, const auto& x_p) {
-    Row r;
-    r.value = x;
-    r.d_v = x_z;
-    if (with_y) r.d_y = x_y;
-    if (all) {
-      r.d_u = x_u;
-      r.d_p = x_p;
-    }
-    return r;
-  };
-  const Eigen::RowVectorXd zero_u = Eigen::RowVectorXd::Zero(nu);
-  const Eigen::RowVectorXd zero_p = Eigen::RowVectorXd::Zero(np);
-  const Eigen::RowVectorXd zero_y = Eigen::RowVectorXd::Zero(ny);
-  // Equations G: differentiated rows G_y F + G_z v_c; value rows G.
-  for (int r = 0; r < ng; ++r) {
-    Row row;
-    if (differentiated_[static_cast<std::size_t>(r)]) {
-      // d/du, d/dp of G_y F: curvature plus G_y F_u (G_u enters only through G_y's u-dependence).
-      row = rate(e.G_y.row(r), e.G_z.row(r),
-                 with_y ? Eigen::RowVectorXd(curvature.equation_y.row(r)) : zero_y,
-                 with_y ? Eigen::RowVectorXd(curvature.equation_u.row(r)) : zero_u,
-                 with_y ? Eigen::RowVectorXd(curvature.equation_p.row(r)) : zero_p, zero_u, zero_p);
-    } else {
-      row =
-          value(e.G[r], e.G_y.row(r), e.G_z.row(r), all ? Eigen::RowVectorXd(e.G_u.row(r)) : zero_u,
-                all ? Eigen::RowVectorXd(e.G_p.row(r)) : zero_p);
-    }
-    write(row, r, &out->equations, &out->equations_v, &out->equations_y, &out->equations_u,
-          &out->equations_p);
-  }
-  int equation_row = ng, complementary_row = 0;
-  for (int k = 0; k < num_pairs_; ++k) {
-    const ContinuousSide side = pairs_[static_cast<std::size_t>(k)].continuous;
-    const bool continuous_a = side != ContinuousSide::kB;
-    // Continuous side X and jump side J of pair k. The rate X_y F + X_z v_c depends on u and
-    // p through X_y (curvature terms) and F; blocks whose X_z is not constant add its
-    // derivatives to the curvature terms. With both sides continuous (kBoth) the "jump" row is
-    // the rate of b, an algebraic unknown: its slot v_j.
-    const Matrix& x_y = continuous_a ? e.A_y : e.B_y;
-    const Matrix& x_z = continuous_a ? e.A_z : e.B_z;
-    const Vector& j_value = continuous_a ? e.B : e.A;
-    const Matrix& j_y = continuous_a ? e.B_y : e.A_y;
-    const Matrix& j_z = continuous_a ? e.B_z : e.A_z;
-    const Row continuous_rate =
-        rate(x_y.row(k), x_z.row(k), with_y ? Eigen::RowVectorXd(curvature.pair_y.row(k)) : zero_y,
-             with_y ? Eigen::RowVectorXd(curvature.pair_u.row(k)) : zero_u,
-             with_y ? Eigen::RowVectorXd(curvature.pair_p.row(k)) : zero_p, zero_u, zero_p);
-    const Row jump =
-        side == ContinuousSide::kBoth
-            ? rate(e.B_y.row(k), e.B_z.row(k), zero_y, zero_u, zero_p, zero_u, zero_p)
-            : value(j_value[k], j_y.row(k), j_z.row(k),
-                    all ? Eigen::RowVectorXd((continuous_a ? e.B_u : e.A_u).row(k)) : zero_u,
-                    all ? Eigen::RowVectorXd((continuous_a ? e.B_p : e.A_p).row(k)) : zero_p);
-    const PairRole role = roles[static_cast<std::size_t>(k)];
-    if (role == PairRole::kComplementary) {
-      write(jump, complementary_row, &out->a, &out->a_v, &out->a_y, &out->a_u, &out->a_p);
-      write(continuous_rate, complementary_row, &out->b, &out->b_v, &out->b_y, &out->b_u,
-            &out->b_p);
-      ++complementary_row;
-      continue;
-    }
-    // The kept side: its rate if continuous, its value if a jump variable.
-    const bool keeps_a = role == PairRole::kAZero;
-    const Row& kept = keeps_a == continuous_a ? continuous_rate : jump;
-    write(kept, equation_row++, &out->equations, &out->equations_v, &out->equations_y,
-          &out->equations_u, &out->equations_p);
+  if (sparse_) {
+    AssembleVelocityLevel<SparseMatrix>(*this, e, curvature, mask, rates, roles, derivatives, out);
+  } else {
+    AssembleVelocityLevel<Matrix>(*this, e, curvature, mask, rates, roles, derivatives, out);
   }
 }
 
@@ -212,14 +264,18 @@ void LoweredSystem::EvaluateEventIndicators(const ConstVectorRef& y, const Const
   MOREAU_ASSERT(static_cast<int>(a_zero.size()) == num_pairs_, "wrong number of statuses");
   out->values.setZero(num_pairs_);
   if (derivatives != Derivatives::kNone) {
-    out->d_y.setZero(num_pairs_, num_states_);
-    out->d_v.setZero(num_pairs_, num_algebraic_);
-    out->d_u.setZero(num_pairs_, scene_.num_inputs());
-    out->d_p.setZero(num_pairs_, scene_.num_parameters());
+    out->d_y.SetZero(num_pairs_, num_states_, sparse_);
+    out->d_v.SetZero(num_pairs_, num_algebraic_, sparse_);
+    out->d_u.SetZero(num_pairs_, scene_.num_inputs(), sparse_);
+    out->d_p.SetZero(num_pairs_, scene_.num_parameters(), sparse_);
   }
   internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
+  context.sparse = sparse_;
   for (const auto& block : blocks_) {
     block->EventIndicators(context, y, v, a_zero, derivatives, out);
+  }
+  if (derivatives != Derivatives::kNone) {
+    for (DerivativeMatrix* m : {&out->d_y, &out->d_v, &out->d_u, &out->d_p}) m->Finalize();
   }
 }
 
@@ -260,11 +316,14 @@ class VelocitySystem final : public MixedComplementaritySystem {
     return r->allFinite() && a->allFinite() && b->allFinite();
   }
   void AssembleJacobian(const Vector& da, const Vector& db, SystemMatrix* jacobian) override {
-    jacobian->AddBlock(0, 0, evaluation_.equations_v);
+    jacobian->AddDerivative(0, 0, evaluation_.equations_v);
     if (complementary_ > 0) {
-      const Matrix rows = da.asDiagonal() * evaluation_.a_v + db.asDiagonal() * evaluation_.b_v;
-      jacobian->AddBlock(num_equations(), 0, rows);
+      jacobian->AddWeightedRows(num_equations(), 0, da, evaluation_.a_v);
+      jacobian->AddWeightedRows(num_equations(), 0, db, evaluation_.b_v);
     }
+  }
+  double EstimatedJacobianNonzeros() const override {
+    return values_.equations_v.NonZeros() + values_.a_v.NonZeros() + values_.b_v.NonZeros();
   }
 
  private:
@@ -276,11 +335,13 @@ class VelocitySystem final : public MixedComplementaritySystem {
   Vector scale_;
 };
 
-SemismoothNewtonOptions VelocityNewtonOptions() {
+// Dense LU for dense storage; with sparse storage the automatic choice (KLU above
+// kDenseSizeLimit unknowns: a crowd's contact Gram matrix J J^T is sparse).
+SemismoothNewtonOptions VelocityNewtonOptions(bool sparse) {
   SemismoothNewtonOptions options;
   options.tolerance = 1e-12;
   options.max_iterations = 30;
-  options.linear_solver = LinearSolverKind::kDenseLu;
+  options.linear_solver = sparse ? LinearSolverKind::kAutomatic : LinearSolverKind::kDenseLu;
   return options;
 }
 
@@ -293,7 +354,7 @@ bool LoweredSystem::SolveVelocityLevel(const Vector& y, const std::vector<bool>&
     return true;
   }
   VelocitySystem system(*this, y, RolesFor(a_zero));
-  SemismoothNewton newton(VelocityNewtonOptions());
+  SemismoothNewton newton(VelocityNewtonOptions(sparse_));
   const SemismoothNewtonResult result = newton.Solve(system, v0);
   *v = result.solution;
   return result.converged();
@@ -341,7 +402,7 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
   }
   decision.candidates = static_cast<int>(candidates.size());
   const int nx = scene_.num_states();
-  SemismoothNewton newton(VelocityNewtonOptions());
+  SemismoothNewton newton(VelocityNewtonOptions(sparse_));
 
   if (static_cast<int>(candidates.size()) > kMaxEnumeratedCandidates) {
     VelocitySystem system(*this, y, roles);

@@ -178,9 +178,10 @@ TEST(ComplementarityLoweringTest, DerivativesMatchCentralDifferences) {
       all << e.F, e.A, e.B;
       return all;
     };
-    auto stacked = [](const Matrix& f, const Matrix& a, const Matrix& b) {
+    auto stacked = [](const DerivativeMatrix& f, const DerivativeMatrix& a,
+                      const DerivativeMatrix& b) {
       Matrix m(f.rows() + a.rows() + b.rows(), f.cols());
-      m << f, a, b;
+      m << f.ToDense(), a.ToDense(), b.ToDense();
       return m;
     };
     const int rows = static_cast<int>(stack(exact).size());
@@ -256,7 +257,9 @@ TEST(ComplementarityLoweringTest, VelocityLevelAndIndicatorDerivativesMatchCentr
         all << e.equations, e.a, e.b;
         return all;
       };
-      auto stacked = [](const Matrix& a, const Matrix& b, const Matrix& c) {
+      auto stacked = [](const DerivativeMatrix& da, const DerivativeMatrix& db,
+                        const DerivativeMatrix& dc) {
+        const Matrix a = da.ToDense(), b = db.ToDense(), c = dc.ToDense();
         Matrix m(a.rows() + b.rows() + c.rows(), a.cols());
         m << a, b, c;
         return m;
@@ -327,7 +330,7 @@ TEST(ComplementarityLoweringTest, VelocityLevelAndIndicatorDerivativesMatchCentr
         system.EvaluateEventIndicators(yy, vv, a_zero, Derivatives::kNone, &out);
         return Vector(out.values);
       };
-      ExpectNear(exact.d_y,
+      ExpectNear(exact.d_y.ToDense(),
                  Numeric(np, static_cast<int>(y.size()),
                          [&](int j, double e) {
                            Vector yy = y;
@@ -335,7 +338,7 @@ TEST(ComplementarityLoweringTest, VelocityLevelAndIndicatorDerivativesMatchCentr
                            return values(yy, v);
                          }),
                  "indicators d/dy");
-      ExpectNear(exact.d_v,
+      ExpectNear(exact.d_v.ToDense(),
                  Numeric(np, nz,
                          [&](int j, double e) {
                            Vector vv = v;
@@ -344,7 +347,7 @@ TEST(ComplementarityLoweringTest, VelocityLevelAndIndicatorDerivativesMatchCentr
                          }),
                  "indicators d/dv");
       const Vector p = system.parameters();
-      ExpectNear(exact.d_p,
+      ExpectNear(exact.d_p.ToDense(),
                  Numeric(np, static_cast<int>(p.size()),
                          [&](int j, double e) {
                            Vector pp = p;

@@ -19,7 +19,9 @@ void CheckDerivatives(LoweredSystem* system, const Vector& y, const Vector& z,
                       const std::string& label) {
   PointEvaluation exact;
   system->Evaluate(y, z, Derivatives::kAll, &exact);
-  auto compare = [&](const Matrix& analytic, const Matrix& numeric, const std::string& what) {
+  auto compare = [&](const DerivativeMatrix& stored, const Matrix& numeric,
+                     const std::string& what) {
+    const Matrix analytic = stored.ToDense();
     ASSERT_EQ(analytic.rows(), numeric.rows()) << label << " " << what;
     ASSERT_EQ(analytic.cols(), numeric.cols()) << label << " " << what;
     const double scale = 1.0 + numeric.lpNorm<Eigen::Infinity>();
@@ -97,17 +99,22 @@ TEST_P(LoweringDerivativeTest, AllBlocksMatchCentralDifferences) {
                       : name == "mixed_hysteresis" ? testing::MixedHysteresisScene()
                       : name == "mixed_speed"      ? testing::MixedHysteresisScene(true)
                                                    : MakeScene(name);
-  LoweringOptions options;
-  options.switching_form = form;
-  LoweredSystem system(scene, options);
-  std::mt19937 rng(42);
-  std::uniform_real_distribution<double> uniform(-0.9, 0.9);
-  for (int trial = 0; trial < 3; ++trial) {
-    Vector y = system.InitialState();
-    for (Eigen::Index i = 0; i < y.size(); ++i) y[i] += uniform(rng);
-    Vector z(system.num_algebraic());
-    for (Eigen::Index i = 0; i < z.size(); ++i) z[i] = 0.5 + 0.5 * uniform(rng);
-    CheckDerivatives(&system, y, z, name + " trial " + std::to_string(trial));
+  // Both derivative storages: dense AD and sparse AD (docs/sparse-systems.md).
+  for (const DerivativeStorage storage : {DerivativeStorage::kDense, DerivativeStorage::kSparse}) {
+    LoweringOptions options;
+    options.switching_form = form;
+    options.storage = storage;
+    LoweredSystem system(scene, options);
+    std::mt19937 rng(42);
+    std::uniform_real_distribution<double> uniform(-0.9, 0.9);
+    for (int trial = 0; trial < 3; ++trial) {
+      Vector y = system.InitialState();
+      for (Eigen::Index i = 0; i < y.size(); ++i) y[i] += uniform(rng);
+      Vector z(system.num_algebraic());
+      for (Eigen::Index i = 0; i < z.size(); ++i) z[i] = 0.5 + 0.5 * uniform(rng);
+      CheckDerivatives(&system, y, z,
+                       name + " " + ToString(storage) + " trial " + std::to_string(trial));
+    }
   }
 }
 

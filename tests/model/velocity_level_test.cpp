@@ -35,9 +35,10 @@ void CheckVelocityDerivatives(LoweredSystem* system, const Vector& y, const Vect
                               const std::vector<PairRole>& roles, const std::string& label) {
   VelocityLevelEvaluation exact;
   system->EvaluateVelocityLevel(y, v, roles, Derivatives::kAll, &exact);
-  auto stacked = [](const Matrix& a, const Matrix& b, const Matrix& c) {
+  auto stacked = [](const DerivativeMatrix& a, const DerivativeMatrix& b,
+                    const DerivativeMatrix& c) {
     Matrix m(a.rows() + b.rows() + c.rows(), a.cols());
-    m << a, b, c;
+    m << a.ToDense(), b.ToDense(), c.ToDense();
     return m;
   };
   auto numeric = [&](int n, auto perturb) {
@@ -82,78 +83,86 @@ void CheckVelocityDerivatives(LoweredSystem* system, const Vector& y, const Vect
 TEST(VelocityLevelTest, DerivativesMatchCentralDifferences) {
   for (const char* name : {"S2", "S3", "F1", "F2c"}) {
     for (SwitchingForm form : {SwitchingForm::kStewart, SwitchingForm::kHeaviside}) {
-      LoweringOptions options;
-      options.switching_form = form;
-      LoweredSystem system(MakeScene(name), options);
-      Vector y = system.InitialState();
-      y.head(system.num_scene_states()).array() += 0.3;
-      y[system.clock_index()] += 0.7;
-      Vector v = Vector::LinSpaced(system.num_algebraic(), 0.2, 0.9);
-      const int np = system.num_pairs();
-      // Mixed roles: alternate decided sides and one complementary pair.
-      std::vector<PairRole> roles(static_cast<std::size_t>(np));
-      for (int k = 0; k < np; ++k) {
-        roles[static_cast<std::size_t>(k)] =
-            k == 0 ? PairRole::kComplementary : (k % 2 ? PairRole::kAZero : PairRole::kBZero);
+      for (DerivativeStorage storage : {DerivativeStorage::kDense, DerivativeStorage::kSparse}) {
+        LoweringOptions options;
+        options.switching_form = form;
+        options.storage = storage;
+        LoweredSystem system(MakeScene(name), options);
+        Vector y = system.InitialState();
+        y.head(system.num_scene_states()).array() += 0.3;
+        y[system.clock_index()] += 0.7;
+        Vector v = Vector::LinSpaced(system.num_algebraic(), 0.2, 0.9);
+        const int np = system.num_pairs();
+        // Mixed roles: alternate decided sides and one complementary pair.
+        std::vector<PairRole> roles(static_cast<std::size_t>(np));
+        for (int k = 0; k < np; ++k) {
+          roles[static_cast<std::size_t>(k)] =
+              k == 0 ? PairRole::kComplementary : (k % 2 ? PairRole::kAZero : PairRole::kBZero);
+        }
+        CheckVelocityDerivatives(
+            &system, y, v, roles,
+            std::string(name) + " " + ToString(form) + " " + ToString(storage));
       }
-      CheckVelocityDerivatives(&system, y, v, roles, std::string(name) + " " + ToString(form));
     }
   }
 }
 
 TEST(VelocityLevelTest, TimeFreezingDerivativesMatchCentralDifferences) {
   for (SwitchingForm form : {SwitchingForm::kStewart, SwitchingForm::kHeaviside}) {
-    LoweringOptions options;
-    options.switching_form = form;
-    LoweredSystem system(testing::MixedHysteresisScene(), options);
-    Vector y = system.InitialState();
-    y.head(system.num_scene_states()).array() += 0.3;
-    y[2] = 0.1;  // memories off their rest values
-    y[3] = 0.8;
-    y[system.clock_index()] += 0.7;
-    const Vector v = Vector::LinSpaced(system.num_algebraic(), 0.2, 0.9);
-    const int np = system.num_pairs();
-    std::vector<PairRole> roles(static_cast<std::size_t>(np));
-    for (int k = 0; k < np; ++k) {
-      roles[static_cast<std::size_t>(k)] =
-          k % 3 == 0 ? PairRole::kComplementary : (k % 2 ? PairRole::kAZero : PairRole::kBZero);
-    }
-    CheckVelocityDerivatives(&system, y, v, roles, "mixed_hysteresis " + ToString(form));
-
-    // Event indicators with respect to y and p (the relay thresholds are parameters).
-    std::vector<bool> a_zero(static_cast<std::size_t>(np), true);
-    for (int k = 0; k < np; k += 3) a_zero[static_cast<std::size_t>(k)] = false;
-    IndicatorEvaluation exact;
-    system.EvaluateEventIndicators(y, v, a_zero, Derivatives::kAll, &exact);
-    auto numeric = [&](int n, auto perturb) {
-      Matrix d(np, n);
-      for (int j = 0; j < n; ++j) {
-        IndicatorEvaluation plus, minus;
-        perturb(j, kFiniteDifference, &plus);
-        perturb(j, -kFiniteDifference, &minus);
-        d.col(j) = (plus.values - minus.values) / (2 * kFiniteDifference);
+    for (DerivativeStorage storage : {DerivativeStorage::kDense, DerivativeStorage::kSparse}) {
+      LoweringOptions options;
+      options.switching_form = form;
+      options.storage = storage;
+      LoweredSystem system(testing::MixedHysteresisScene(), options);
+      Vector y = system.InitialState();
+      y.head(system.num_scene_states()).array() += 0.3;
+      y[2] = 0.1;  // memories off their rest values
+      y[3] = 0.8;
+      y[system.clock_index()] += 0.7;
+      const Vector v = Vector::LinSpaced(system.num_algebraic(), 0.2, 0.9);
+      const int np = system.num_pairs();
+      std::vector<PairRole> roles(static_cast<std::size_t>(np));
+      for (int k = 0; k < np; ++k) {
+        roles[static_cast<std::size_t>(k)] =
+            k % 3 == 0 ? PairRole::kComplementary : (k % 2 ? PairRole::kAZero : PairRole::kBZero);
       }
-      return d;
-    };
-    ExpectNear(exact.d_y,
-               numeric(static_cast<int>(y.size()),
-                       [&](int j, double e, IndicatorEvaluation* out) {
-                         Vector yy = y;
-                         yy[j] += e;
-                         system.EvaluateEventIndicators(yy, v, a_zero, Derivatives::kNone, out);
-                       }),
-               "mixed_hysteresis indicators d/dy");
-    const Vector p = system.parameters();
-    ExpectNear(exact.d_p,
-               numeric(static_cast<int>(p.size()),
-                       [&](int j, double e, IndicatorEvaluation* out) {
-                         Vector pp = p;
-                         pp[j] += e;
-                         system.SetParameters(pp);
-                         system.EvaluateEventIndicators(y, v, a_zero, Derivatives::kNone, out);
-                         system.SetParameters(p);
-                       }),
-               "mixed_hysteresis indicators d/dp");
+      CheckVelocityDerivatives(&system, y, v, roles, "mixed_hysteresis " + ToString(form));
+
+      // Event indicators with respect to y and p (the relay thresholds are parameters).
+      std::vector<bool> a_zero(static_cast<std::size_t>(np), true);
+      for (int k = 0; k < np; k += 3) a_zero[static_cast<std::size_t>(k)] = false;
+      IndicatorEvaluation exact;
+      system.EvaluateEventIndicators(y, v, a_zero, Derivatives::kAll, &exact);
+      auto numeric = [&](int n, auto perturb) {
+        Matrix d(np, n);
+        for (int j = 0; j < n; ++j) {
+          IndicatorEvaluation plus, minus;
+          perturb(j, kFiniteDifference, &plus);
+          perturb(j, -kFiniteDifference, &minus);
+          d.col(j) = (plus.values - minus.values) / (2 * kFiniteDifference);
+        }
+        return d;
+      };
+      ExpectNear(exact.d_y.ToDense(),
+                 numeric(static_cast<int>(y.size()),
+                         [&](int j, double e, IndicatorEvaluation* out) {
+                           Vector yy = y;
+                           yy[j] += e;
+                           system.EvaluateEventIndicators(yy, v, a_zero, Derivatives::kNone, out);
+                         }),
+                 "mixed_hysteresis indicators d/dy");
+      const Vector p = system.parameters();
+      ExpectNear(exact.d_p.ToDense(),
+                 numeric(static_cast<int>(p.size()),
+                         [&](int j, double e, IndicatorEvaluation* out) {
+                           Vector pp = p;
+                           pp[j] += e;
+                           system.SetParameters(pp);
+                           system.EvaluateEventIndicators(y, v, a_zero, Derivatives::kNone, out);
+                           system.SetParameters(p);
+                         }),
+                 "mixed_hysteresis indicators d/dp");
+    }
   }
 }
 
@@ -180,7 +189,7 @@ TEST(VelocityLevelTest, IndicatorDerivativesMatchCentralDifferences) {
         system.EvaluateEventIndicators(ym, v, a_zero, Derivatives::kNone, &minus);
         dy.col(j) = (plus.values - minus.values) / (2 * kFiniteDifference);
       }
-      ExpectNear(exact.d_y, dy, std::string(name) + " indicators d/dy");
+      ExpectNear(exact.d_y.ToDense(), dy, std::string(name) + " indicators d/dy");
     }
   }
 }

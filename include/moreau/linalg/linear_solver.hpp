@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "moreau/core/types.hpp"
+#include "moreau/linalg/derivative_matrix.hpp"
 
 namespace moreau {
 
@@ -45,6 +46,17 @@ class SystemMatrix {
   void AddBlock(int row0, int col0, const ConstMatrixRef& block, double scale = 1.0);
   /// A(row0 + i, col0 + j) += scale * block(i, j) for the stored entries of a sparse block.
   void AddSparseBlock(int row0, int col0, const SparseMatrix& block, double scale = 1.0);
+  /// A(row0 + i, col0 + j) += scale * M(i, j) for the stored entries of a derivative matrix
+  /// (every entry of a dense one).
+  void AddDerivative(int row0, int col0, const DerivativeMatrix& m, double scale = 1.0);
+  /// A(row0 + i, col0 + j) += row_weights(i) * M(i, j) (rows weighted, e.g. by NCP derivatives).
+  void AddWeightedRows(int row0, int col0, const ConstVectorRef& row_weights,
+                       const DerivativeMatrix& m);
+  /// A(row, col0 + j) += sum_k weights(k) M(k, j): a combination of the rows of M into one
+  /// row. With sparse storage every stored entry of M enters (zero weights included), so
+  /// that the pattern does not depend on which weights vanish.
+  void AddRowCombination(int row, int col0, const ConstVectorRef& weights,
+                         const DerivativeMatrix& m);
   /// A(row0 + i, col0 + i) += value, i = 0..count-1.
   void AddDiagonal(int row0, int col0, int count, double value);
   void AddEntry(int row, int col, double value);

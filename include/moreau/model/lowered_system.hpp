@@ -30,6 +30,8 @@
 #include <vector>
 
 #include "moreau/core/types.hpp"
+#include "moreau/linalg/derivative_matrix.hpp"
+#include "moreau/linalg/linear_solver.hpp"
 #include "moreau/model/events.hpp"
 #include "moreau/model/scene.hpp"
 
@@ -52,12 +54,36 @@ enum class RelayForm {
   kDiscreteMemory,
 };
 
+/// How the derivatives of a lowered system are stored (DerivativeMatrix).
+enum class DerivativeStorage {
+  /// Sparse if n_y + n_z > kSparseStorageThreshold or the dynamics have a hand-written sparse
+  /// Jacobian (MakeSparseStateFunction), dense otherwise.
+  kAutomatic,
+  kDense,   ///< dense matrices, dense forward-mode AD (small systems: fastest)
+  kSparse,  ///< compressed sparse matrices from sparse AD (large systems: cost ~ nonzeros)
+};
+std::string ToString(DerivativeStorage storage);
+
+/// The storage an integrator asks for given its linear solver option: sparse with the sparse
+/// LU, otherwise automatic (a dense LU also accepts sparse blocks).
+inline DerivativeStorage StorageForLinearSolver(LinearSolverKind kind) {
+  return kind == LinearSolverKind::kSparseLu ? DerivativeStorage::kSparse
+                                             : DerivativeStorage::kAutomatic;
+}
+
+/// Under DerivativeStorage::kAutomatic, systems with more than this many states and algebraic
+/// unknowns (n_y + n_z) are stored sparse: a Radau IIA stage system of s >= 2 stages then has
+/// more than kDenseSizeLimit = 256 unknowns, where the sparse LU takes over from the dense one.
+inline constexpr int kSparseStorageThreshold = 128;
+
 struct LoweringOptions {
   SwitchingForm switching_form = SwitchingForm::kStewart;
   RelayForm relay_form = RelayForm::kTimeFreezing;
   /// Require the scene's x0 to lie in its moving sets (ValidateScene); false for integrators
   /// that start from another state and project it (FesdOptions::initial_state).
   bool require_feasible_initial_state = true;
+  /// Dense or sparse derivatives (docs/sparse-systems.md).
+  DerivativeStorage storage = DerivativeStorage::kAutomatic;
 };
 
 /// Which derivatives LoweredSystem::Evaluate computes.
@@ -67,16 +93,13 @@ enum class Derivatives {
   kAll,     ///< also with respect to the inputs u and the parameters p
 };
 
-/// Values (and requested derivatives) of the lowered system at one point (y, z).
+/// Values (and requested derivatives) of the lowered system at one point (y, z). The
+/// derivatives are stored as the system says (LoweredSystem::sparse()).
 struct PointEvaluation {
   Vector F, G, A, B;
-  Matrix F_y, F_z, G_y, G_z, A_y, A_z, B_y, B_z;
-  /// Sparse F_y, filled instead of F_y (which is then left empty) when the dynamics have a
-  /// hand-written sparse Jacobian (MakeSparseStateFunction; such scenes have no effects).
-  SparseMatrix F_y_sparse;
-  bool has_sparse_F_y = false;
-  Matrix F_u, G_u, A_u, B_u;  ///< with Derivatives::kAll
-  Matrix F_p, G_p, A_p, B_p;  ///< with Derivatives::kAll
+  DerivativeMatrix F_y, F_z, G_y, G_z, A_y, A_z, B_y, B_z;
+  DerivativeMatrix F_u, G_u, A_u, B_u;  ///< with Derivatives::kAll
+  DerivativeMatrix F_p, G_p, A_p, B_p;  ///< with Derivatives::kAll
 };
 
 /// Which side of a complementarity pair is continuous in time along solutions.
@@ -104,14 +127,14 @@ struct PairInfo {
 /// rows of d/d(y, u, p) [grad_y X(y) . d] for the continuous sides of pairs and for the
 /// differentiated equation rows, for a fixed direction d.
 struct CurvatureTerms {
-  Matrix pair_y, pair_u, pair_p;              ///< n_pairs rows
-  Matrix equation_y, equation_u, equation_p;  ///< n_G rows
+  DerivativeMatrix pair_y, pair_u, pair_p;              ///< n_pairs rows
+  DerivativeMatrix equation_y, equation_u, equation_p;  ///< n_G rows
 };
 
 /// Event indicators (free side of every pair) and their derivatives.
 struct IndicatorEvaluation {
-  Vector values;              ///< n_pairs
-  Matrix d_y, d_v, d_u, d_p;  ///< n_pairs rows
+  Vector values;                        ///< n_pairs
+  DerivativeMatrix d_y, d_v, d_u, d_p;  ///< n_pairs rows
 };
 
 /// Role of a pair in the velocity-level problem.
@@ -125,10 +148,10 @@ enum class PairRole {
 struct VelocityLevelEvaluation {
   Vector equations;  ///< n_G rows, then one row per pair with a decided role
   Vector a, b;       ///< complementary pairs: (jump side value, continuous-side rate)
-  Matrix equations_v, a_v, b_v;
-  Matrix equations_y, a_y, b_y;  ///< with Derivatives::kStates or kAll
-  Matrix equations_u, a_u, b_u;  ///< with Derivatives::kAll
-  Matrix equations_p, a_p, b_p;
+  DerivativeMatrix equations_v, a_v, b_v;
+  DerivativeMatrix equations_y, a_y, b_y;  ///< with Derivatives::kStates or kAll
+  DerivativeMatrix equations_u, a_u, b_u;  ///< with Derivatives::kAll
+  DerivativeMatrix equations_p, a_p, b_p;
 };
 
 /// Outcome of LoweredSystem::DecideStatuses.
@@ -146,6 +169,7 @@ inline bool PairStatusIsAZero(double a, double b) { return a <= b; }
 
 namespace internal {
 class LoweredBlock;
+class ArgumentMatrix;
 }
 
 /// A scene lowered to a DCS (see file comment).
@@ -225,8 +249,17 @@ class LoweredSystem {
   /// velocity-level complementarity problem instead of enumeration (no ambiguity check).
   static constexpr int kMaxEnumeratedCandidates = 10;
 
+  /// True if derivatives are stored sparse (LoweringOptions::storage resolved).
+  bool sparse() const { return sparse_; }
+  /// Structurally nonzero entries of each derivative block with respect to y and z at the
+  /// initial point (sparse storage; dense storage counts every entry), for sizing linear
+  /// solvers before the first evaluation.
+  struct Nonzeros {
+    double F_y = 0, F_z = 0, G_y = 0, G_z = 0, A_y = 0, A_z = 0, B_y = 0, B_z = 0;
+  };
+  const Nonzeros& nonzeros() const { return nonzeros_; }
   /// Number of structurally nonzero entries of F_y (for choosing dense or sparse LU).
-  double EstimatedNonzerosFy() const;
+  double EstimatedNonzerosFy() const { return nonzeros_.F_y; }
 
   // --- velocity level -------------------------------------------------------------------
   /// The velocity-level problem at state y (docs/fesd-formulation.md): unknowns v in the
@@ -272,6 +305,8 @@ class LoweredSystem {
   // in their context (BlockContext::velocity_roles).
   void EvaluatePoint(const ConstVectorRef& y, const ConstVectorRef& z, Derivatives derivatives,
                      const std::vector<PairRole>* velocity_roles, PointEvaluation* out) const;
+  // Completes sparse accumulation (DerivativeMatrix::Finalize) of the requested blocks.
+  void FinalizeEvaluation(Derivatives derivatives, PointEvaluation* out) const;
 
   Scene scene_;
   LoweringOptions options_;
@@ -292,11 +327,13 @@ class LoweredSystem {
   int memory_block_ = -1;      // the discrete-memory relay block, or -1
   bool time_freezing_ = false;
   bool sparse_dynamics_ = false;  // dynamics with a hand-written sparse Jacobian
-  double nonzeros_fy_ = 0.0;
-  mutable Vector x_scratch_, f_scratch_;
-  mutable Matrix jac_scratch_;
+  bool sparse_ = false;           // sparse derivative storage
+  Nonzeros nonzeros_;
+  mutable Vector f_scratch_;
   mutable Eigen::RowVectorXd rate_gradient_;
-  mutable SparseMatrix sparse_scratch_;
+  mutable PointEvaluation velocity_point_;  // EvaluateVelocityLevel's workspace
+  mutable CurvatureTerms curvature_;
+  mutable std::unique_ptr<internal::ArgumentMatrix> dynamics_jacobian_holder_;
 };
 
 }  // namespace moreau

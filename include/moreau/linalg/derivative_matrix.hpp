@@ -1,0 +1,87 @@
+#pragma once
+/// @file
+/// DerivativeMatrix: one derivative block of a lowered system's evaluation (F_y, A_z, ...),
+/// stored dense for small systems and sparse (compressed columns) for large ones.
+///
+/// The lowered effects add their contributions block by block; the integrators read the
+/// finished matrix. In sparse storage every added entry is structural, including exact zeros
+/// of a dense block, so that the pattern depends on the structure of the model and not on the
+/// values at the point: a sparse factorization of a matrix assembled from these blocks can
+/// reuse its symbolic analysis from one evaluation to the next (docs/sparse-systems.md).
+///
+/// Sparse storage accumulates (row, column, value) entries and sums duplicates in Finalize(),
+/// which the producer calls once all contributions are in. Capacity is kept across
+/// SetZero calls, so a steady sequence of evaluations does not allocate.
+
+#include <vector>
+
+#include "moreau/core/types.hpp"
+
+namespace moreau {
+
+class DerivativeMatrix {
+ public:
+  /// A rows x cols matrix of zeros in the given storage (true: sparse).
+  void SetZero(int rows, int cols, bool sparse);
+  int rows() const { return rows_; }
+  int cols() const { return cols_; }
+  bool is_sparse() const { return sparse_; }
+
+  // --- accumulation ------------------------------------------------------------------------
+  /// M(row, col) += value.
+  void Add(int row, int col, double value);
+  /// M(row0 + i, col0 + j) += scale * block(i, j) for every entry of the block.
+  void AddBlock(int row0, int col0, const ConstMatrixRef& block, double scale = 1.0);
+  /// M(row0 + i, col0 + j) += scale * block(i, j) for the stored entries of a sparse block
+  /// (transposed: M(row0 + j, col0 + i) += scale * block(i, j)).
+  void AddSparse(int row0, int col0, const SparseMatrix& block, double scale = 1.0,
+                 bool transposed = false);
+  /// M(row0 + i, col0 + j) += scale * column(i) * row(j) for the nonzero entries of `row`
+  /// (every entry of `column`): a rank-one term whose row factor is sparse in practice.
+  void AddOuter(int row0, int col0, const ConstVectorRef& column, const ConstVectorRef& row,
+                double scale = 1.0);
+  /// M = m (storage per is_sparse(), sizes from m; finished, no Finalize needed).
+  void Assign(const Matrix& m);
+  void Assign(const SparseMatrix& m);
+  /// M *= factor (all entries added so far).
+  void Scale(double factor);
+  /// Completes the accumulation (sparse: builds the compressed matrix, summing duplicates).
+  void Finalize();
+
+  // --- reading (after Finalize) ------------------------------------------------------------
+  const Matrix& dense() const;         ///< dense storage only
+  const SparseMatrix& sparse() const;  ///< sparse storage only
+  Matrix ToDense() const;
+  /// f(m) with m the dense Matrix or the SparseMatrix: code written once for both storages.
+  template <class F>
+  decltype(auto) Visit(F&& f) const {
+    return sparse_ ? f(sparse_matrix_) : f(dense_);
+  }
+  /// y += scale * M x.
+  void MultiplyAdd(const ConstVectorRef& x, VectorRef y, double scale = 1.0) const;
+  /// y += scale * M^T x.
+  void TransposedMultiplyAdd(const ConstVectorRef& x, VectorRef y, double scale = 1.0) const;
+  /// Row `row` as a dense row vector (O(cols) dense, O(nonzeros) sparse).
+  Eigen::RowVectorXd Row(int row) const;
+  /// Structurally stored entries (dense: rows x cols).
+  double NonZeros() const;
+
+  /// One (row, column, value) entry; Eigen's setFromTriplets reads it.
+  struct Entry {
+    int r, c;
+    double v;
+    int row() const { return r; }
+    int col() const { return c; }
+    double value() const { return v; }
+  };
+
+ private:
+  int rows_ = 0, cols_ = 0;
+  bool sparse_ = false;
+  bool finalized_ = true;
+  Matrix dense_;
+  std::vector<Entry> entries_;
+  SparseMatrix sparse_matrix_;
+};
+
+}  // namespace moreau

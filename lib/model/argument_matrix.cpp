@@ -1,0 +1,195 @@
+// ArgumentMatrix (lowered_block.hpp): model-function derivatives with columns x, [u], t, [p],
+// dense (forward-mode AD over all inputs) or sparse (sparsity detection, colouring and
+// compressed AD: docs/sparse-derivatives.md), scattered into the lowered system's blocks.
+
+#include <Eigen/Dense>
+
+#include "lowered_block.hpp"
+#include "moreau/core/error.hpp"
+
+namespace moreau::internal {
+
+void ArgumentMatrix::Layout(const BlockContext& context, Derivatives derivatives) {
+  is_sparse_ = context.sparse;
+  all_ = derivatives == Derivatives::kAll;
+  nx_ = context.num_scene_states;
+  nu_ = static_cast<int>(context.inputs->size());
+  np_ = static_cast<int>(context.parameters->size());
+  clock_ = context.clock_index;
+}
+
+int ArgumentMatrix::Target(int j, int* index) const {
+  if (j < nx_) {
+    *index = j;
+    return 0;
+  }
+  if (!all_) {
+    *index = clock_;  // Wrt::XT: x, then t
+    return 0;
+  }
+  if (j < nx_ + nu_) {
+    *index = j - nx_;
+    return 1;
+  }
+  if (j == nx_ + nu_) {
+    *index = clock_;
+    return 0;
+  }
+  *index = j - nx_ - nu_ - 1;
+  return 2;
+}
+
+void ArgumentMatrix::Jacobian(const BlockContext& context, const SmoothFunction& function,
+                              const ConstVectorRef& y, Derivatives derivatives, Vector* values) {
+  Layout(context, derivatives);
+  x_ = y.head(nx_);
+  const double t = y[clock_];
+  rows_ = function.num_outputs();
+  if (derivatives == Derivatives::kNone) {
+    function.Evaluate(x_, *context.inputs, t, *context.parameters, values);
+    return;
+  }
+  const Wrt wrt = all_ ? Wrt::All() : Wrt::XT();
+  if (is_sparse_) {
+    function.SparseJacobian(x_, *context.inputs, t, *context.parameters, wrt, values, &columns_);
+    rows_sparse_ = columns_;
+  } else {
+    function.Jacobian(x_, *context.inputs, t, *context.parameters, wrt, values, &dense_);
+  }
+}
+
+void ArgumentMatrix::HessianDirections(const BlockContext& context, const SmoothFunction& function,
+                                       const ConstVectorRef& y, const ConstVectorRef& direction,
+                                       Derivatives derivatives, const std::vector<int>* outputs) {
+  Layout(context, derivatives);
+  x_ = y.head(nx_);
+  const double t = y[clock_];
+  rows_ = function.num_outputs();
+  const Wrt wrt = all_ ? Wrt::All() : Wrt::XT();
+  // The direction in the function's columns: x and clock components only.
+  direction_.setZero(wrt.Columns(nx_, nu_, np_));
+  direction_.head(nx_) = direction.head(nx_);
+  direction_[all_ ? nx_ + nu_ : nx_] = direction[clock_];
+  if (is_sparse_) {
+    function.SparseHessianDirection(x_, *context.inputs, t, *context.parameters, wrt, direction_,
+                                    &columns_, outputs);
+    rows_sparse_ = columns_;
+    return;
+  }
+  // Dense: one Hessian per output (small systems).
+  dense_.setZero(rows_, direction_.size());
+  weights_.setZero(rows_);
+  Matrix hessian;
+  for (int k = 0; k < rows_; ++k) {
+    weights_.setZero();
+    weights_[k] = 1.0;
+    function.WeightedHessian(x_, *context.inputs, t, *context.parameters, wrt, weights_, &hessian);
+    dense_.row(k) = (hessian * direction_).transpose();
+  }
+}
+
+void ArgumentMatrix::WeightedHessian(const BlockContext& context, const SmoothFunction& function,
+                                     const ConstVectorRef& y, const ConstVectorRef& weights,
+                                     Derivatives derivatives) {
+  Layout(context, derivatives);
+  x_ = y.head(nx_);
+  const double t = y[clock_];
+  const Wrt wrt = all_ ? Wrt::All() : Wrt::XT();
+  rows_ = wrt.Columns(nx_, nu_, np_);
+  if (is_sparse_) {
+    function.SparseWeightedHessian(x_, *context.inputs, t, *context.parameters, wrt, weights,
+                                   &columns_);
+    rows_sparse_ = columns_;
+  } else {
+    function.WeightedHessian(x_, *context.inputs, t, *context.parameters, wrt, weights, &dense_);
+  }
+}
+
+void ArgumentMatrix::AddRow(int k, double weight, int row, DerivativeMatrix* dy,
+                            DerivativeMatrix* du, DerivativeMatrix* dp) const {
+  DerivativeMatrix* targets[3] = {dy, du, dp};
+  int index = 0;
+  if (is_sparse_) {
+    for (decltype(rows_sparse_)::InnerIterator it(rows_sparse_, k); it; ++it) {
+      const int target = Target(static_cast<int>(it.col()), &index);
+      if (target == 0 || all_) targets[target]->Add(row, index, weight * it.value());
+    }
+    return;
+  }
+  for (Eigen::Index j = 0; j < dense_.cols(); ++j) {
+    const int target = Target(static_cast<int>(j), &index);
+    if (target == 0 || all_) targets[target]->Add(row, index, weight * dense_(k, j));
+  }
+}
+
+void ArgumentMatrix::AddRows(int first, int count, double weight, int row0, DerivativeMatrix* dy,
+                             DerivativeMatrix* du, DerivativeMatrix* dp) const {
+  if (!is_sparse_ && !dy->is_sparse()) {
+    // Dense fast path: whole column blocks.
+    const auto block = dense_.middleRows(first, count);
+    dy->AddBlock(row0, 0, block.leftCols(nx_), weight);
+    dy->AddBlock(row0, clock_, block.col(all_ ? nx_ + nu_ : nx_), weight);
+    if (!all_) return;
+    du->AddBlock(row0, 0, block.middleCols(nx_, nu_), weight);
+    dp->AddBlock(row0, 0, block.rightCols(np_), weight);
+    return;
+  }
+  for (int k = 0; k < count; ++k) AddRow(first + k, weight, row0 + k, dy, du, dp);
+}
+
+void ArgumentMatrix::AddStateGradientProduct(const ConstVectorRef& weights,
+                                             const Matrix* projection, VectorRef target) const {
+  gradient_.setZero(nx_);
+  if (is_sparse_) {
+    for (int k = 0; k < rows_; ++k) {
+      if (weights[k] == 0.0) continue;
+      for (decltype(rows_sparse_)::InnerIterator it(rows_sparse_, k); it; ++it) {
+        if (it.col() < nx_) gradient_[it.col()] += it.value() * weights[k];
+      }
+    }
+  } else {
+    gradient_.noalias() = dense_.leftCols(nx_).transpose() * weights;
+  }
+  if (projection == nullptr) {
+    target += gradient_;
+  } else {
+    target.noalias() += *projection * gradient_;
+  }
+}
+
+void ArgumentMatrix::AddStateGradients(int col0, const Matrix* projection, double weight,
+                                       DerivativeMatrix* target) const {
+  if (is_sparse_ && projection == nullptr) {
+    // target(i, col0 + k) += weight * dg_k/dx_i: the x columns of the Jacobian, transposed.
+    for (int k = 0; k < rows_; ++k) {
+      for (decltype(rows_sparse_)::InnerIterator it(rows_sparse_, k); it; ++it) {
+        if (it.col() < nx_) target->Add(static_cast<int>(it.col()), col0 + k, weight * it.value());
+      }
+    }
+    return;
+  }
+  const Matrix jx = is_sparse_ ? Matrix(Matrix(columns_).leftCols(nx_)) : Matrix(dense_.leftCols(nx_));
+  if (projection == nullptr) {
+    target->AddBlock(0, col0, jx.transpose(), weight);
+  } else {
+    target->AddBlock(0, col0, *projection * jx.transpose(), weight);
+  }
+}
+
+void ArgumentMatrix::AddStateRows(const Matrix* projection, double weight, DerivativeMatrix* dy,
+                                  DerivativeMatrix* du, DerivativeMatrix* dp) const {
+  if (projection == nullptr) {
+    AddRows(0, nx_, weight, 0, dy, du, dp);
+    return;
+  }
+  // P times the x rows (P = E E^T is dense in general).
+  const Matrix rows = is_sparse_ ? Matrix(Matrix(columns_).topRows(nx_)) : Matrix(dense_.topRows(nx_));
+  const Matrix projected = *projection * rows;
+  dy->AddBlock(0, 0, projected.leftCols(nx_), weight);
+  dy->AddBlock(0, clock_, projected.col(all_ ? nx_ + nu_ : nx_), weight);
+  if (!all_) return;
+  du->AddBlock(0, 0, projected.middleCols(nx_, nu_), weight);
+  dp->AddBlock(0, 0, projected.rightCols(np_), weight);
+}
+
+}  // namespace moreau::internal
