@@ -70,21 +70,15 @@ void ArgumentMatrix::HessianDirections(const BlockContext& context, const Smooth
   direction_.setZero(wrt.Columns(nx_, nu_, np_));
   direction_.head(nx_) = direction.head(nx_);
   direction_[all_ ? nx_ + nu_ : nx_] = direction[clock_];
+  // Second derivatives along one direction by compressed Dual2 passes (one per 16 colours of
+  // the outputs' Hessian supports) in both storages: a dense Hessian per output would cost
+  // m times (inputs / 16)^2 passes.
+  function.SparseHessianDirection(x_, *context.inputs, t, *context.parameters, wrt, direction_,
+                                  &columns_, outputs);
   if (is_sparse_) {
-    function.SparseHessianDirection(x_, *context.inputs, t, *context.parameters, wrt, direction_,
-                                    &columns_, outputs);
     rows_sparse_ = columns_;
-    return;
-  }
-  // Dense: one Hessian per output (small systems).
-  dense_.setZero(rows_, direction_.size());
-  weights_.setZero(rows_);
-  Matrix hessian;
-  for (int k = 0; k < rows_; ++k) {
-    weights_.setZero();
-    weights_[k] = 1.0;
-    function.WeightedHessian(x_, *context.inputs, t, *context.parameters, wrt, weights_, &hessian);
-    dense_.row(k) = (hessian * direction_).transpose();
+  } else {
+    dense_ = Matrix(columns_);
   }
 }
 

@@ -79,6 +79,10 @@ class MovingSetBlock final : public LoweredBlock {
     }
   }
 
+  // With x' = f + P grad c lambda the rates of the constraints are q + J P J^T lambda:
+  // symmetric positive semidefinite in lambda (P = E E^T), one velocity for all solutions.
+  bool MonotoneVelocityLevel() const override { return true; }
+
   // lambda is a jump variable (it jumps at contact); there are no equations.
   std::vector<bool> ContinuousAlgebraic() const override {
     return std::vector<bool>(static_cast<std::size_t>(num_constraints_), false);

@@ -174,6 +174,12 @@ class LoweredBlock {
   // one), so that DecideStatuses need not try it.
   virtual bool AdmitsRoles(const std::vector<PairRole>& /*roles*/) const { return true; }
 
+  // True if the velocity-level problem in the block's jump variables is monotone: an LCP
+  // whose matrix is symmetric positive semidefinite (moving sets: J P J^T), so that all its
+  // solutions give the same velocity. DecideStatuses then solves for such candidates instead
+  // of enumerating their assignments.
+  virtual bool MonotoneVelocityLevel() const { return false; }
+
   // Events implied by a change of the block's pair statuses between two times:
   // a_zero[k] is true when pair k has a_k = 0 (its first side vanishes), false when b_k = 0.
   virtual std::vector<Event> StatusEvents(double t, const std::vector<bool>& before,

@@ -403,8 +403,40 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
   decision.candidates = static_cast<int>(candidates.size());
   const int nx = scene_.num_states();
   SemismoothNewton newton(VelocityNewtonOptions(sparse_));
+  // Row of each complementary pair among the a, b rows of a velocity-level evaluation (they
+  // follow the pair order).
+  auto complementary_rows = [&](const std::vector<PairRole>& r) {
+    std::vector<int> row(static_cast<std::size_t>(num_pairs_), -1);
+    int next = 0;
+    for (int k = 0; k < num_pairs_; ++k) {
+      if (r[static_cast<std::size_t>(k)] == PairRole::kComplementary) {
+        row[static_cast<std::size_t>(k)] = next++;
+      }
+    }
+    return row;
+  };
+  // Candidates of monotone blocks (moving sets: the velocity-level problem in their
+  // multipliers is an LCP with the symmetric positive semidefinite matrix J P J^T, so every
+  // solution has the same velocity) need no enumeration: they stay complementary in every
+  // trial, and the semismooth Newton solution decides them. Only the other candidates are
+  // enumerated (their assignments can give different velocities: ambiguity).
+  std::vector<int> enumerated, monotone;
+  for (int k : candidates) {
+    const auto& block = *blocks_[static_cast<std::size_t>(pairs_[static_cast<std::size_t>(k)].block)];
+    (block.MonotoneVelocityLevel() ? monotone : enumerated).push_back(k);
+  }
+  if (static_cast<int>(enumerated.size()) <= kMaxEnumeratedCandidates) candidates = enumerated;
+  // Decides a complementary candidate from a solution: jump side zero (a <= b) means the
+  // continuous side is free to leave zero. A degenerate pair (both sides zero to the
+  // tolerance: a tangential departure) leaves, as the enumeration's tie-break between
+  // continuations of equal velocity does.
+  auto decide_complementary = [&](int k, const VelocityLevelEvaluation& e, int row) {
+    const bool continuous_a = pairs_[static_cast<std::size_t>(k)].continuous != ContinuousSide::kB;
+    const bool jump_zero = e.a[row] <= std::max(e.b[row], candidate_tolerance);
+    decision.a_zero[static_cast<std::size_t>(k)] = jump_zero != continuous_a;
+  };
 
-  if (static_cast<int>(candidates.size()) > kMaxEnumeratedCandidates) {
+  if (static_cast<int>(enumerated.size()) > kMaxEnumeratedCandidates) {
     VelocitySystem system(*this, y, roles);
     const SemismoothNewtonResult result = newton.Solve(system, guess);
     if (!result.converged()) {
@@ -418,15 +450,12 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
       decision.a_zero[static_cast<std::size_t>(k)] =
           roles[static_cast<std::size_t>(k)] == PairRole::kAZero;
     for (std::size_t i = 0; i < candidates.size(); ++i) {
-      // Jump side zero: the continuous side is free to leave zero.
-      const bool continuous_a =
-          pairs_[static_cast<std::size_t>(candidates[i])].continuous != ContinuousSide::kB;
-      const bool jump_zero = e.a[static_cast<Eigen::Index>(i)] <= e.b[static_cast<Eigen::Index>(i)];
-      decision.a_zero[static_cast<std::size_t>(candidates[i])] = jump_zero != continuous_a;
+      decide_complementary(candidates[i], e, static_cast<int>(i));
     }
     decision.solved = true;
     return decision;
   }
+  for (int k : monotone) roles[static_cast<std::size_t>(k)] = PairRole::kComplementary;
 
   // Enumerate: every candidate keeps either its jump side at zero (the continuous side may
   // leave zero) or its continuous side's rate at zero (it stays at zero).
@@ -465,11 +494,12 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
     std::vector<PairRole> check = trial;
     for (int k : candidates) check[static_cast<std::size_t>(k)] = PairRole::kComplementary;
     EvaluateVelocityLevel(y, result.solution, check, Derivatives::kNone, &e);
+    const std::vector<int> row = complementary_rows(check);
     bool ok = true;
     for (std::size_t i = 0; i < candidates.size(); ++i) {
       const bool jump_zero = (mask >> i) & 1u;
-      const double free =
-          jump_zero ? e.b[static_cast<Eigen::Index>(i)] : e.a[static_cast<Eigen::Index>(i)];
+      const int r = row[static_cast<std::size_t>(candidates[i])];
+      const double free = jump_zero ? e.b[r] : e.a[r];
       ok &= free >= -sign_tolerance;
     }
     if (!ok) continue;
@@ -509,6 +539,12 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
   for (int k = 0; k < num_pairs_; ++k) {
     decision.a_zero[static_cast<std::size_t>(k)] =
         valid[best].roles[static_cast<std::size_t>(k)] == PairRole::kAZero;
+  }
+  if (!monotone.empty()) {
+    VelocityLevelEvaluation e;
+    EvaluateVelocityLevel(y, decision.v, valid[best].roles, Derivatives::kNone, &e);
+    const std::vector<int> row = complementary_rows(valid[best].roles);
+    for (int k : monotone) decide_complementary(k, e, row[static_cast<std::size_t>(k)]);
   }
   decision.solved = true;
   return decision;

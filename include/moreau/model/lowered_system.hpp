@@ -292,6 +292,10 @@ class LoweredSystem {
   /// one of least velocity norm is taken (slow solution). Valid assignments with equal
   /// velocities (degenerate pairs, zero on both sides at velocity level) are broken in favour
   /// of the continuous side being free, i.e. the pair leaves zero (second-order departure).
+  /// Candidates of moving sets are not enumerated: their velocity-level problem is a monotone
+  /// LCP (matrix J P J^T) whose solutions share one velocity, so one semismooth Newton solve
+  /// decides them inside every enumerated assignment of the other candidates (a crowd's
+  /// active contacts are all candidates at every switch: enumeration would cost 2^contacts).
   StatusDecision DecideStatuses(const Vector& y, double candidate_tolerance) const;
 
   /// Events implied by a change of pair statuses: a_zero[k] is true when pair k has its
