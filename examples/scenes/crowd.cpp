@@ -280,8 +280,8 @@ CrowdLayout MakeCrowdLayout(const CrowdOptions& options) {
   const double h = layout.room_height;
   layout.door_width = options.door > 0.0 ? options.door : std::min(6.0 * r, 0.5 * h);
   layout.jamb_radius = 0.5 * h;
-  // a/2 beyond the grid: the agents' distance to the jambs then exceeds R + r by at least
-  // a - r - sqrt(2) j > 0 whatever the jitter j (a jitter along the diagonal).
+  // The jambs lie in x >= L - R = L0 + a/2, and every agent starts at x <= L0 - a/2 + j: at a gap
+  // of at least a - r - j from them, more than from the straight walls.
   layout.door_x = layout.grid_length + 0.5 * a + layout.jamb_radius;
   layout.upper_jamb_y = 0.5 * layout.door_width + layout.jamb_radius;
   layout.exit_x = layout.door_x + options.exit_distance;

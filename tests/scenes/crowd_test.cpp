@@ -66,7 +66,7 @@ TEST(CrowdOptionsTest, BadOptionsAreRejectedWithTheirRange) {
     ExpectInvalid([&] { options.Validate(); }, part);
     ExpectInvalid([&] { MakeCrowdScene(options); }, part);
   };
-  expect([](CrowdOptions* o) { o->agents = 0; }, "N (agents) must be in [1, 10000000], got 0");
+  expect([](CrowdOptions* o) { o->agents = 0; }, "N (agents) must be in [1, 1000000], got 0");
   expect([](CrowdOptions* o) { o->radius = -1.0; }, "radius must be finite and > 0, got -1");
   expect([](CrowdOptions* o) { o->speed = NAN; }, "speed must be finite and > 0, got nan");
   expect([](CrowdOptions* o) { o->spacing = 1.0; }, "spacing must be finite and > 2 radius = 1");
@@ -99,8 +99,8 @@ TEST(CrowdOptionsTest, ParsedFromTheSceneNameSyntax) {
   ExpectInvalid([] { ParseCrowdOptions("N"); }, "bad crowd option 'N': expected key=value");
   ExpectInvalid([] { ParseCrowdOptions("N=4,"); }, "bad crowd option '': expected key=value");
   ExpectInvalid([] { ParseCrowdOptions("N=2.5"); },
-                "bad value '2.5' for crowd option N: expected an integer in [1, 10000000]");
-  ExpectInvalid([] { ParseCrowdOptions("N=0"); }, "expected an integer in [1, 10000000]");
+                "bad value '2.5' for crowd option N: expected an integer in [1, 1000000]");
+  ExpectInvalid([] { ParseCrowdOptions("N=0"); }, "expected an integer in [1, 1000000]");
   ExpectInvalid([] { ParseCrowdOptions("radius=abc"); },
                 "bad value 'abc' for crowd option radius: expected a number");
   ExpectInvalid([] { ParseCrowdOptions("seed=-1"); }, "bad value '-1' for crowd option seed");
@@ -139,8 +139,14 @@ TEST(CrowdLayoutTest, StartIsFeasibleWithItsMarginAndDeterministic) {
       if (agents > 1) {
         EXPECT_GE(start.min_pair_gap, (1.0 - jitter) * (a - 2.0 * r) - slack) << what;
       }
-      // The straight walls' margin bounds the jambs' too (they are farther, see MakeCrowdLayout).
       EXPECT_GE(start.min_wall_gap, (1.0 - jitter) * (0.5 * a - r) - slack) << what;
+      // The jambs lie in x >= L0 + a/2: at least a - r - j from every agent.
+      const double j = jitter * 0.5 * (a - 2.0 * r);
+      for (int i = 0; i < agents; ++i) {
+        for (CrowdWall jamb : {CrowdWall::kUpperJamb, CrowdWall::kLowerJamb}) {
+          EXPECT_GE(layout.WallGap(layout.initial_state, i, jamb), a - r - j - slack) << what;
+        }
+      }
       EXPECT_TRUE(start.ListsSufficed()) << what << ": " << start.Summary();
       EXPECT_NO_THROW(ValidateScene(MakeCrowdScene(layout))) << what;
       EXPECT_EQ(
@@ -398,7 +404,7 @@ FesdOptions SmallCrowdFesd() {
 constexpr double kSmallCrowdHorizon = 2.5;
 
 TEST(CrowdSimulationTest, FesdFormsContactsWithCertifiedElements) {
-  for (int agents : {4, 6}) {
+  for (int agents : {4, 7}) {
     const CrowdLayout layout = MakeCrowdLayout(Options(agents));
     Scene scene = MakeCrowdScene(layout);
     scene.final_time = kSmallCrowdHorizon;

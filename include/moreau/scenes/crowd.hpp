@@ -82,8 +82,8 @@ struct CrowdOptions {
   void Validate() const;
 };
 
-/// Most agents a crowd scene may have (memory: a few hundred bytes per agent).
-inline constexpr int kMaxCrowdAgents = 10'000'000;
+/// Most agents a crowd scene may have (a scene holds about 1 kB per agent: lists and names).
+inline constexpr int kMaxCrowdAgents = 1'000'000;
 
 /// A wall of the crowd's room (see the file comment).
 enum class CrowdWall { kLeft, kBottom, kTop, kUpperJamb, kLowerJamb };
