@@ -74,7 +74,7 @@ struct CrowdOptions {
   double smoothing = 1.0;
   /// Horizon tf > 0. By the default tf = 4.5 about 45 of 100 agents are in contact, and among
   /// 10^4 agents more than 200 contacts are active, while every pair outside the neighbour list
-  /// is still at least 0.36 (about 2/3 r) from contact (docs/crowd-motion.md). Longer horizons:
+  /// is still at least 0.36 (about 0.7 r) from contact (docs/crowd-motion.md). Longer horizons:
   /// a larger cutoff, or segments with RelistCrowdLayout.
   double final_time = 4.5;
 
