@@ -1,6 +1,9 @@
 #include "moreau/scenes/catalog.hpp"
 
+#include <exception>
+
 #include "moreau/core/error.hpp"
+#include "moreau/scenes/crowd.hpp"
 #include "scenes.hpp"
 
 namespace moreau {
@@ -20,6 +23,10 @@ const std::vector<SceneDefinition>& SceneCatalog() {
       {"S4", "wave-rider: a moving boundary pushes an unactuated state (fixed control)",
        scenes::MakeS4},
       {"S5", "moving doorway: a pusher drives a slider between two moving discs", scenes::MakeS5},
+      {"crowd",
+       "crowd motion (Maury-Venel): 100 discs pushed through a door; crowd:N=1000,seed=3 for "
+       "others (docs/crowd-motion.md)",
+       [] { return MakeCrowdScene(CrowdOptions{}); }},
       {"F1", "oscillator switching at the unit circle (FESD order benchmark)", scenes::MakeF1},
       {"F2a", "crossing a switching surface", scenes::MakeF2a},
       {"F2b", "entering a sliding mode", scenes::MakeF2b},
@@ -66,6 +73,18 @@ const std::vector<SceneDefinition>& SceneCatalog() {
 }
 
 Scene MakeScene(const std::string& name) {
+  // Scene families with structural options: "crowd:N=1000,seed=3".
+  const std::size_t colon = name.find(':');
+  if (colon != std::string::npos) {
+    const std::string family = name.substr(0, colon);
+    RequireArgument(family == "crowd", "scene '", name, "': only the crowd family takes options ",
+                    "after a colon (crowd:N=1000,seed=3), not '", family, "'");
+    try {
+      return MakeCrowdScene(ParseCrowdOptions(name.substr(colon + 1)));
+    } catch (const std::invalid_argument& error) {
+      ThrowInvalidArgument("scene '", name, "': ", error.what());
+    }
+  }
   std::string available;
   for (const SceneDefinition& definition : SceneCatalog()) {
     if (definition.name == name) return definition.make();

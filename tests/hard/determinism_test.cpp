@@ -52,8 +52,14 @@ bool BitEqual(double a, double b) { return std::memcmp(&a, &b, sizeof(double)) =
 
 class DeterminismTest : public ::testing::TestWithParam<std::string> {};
 
+// Scenes whose default size makes two runs cost minutes with dense derivatives: their family's
+// small member has the same structure (the crowd: 100 agents, 572 constraints; 9 agents here).
+std::string DeterminismVariant(const std::string& name) {
+  return name == "crowd" ? "crowd:N=9" : name;
+}
+
 TEST_P(DeterminismTest, TwoRunsAreBitIdentical) {
-  Scene scene = MakeScene(GetParam());
+  Scene scene = MakeScene(DeterminismVariant(GetParam()));
   scene.final_time = std::min(scene.final_time, scene.initial_time + kMaxHorizon);
   const Fingerprint first = RunDefault(scene);
   const Fingerprint second = RunDefault(scene);

@@ -4,6 +4,7 @@
 //   moreau run [<scene>] [--integrator NAME] [--stages S] [--h H] [--tf T]
 //              [--set name=value ...] [--out DIR] ...
 //   moreau ocp <problem> [--N N] [--stages S] [--fe N_FE] [--single-shooting] ...
+//   moreau crowd-file [KEY=VALUE ...] > crowd.toml
 // Exit codes: 0 success; 1 the simulation ended with a non-success status; 2 bad usage or
 // input (unknown scene, option or parameter, bad value).
 
@@ -22,6 +23,7 @@
 #include "moreau/core/error.hpp"
 #include "moreau/integrators/simulate.hpp"
 #include "moreau/scenes/catalog.hpp"
+#include "moreau/scenes/crowd.hpp"
 #include "ocp_command.hpp"
 #include "output.hpp"
 #include "sweep_command.hpp"
@@ -362,6 +364,14 @@ int main(int argc, char** argv) {
   ocp->add_flag("--no-plot", no_plot, "do not write solution.png");
   ocp->add_flag("--quiet", quiet, "no progress output");
 
+  auto* crowd_file = app.add_subcommand(
+      "crowd-file",
+      "write a crowd-motion scene as a scene file on stdout (the built-in crowd:KEY=VALUE,...)");
+  std::vector<std::string> crowd_options;
+  crowd_file->add_option("options", crowd_options,
+                         "crowd options KEY=VALUE (N, radius, speed, spacing, jitter, seed, "
+                         "cutoff, door, exit_distance, smoothing, tf; docs/crowd-motion.md)");
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& error) {
@@ -371,6 +381,12 @@ int main(int argc, char** argv) {
   try {
     if (app.got_subcommand("list")) {
       List();
+      return 0;
+    }
+    if (app.got_subcommand("crowd-file")) {
+      std::string text;
+      for (const std::string& option : crowd_options) text += (text.empty() ? "" : ",") + option;
+      moreau::WriteCrowdSceneFile(moreau::ParseCrowdOptions(text), std::cout);
       return 0;
     }
     if (app.got_subcommand("show")) {

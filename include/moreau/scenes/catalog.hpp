@@ -19,8 +19,11 @@ struct SceneDefinition {
 
 /// All scenes, in the order `moreau list` shows them.
 const std::vector<SceneDefinition>& SceneCatalog();
-/// The scene with this name (case-sensitive). Throws std::invalid_argument naming the
-/// unknown scene and listing the available ones.
+/// The scene with this name (case-sensitive). Scene families whose structure has options take
+/// them after a colon as comma-separated KEY=VALUE pairs: "crowd:N=1000,seed=3"
+/// (include/moreau/scenes/crowd.hpp, docs/crowd-motion.md); "crowd" is "crowd:" with the
+/// defaults. Throws std::invalid_argument naming the unknown scene (listing the available
+/// ones) or the bad option.
 Scene MakeScene(const std::string& name);
 /// The scene simulated by the README's first command.
 std::string DefaultSceneName();
