@@ -474,20 +474,19 @@ class IdaRun {
     const Vector switching = system_.MemorySwitchingFunctions(y_);
     bool event = false;
     for (int i = 0; i < nr_; ++i) event |= switching[i] <= options_.event_tolerance;
-    if (np_ > 0) {
+    // The inputs may have changed (SetInputs before this call): the free sides are those of
+    // the velocity-level values for the new inputs and the same statuses. With the previous
+    // values, a multiplier that the new inputs make negative (a push that becomes a pull) was
+    // not seen, and the next phase started with a root function below zero, which IDA never
+    // reports (the doorway plan kept the pusher glued to the slider for a whole control
+    // interval; docs/ida.md, "Control breakpoints").
+    if (nz_ > 0 && !system_.SolveVelocityLevel(y_, a_zero_, v_, &v_)) event = true;
+    if (np_ > 0 && !event) {
       IndicatorEvaluation indicators;
       system_.EvaluateEventIndicators(y_, v_, a_zero_, Derivatives::kNone, &indicators);
-      for (int k = 0; k < np_; ++k) {
-        event |= indicators.values[k] <=
-                 options_.event_tolerance * std::max(1.0, std::fabs(indicators.values[k]));
-      }
+      for (int k = 0; k < np_; ++k) event |= indicators.values[k] <= options_.event_tolerance;
     }
     if (!event) {
-      // Inputs may have changed: consistent velocity-level values for the same statuses.
-      if (nz_ > 0 && !system_.SolveVelocityLevel(y_, a_zero_, v_, &v_)) {
-        const std::vector<bool> previous = a_zero_;
-        return Decide(t, &previous);
-      }
       StartPhase(t);
       return true;
     }

@@ -349,5 +349,46 @@ TEST(IdaTest, ReferenceAccuracyOnF1AndS3) {
   }
 }
 
+// --- Events the velocity-level values do not show at first order --------------------------
+
+// x' = u against the wall x >= 0 from x = 1: u = -1 until t = 2, then u = +1. The wall is
+// reached at t = 1 and left at the breakpoint t = 2 (the push becomes a pull), x(3) = 1.
+Scene WallScene() {
+  Scene scene;
+  scene.name = "wall";
+  scene.state_names = {"x"};
+  scene.initial_state = Vector{{1.0}};
+  scene.final_time = 3.0;
+  InputSpec u;
+  u.name = "u";
+  u.signal = PiecewiseConstantSignal{{2.0}, {-1.0, 1.0}};
+  scene.inputs.push_back(u);
+  scene.dynamics = MakeSmoothFunction(
+      "wall.f", 1,
+      [](const auto&, const auto& input, const auto&, const auto&, auto& out) { out[0] = input[0]; });
+  MovingSet wall;
+  wall.name = "wall";
+  wall.constraint_names = {"c"};
+  wall.constraints = MakeSmoothFunction(
+      "wall.c", 1,
+      [](const auto& x, const auto&, const auto&, const auto&, auto& out) { out[0] = x[0]; });
+  scene.effects.push_back(wall);
+  return scene;
+}
+
+TEST(IdaTest, BreakpointThatTurnsThePushIntoAPullEndsTheContact) {
+  // The free side at a breakpoint is the multiplier for the new input (-1 here); with the
+  // previous input's (+1) no event was seen, the phase started with its root function below
+  // zero, and x stayed at the wall until tf (x(3) = 0, "success").
+  const IdaResult result = SimulateIda(WallScene(), IdaOptions::Reference());
+  ASSERT_EQ(result.status, IdaStatus::kSuccess) << result.message;
+  ASSERT_EQ(result.events.size(), 2u);
+  EXPECT_EQ(result.events[0].kind, EventKind::kEnter);
+  EXPECT_NEAR(result.events[0].t, 1.0, kReferenceAccuracy);
+  EXPECT_EQ(result.events[1].kind, EventKind::kLeave);
+  EXPECT_EQ(result.events[1].t, 2.0);
+  EXPECT_NEAR(result.final_state[0], 1.0, kReferenceAccuracy);
+}
+
 }  // namespace
 }  // namespace moreau
