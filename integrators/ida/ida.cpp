@@ -434,7 +434,7 @@ class IdaRun {
     }
     std::vector<int> found(static_cast<std::size_t>(np_ + nr_), 0);
     IDAGetRootInfo(memory_, found.data());
-    EndPhase();
+    EndPhase(&found);
     Vector switching(nr_);
     for (int i = 0; i < nr_; ++i) {
       switching[i] = found[static_cast<std::size_t>(np_ + i)] != 0 ? 0.0 : 1.0;
@@ -673,9 +673,19 @@ class IdaRun {
   // At the end of a phase: the drift certificate |P| (position-level conditions of the phase),
   // then the state is projected back onto P = 0 (minimum-norm Gauss-Newton correction of x and
   // z_c; relay memories and the clock stay), so that the status decision at the event sees
-  // the kept sides at zero rather than at the integration error.
-  void EndPhase() {
+  // the kept sides at zero rather than at the integration error. At a root (`roots`: IDA's
+  // root flags), the continuous free sides that reached zero are kept at zero by the same
+  // projection: the correction of the drift (of the size of the integration error) would
+  // otherwise move them off zero, and a constraint just reached could be found violated by
+  // more than the event tolerance (the doorway plan at rtol 1e-8: -5.4e-8 for the slider on
+  // the left disc, a status-decision failure).
+  void EndPhase(const std::vector<int>* roots = nullptr) {
     if (nz_ == 0) return;
+    std::vector<int> reached;  // pairs whose continuous free side is a root
+    for (int k = 0; roots != nullptr && k < np_; ++k) {
+      if ((*roots)[static_cast<std::size_t>(k)] != 0 && FreeSideIsContinuous(k)) reached.push_back(k);
+    }
+    const int rows = nz_ + static_cast<int>(reached.size());
     auto Y = View(Y_->vector);
     for (int iteration = 0; iteration < kProjectionIterations; ++iteration) {
       Vector y, z, v;
@@ -687,8 +697,19 @@ class IdaRun {
       PositionLevel(point, true, &p, &p_y, &p_z);
       const double size = p.lpNorm<Eigen::Infinity>();
       if (iteration == 0) result_.stats.max_drift = std::max(result_.stats.max_drift, size);
-      if (size <= kProjectionTolerance) break;
-      Matrix jacobian(nz_, nx_ + nc_);
+      p.conservativeResize(rows);
+      p_y.conservativeResize(rows, Eigen::NoChange);
+      p_z.conservativeResize(rows, Eigen::NoChange);
+      for (std::size_t r = 0; r < reached.size(); ++r) {
+        const int k = reached[r];
+        const bool free_b = a_zero_[static_cast<std::size_t>(k)];
+        const int row = nz_ + static_cast<int>(r);
+        p[row] = free_b ? point.B[k] : point.A[k];
+        p_y.row(row) = free_b ? point.B_y.row(k) : point.A_y.row(k);
+        p_z.row(row) = free_b ? point.B_z.row(k) : point.A_z.row(k);
+      }
+      if (p.lpNorm<Eigen::Infinity>() <= kProjectionTolerance) break;
+      Matrix jacobian(rows, nx_ + nc_);
       jacobian.leftCols(nx_) = p_y.leftCols(nx_);
       for (int c = 0; c < nc_; ++c) {
         jacobian.col(nx_ + c) = p_z.col(continuous_[static_cast<std::size_t>(c)]);
@@ -698,6 +719,16 @@ class IdaRun {
       Y.segment(ny_, nc_) += step.tail(nc_);
     }
     y_ = Y.head(ny_);
+  }
+
+  // True if pair k's free side for the current statuses is a continuous variable (a
+  // constraint value or a Stewart lambda: a position-level condition when it is zero) rather
+  // than a jump variable (a multiplier, zero only at velocity level).
+  bool FreeSideIsContinuous(int k) const {
+    const ContinuousSide side = system_.pairs()[static_cast<std::size_t>(k)].continuous;
+    if (side == ContinuousSide::kBoth) return true;
+    const bool free_b = a_zero_[static_cast<std::size_t>(k)];
+    return free_b == (side == ContinuousSide::kB);
   }
 
   // Projection onto the phase's position-level conditions: Gauss-Newton iterations until |P|
