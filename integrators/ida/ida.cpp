@@ -2,7 +2,6 @@
 // docs/ida.md). SUNDIALS types stay in this file.
 
 #include "moreau/integrators/ida.hpp"
-#include "moreau/integrators/simulate.hpp"
 
 #include <ida/ida.h>
 #include <ida/ida_ls.h>
@@ -24,6 +23,7 @@
 #include <stdexcept>
 
 #include "moreau/core/error.hpp"
+#include "moreau/integrators/simulate.hpp"
 
 namespace moreau {
 
@@ -321,8 +321,44 @@ class IdaRun {
     }
     Y.tail(nz_) = v_;
     Yp.tail(nz_).setZero();
+    ArmRoots(/*phase_start=*/true);
     ReInit(t);
     ++result_.stats.num_phases;
+  }
+
+  // Root functions of free sides that start at zero. A free side within the event tolerance
+  // of zero at the start of a phase (a constraint that has just left, a multiplier that starts
+  // at zero at a grazing contact) has a zero rate there; its value in the first steps is
+  // round-off and integration error of either sign, and IDA reported "decreases through
+  // zero" of that noise as events. Each such event was decided at a point where the
+  // velocity-level problem is degenerate, and a run of them ended in the wrong branch (S5 with
+  // u = (0, 1), the doorway plan at rtol 1e-10: a pusher that had left the left disc was
+  // glued to it with a negative multiplier, its root function starting below zero where IDA
+  // never reports it). Until such a free side has exceeded the event tolerance at the end of
+  // an accepted step (armed), its root function is offset, g = value + event tolerance +
+  // max(0, -start value): an event only when it falls by more than the event tolerance below
+  // zero and below its start. The offset is the resolution of the status decisions
+  // (candidates are free sides within the event tolerance of zero); a continuous free side
+  // found below zero is projected back onto zero at the root (EndPhase).
+  void ArmRoots(bool phase_start) {
+    if (np_ == 0) return;
+    if (phase_start) root_offset_.assign(static_cast<std::size_t>(np_), 0.0);
+    if (!phase_start && std::none_of(root_offset_.begin(), root_offset_.end(),
+                                     [](double offset) { return offset > 0.0; })) {
+      return;
+    }
+    IndicatorEvaluation indicators;
+    system_.EvaluateEventIndicators(y_, v_, a_zero_, Derivatives::kNone, &indicators);
+    const double tolerance = options_.event_tolerance;
+    for (int k = 0; k < np_; ++k) {
+      const double value = indicators.values[k];
+      double& offset = root_offset_[static_cast<std::size_t>(k)];
+      if (phase_start) {
+        offset = value > tolerance ? 0.0 : tolerance + std::max(0.0, -value);
+      } else if (value > tolerance) {
+        offset = 0.0;  // armed: both root functions are positive here, no false sign change
+      }
+    }
   }
 
   // Adds IDA's counters since the last accumulation (IDAReInit resets them; ReInit below
@@ -384,6 +420,7 @@ class IdaRun {
       t_ = t_return;
       y_ = View(Y_->vector).head(ny_);
       v_ = View(Y_->vector).tail(nz_);
+      if (flag != IDA_ROOT_RETURN) ArmRoots(/*phase_start=*/false);
       if (options_.record_steps) {
         double h = 0.0;
         IDAGetLastStep(memory_, &h);
@@ -661,7 +698,9 @@ class IdaRun {
     Unpack(Y, &y, &z, &v);
     if (np_ > 0) {
       system_.EvaluateEventIndicators(y, v, a_zero_, Derivatives::kNone, &indicators_);
-      for (int k = 0; k < np_; ++k) out[k] = indicators_.values[k];
+      for (int k = 0; k < np_; ++k) {
+        out[k] = indicators_.values[k] + root_offset_[static_cast<std::size_t>(k)];
+      }
     }
     if (nr_ > 0) {
       const Vector switching = system_.MemorySwitchingFunctions(y);
@@ -683,7 +722,8 @@ class IdaRun {
     if (nz_ == 0) return;
     std::vector<int> reached;  // pairs whose continuous free side is a root
     for (int k = 0; roots != nullptr && k < np_; ++k) {
-      if ((*roots)[static_cast<std::size_t>(k)] != 0 && FreeSideIsContinuous(k)) reached.push_back(k);
+      if ((*roots)[static_cast<std::size_t>(k)] != 0 && FreeSideIsContinuous(k))
+        reached.push_back(k);
     }
     const int rows = nz_ + static_cast<int>(reached.size());
     auto Y = View(Y_->vector);
@@ -810,6 +850,8 @@ class IdaRun {
   Vector y_, v_;
   std::vector<bool> a_zero_;
   std::vector<PairRole> roles_;
+  // Per pair: the offset of its root function until the free side is armed (ArmRoots), or 0.
+  std::vector<double> root_offset_;
   std::vector<double> output_times_;
   std::size_t next_output_ = 0;
   std::string last_error_;
