@@ -31,7 +31,7 @@ IdaOptions IdaOptions::Reference() {
   IdaOptions options;
   options.relative_tolerance = 1e-12;
   options.absolute_tolerance = 1e-14;
-  options.newton_convergence_factor = 0.001;
+  options.newton_convergence_factor = 0.01;
   return options;
 }
 
