@@ -196,6 +196,9 @@ class IdaRun {
     result_.final_time = t_;
     result_.final_state = y_.head(nx_);
     if (result_.trajectory.t.empty() || result_.trajectory.t.back() != t_) Record(t_, 0.0);
+    // The last phase's counters: a run that fails inside a phase has no IDAReInit after it
+    // (hard_corner with the Newton factor 0.001 reported 48 steps after 10^7).
+    AccumulateStats();
     result_.stats.cpu_seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return result_;

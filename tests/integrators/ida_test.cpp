@@ -70,6 +70,16 @@ TEST(IdaTest, StepCountMatchesTheRecordedSteps) {
   }
 }
 
+// A run that fails inside a phase counts that phase's steps too.
+TEST(IdaTest, StatsOfAFailedRunCountItsSteps) {
+  IdaOptions options;
+  options.max_steps = 5;
+  const IdaResult result = SimulateIda(MakeScene("S3"), options);
+  ASSERT_EQ(result.status, IdaStatus::kTooManySteps) << result.message;
+  EXPECT_GT(result.stats.num_steps, options.max_steps);
+  EXPECT_GT(result.stats.num_residual_evaluations, 0);
+}
+
 TEST(IdaTest, ThermostatSwitchesAndFinalStateMatchClosedForm) {
   const IdaResult result = SimulateIda(MakeScene("H1"), IdaOptions::Reference());
   ASSERT_EQ(result.status, IdaStatus::kSuccess) << result.message;
