@@ -350,11 +350,10 @@ class IdaRun {
                                      [](double offset) { return offset > 0.0; })) {
       return;
     }
-    IndicatorEvaluation indicators;
-    system_.EvaluateEventIndicators(y_, v_, a_zero_, Derivatives::kNone, &indicators);
+    system_.EvaluateEventIndicators(y_, v_, a_zero_, Derivatives::kNone, &indicators_);
     const double tolerance = options_.event_tolerance;
     for (int k = 0; k < np_; ++k) {
-      const double value = indicators.values[k];
+      const double value = indicators_.values[k];
       double& offset = root_offset_[static_cast<std::size_t>(k)];
       if (phase_start) {
         offset = value > tolerance ? 0.0 : tolerance + std::max(0.0, -value);
