@@ -2,7 +2,6 @@
 // docs/ida.md). SUNDIALS types stay in this file.
 
 #include "moreau/integrators/ida.hpp"
-#include "moreau/integrators/simulate.hpp"
 
 #include <ida/ida.h>
 #include <ida/ida_ls.h>
@@ -24,6 +23,7 @@
 #include <stdexcept>
 
 #include "moreau/core/error.hpp"
+#include "moreau/integrators/simulate.hpp"
 
 namespace moreau {
 
@@ -136,6 +136,11 @@ class IdaRun {
       MOREAU_ASSERT(it != continuous_.end(), "an index-1 pair's b must be a continuous unknown");
       position_pair_[static_cast<std::size_t>(it - continuous_.begin())] = k;
     }
+    tested_.assign(static_cast<std::size_t>(n_), false);
+    for (int i = 0; i < nx_; ++i) tested_[static_cast<std::size_t>(i)] = true;
+    for (int c = 0; c < nc_; ++c) {
+      tested_[static_cast<std::size_t>(ny_ + c)] = position_pair_[static_cast<std::size_t>(c)] < 0;
+    }
     const bool sparse_dynamics = scene.dynamics.has_sparse_state_jacobian();
     sparse_ = options.linear_solver == LinearSolverKind::kSparseLu ||
               (options.linear_solver == LinearSolverKind::kAutomatic &&
@@ -191,6 +196,9 @@ class IdaRun {
     result_.final_time = t_;
     result_.final_state = y_.head(nx_);
     if (result_.trajectory.t.empty() || result_.trajectory.t.back() != t_) Record(t_, 0.0);
+    // The last phase's counters: a run that fails inside a phase has no IDAReInit after it
+    // (hard_corner with the Newton factor 0.001 reported 48 steps after 10^7).
+    AccumulateStats();
     result_.stats.cpu_seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return result_;
@@ -320,8 +328,43 @@ class IdaRun {
     }
     Y.tail(nz_) = v_;
     Yp.tail(nz_).setZero();
+    ArmRoots(/*phase_start=*/true);
     ReInit(t);
     ++result_.stats.num_phases;
+  }
+
+  // Root functions of free sides that start at zero. A free side within the event tolerance
+  // of zero at the start of a phase (a constraint that has just left, a multiplier that starts
+  // at zero at a grazing contact) has a zero rate there; its value in the first steps is
+  // round-off and integration error of either sign, and IDA reported "decreases through
+  // zero" of that noise as events. Each such event was decided at a point where the
+  // velocity-level problem is degenerate, and a run of them ended in the wrong branch (S5 with
+  // u = (0, 1), the doorway plan at rtol 1e-10: a pusher that had left the left disc was
+  // glued to it with a negative multiplier, its root function starting below zero where IDA
+  // never reports it). Until such a free side has exceeded the event tolerance at the end of
+  // an accepted step (armed), its root function is offset, g = value + event tolerance +
+  // max(0, -start value): an event only when it falls by more than the event tolerance below
+  // zero and below its start. The offset is the resolution of the status decisions
+  // (candidates are free sides within the event tolerance of zero); a continuous free side
+  // found below zero is projected back onto zero at the root (EndPhase).
+  void ArmRoots(bool phase_start) {
+    if (np_ == 0) return;
+    if (phase_start) root_offset_.assign(static_cast<std::size_t>(np_), 0.0);
+    if (!phase_start && std::none_of(root_offset_.begin(), root_offset_.end(),
+                                     [](double offset) { return offset > 0.0; })) {
+      return;
+    }
+    system_.EvaluateEventIndicators(y_, v_, a_zero_, Derivatives::kNone, &indicators_);
+    const double tolerance = options_.event_tolerance;
+    for (int k = 0; k < np_; ++k) {
+      const double value = indicators_.values[k];
+      double& offset = root_offset_[static_cast<std::size_t>(k)];
+      if (phase_start) {
+        offset = value > tolerance ? 0.0 : tolerance + std::max(0.0, -value);
+      } else if (value > tolerance) {
+        offset = 0.0;  // armed: both root functions are positive here, no false sign change
+      }
+    }
   }
 
   // Adds IDA's counters since the last accumulation (IDAReInit resets them; ReInit below
@@ -383,6 +426,7 @@ class IdaRun {
       t_ = t_return;
       y_ = View(Y_->vector).head(ny_);
       v_ = View(Y_->vector).tail(nz_);
+      if (flag != IDA_ROOT_RETURN) ArmRoots(/*phase_start=*/false);
       if (options_.record_steps) {
         double h = 0.0;
         IDAGetLastStep(memory_, &h);
@@ -433,7 +477,7 @@ class IdaRun {
     }
     std::vector<int> found(static_cast<std::size_t>(np_ + nr_), 0);
     IDAGetRootInfo(memory_, found.data());
-    EndPhase();
+    EndPhase(&found);
     Vector switching(nr_);
     for (int i = 0; i < nr_; ++i) {
       switching[i] = found[static_cast<std::size_t>(np_ + i)] != 0 ? 0.0 : 1.0;
@@ -473,20 +517,19 @@ class IdaRun {
     const Vector switching = system_.MemorySwitchingFunctions(y_);
     bool event = false;
     for (int i = 0; i < nr_; ++i) event |= switching[i] <= options_.event_tolerance;
-    if (np_ > 0) {
+    // The inputs may have changed (SetInputs before this call): the free sides are those of
+    // the velocity-level values for the new inputs and the same statuses. With the previous
+    // values, a multiplier that the new inputs make negative (a push that becomes a pull) was
+    // not seen, and the next phase started with a root function below zero, which IDA never
+    // reports (the doorway plan kept the pusher glued to the slider for a whole control
+    // interval; docs/ida.md, "Control breakpoints").
+    if (nz_ > 0 && !system_.SolveVelocityLevel(y_, a_zero_, v_, &v_)) event = true;
+    if (np_ > 0 && !event) {
       IndicatorEvaluation indicators;
       system_.EvaluateEventIndicators(y_, v_, a_zero_, Derivatives::kNone, &indicators);
-      for (int k = 0; k < np_; ++k) {
-        event |= indicators.values[k] <=
-                 options_.event_tolerance * std::max(1.0, std::fabs(indicators.values[k]));
-      }
+      for (int k = 0; k < np_; ++k) event |= indicators.values[k] <= options_.event_tolerance;
     }
     if (!event) {
-      // Inputs may have changed: consistent velocity-level values for the same statuses.
-      if (nz_ > 0 && !system_.SolveVelocityLevel(y_, a_zero_, v_, &v_)) {
-        const std::vector<bool> previous = a_zero_;
-        return Decide(t, &previous);
-      }
       StartPhase(t);
       return true;
     }
@@ -661,7 +704,9 @@ class IdaRun {
     Unpack(Y, &y, &z, &v);
     if (np_ > 0) {
       system_.EvaluateEventIndicators(y, v, a_zero_, Derivatives::kNone, &indicators_);
-      for (int k = 0; k < np_; ++k) out[k] = indicators_.values[k];
+      for (int k = 0; k < np_; ++k) {
+        out[k] = indicators_.values[k] + root_offset_[static_cast<std::size_t>(k)];
+      }
     }
     if (nr_ > 0) {
       const Vector switching = system_.MemorySwitchingFunctions(y);
@@ -673,9 +718,20 @@ class IdaRun {
   // At the end of a phase: the drift certificate |P| (position-level conditions of the phase),
   // then the state is projected back onto P = 0 (minimum-norm Gauss-Newton correction of x and
   // z_c; relay memories and the clock stay), so that the status decision at the event sees
-  // the kept sides at zero rather than at the integration error.
-  void EndPhase() {
+  // the kept sides at zero rather than at the integration error. At a root (`roots`: IDA's
+  // root flags), the continuous free sides that reached zero are kept at zero by the same
+  // projection: the correction of the drift (of the size of the integration error) would
+  // otherwise move them off zero, and a constraint just reached could be found violated by
+  // more than the event tolerance (the doorway plan at rtol 1e-8: -5.4e-8 for the slider on
+  // the left disc, a status-decision failure).
+  void EndPhase(const std::vector<int>* roots = nullptr) {
     if (nz_ == 0) return;
+    std::vector<int> reached;  // pairs whose continuous free side is a root
+    for (int k = 0; roots != nullptr && k < np_; ++k) {
+      if ((*roots)[static_cast<std::size_t>(k)] != 0 && FreeSideIsContinuous(k))
+        reached.push_back(k);
+    }
+    const int rows = nz_ + static_cast<int>(reached.size());
     auto Y = View(Y_->vector);
     for (int iteration = 0; iteration < kProjectionIterations; ++iteration) {
       Vector y, z, v;
@@ -687,8 +743,19 @@ class IdaRun {
       PositionLevel(point, true, &p, &p_y, &p_z);
       const double size = p.lpNorm<Eigen::Infinity>();
       if (iteration == 0) result_.stats.max_drift = std::max(result_.stats.max_drift, size);
-      if (size <= kProjectionTolerance) break;
-      Matrix jacobian(nz_, nx_ + nc_);
+      p.conservativeResize(rows);
+      p_y.conservativeResize(rows, Eigen::NoChange);
+      p_z.conservativeResize(rows, Eigen::NoChange);
+      for (std::size_t r = 0; r < reached.size(); ++r) {
+        const int k = reached[r];
+        const bool free_b = a_zero_[static_cast<std::size_t>(k)];
+        const int row = nz_ + static_cast<int>(r);
+        p[row] = free_b ? point.B[k] : point.A[k];
+        p_y.row(row) = free_b ? point.B_y.row(k) : point.A_y.row(k);
+        p_z.row(row) = free_b ? point.B_z.row(k) : point.A_z.row(k);
+      }
+      if (p.lpNorm<Eigen::Infinity>() <= kProjectionTolerance) break;
+      Matrix jacobian(rows, nx_ + nc_);
       jacobian.leftCols(nx_) = p_y.leftCols(nx_);
       for (int c = 0; c < nc_; ++c) {
         jacobian.col(nx_ + c) = p_z.col(continuous_[static_cast<std::size_t>(c)]);
@@ -698,6 +765,16 @@ class IdaRun {
       Y.segment(ny_, nc_) += step.tail(nc_);
     }
     y_ = Y.head(ny_);
+  }
+
+  // True if pair k's free side for the current statuses is a continuous variable (a
+  // constraint value or a Stewart lambda: a position-level condition when it is zero) rather
+  // than a jump variable (a multiplier, zero only at velocity level).
+  bool FreeSideIsContinuous(int k) const {
+    const ContinuousSide side = system_.pairs()[static_cast<std::size_t>(k)].continuous;
+    if (side == ContinuousSide::kBoth) return true;
+    const bool free_b = a_zero_[static_cast<std::size_t>(k)];
+    return free_b == (side == ContinuousSide::kB);
   }
 
   // Projection onto the phase's position-level conditions: Gauss-Newton iterations until |P|
@@ -726,23 +803,25 @@ class IdaRun {
     }
   }
 
-  // Error weights 1/(rtol |Y_i| + atol), with the scene states x and the carried continuous
-  // algebraic variables z_c (the components whose errors the test is about) scaled by
-  // sqrt(N / (n_x + n_c)). IDA's local error test is the weighted RMS over all N components,
-  // N including the clock and relay memories (integrated exactly: zero error) and the
-  // velocity-level values (suppressed from the test), so with plain weights the test on the
-  // states was looser than rtol by sqrt(N / (n_x + n_c)) (sqrt(11/5) on F1 in Stewart form;
-  // docs/ida.md, "Accuracy and settings").
+  // Error weights 1/(rtol |Y_i| + atol), those of the scene states x and of the carried
+  // continuous algebraic variables z_c scaled by sqrt(N / n_x), so that IDA's local error test
+  // (the weighted RMS over all N components) is the RMS over the n_x scene states, as for an
+  // ODE in x alone, plus the errors of z_c. The other components carry no error of their own:
+  // the clock and relay memories are integrated exactly, the velocity-level values and the
+  // index-1 multipliers are algebraic (suppressed from the test). Counting z_c in the average
+  // (sqrt(N / (n_x + n_c)), as before) diluted the test on x: on the exact solution z_c is a
+  // function of x (lambda = g - min g) whose local errors are far smaller than x's, and F1
+  // took fewer steps than the ODE x' = A2 x alone and ended 2.2 times less accurate
+  // (docs/ida.md, "Accuracy and settings").
   static int WeightCallback(N_Vector Y, N_Vector ewt, void* user_data) {
     const auto* run = static_cast<const IdaRun*>(user_data);
     const auto y = View(Y);
     auto weights = View(ewt);
-    const double scale = std::sqrt(static_cast<double>(run->n_) / (run->nx_ + run->nc_));
+    const double scale = std::sqrt(static_cast<double>(run->n_) / std::max(run->nx_, 1));
     for (int i = 0; i < run->n_; ++i) {
       const double tolerance =
           run->options_.relative_tolerance * std::fabs(y[i]) + run->options_.absolute_tolerance;
-      const bool tested = i < run->nx_ || (i >= run->ny_ && i < run->ny_ + run->nc_);
-      weights[i] = (tested ? scale : 1.0) / tolerance;
+      weights[i] = (run->tested_[static_cast<std::size_t>(i)] ? scale : 1.0) / tolerance;
     }
     return 0;
   }
@@ -763,6 +842,9 @@ class IdaRun {
   std::vector<int> continuous_, jump_;  // indices in z of continuous and jump variables
   // Per continuous variable: the index-1 pair whose multiplier it is (position-level row), or -1.
   std::vector<int> position_pair_;
+  // Per IDA component: in the local error test with the scaled weight (WeightCallback): the
+  // scene states x and the differential z_c.
+  std::vector<bool> tested_;
   bool sparse_ = false;
   SundialsContext context_;
   void* memory_ = nullptr;
@@ -774,6 +856,8 @@ class IdaRun {
   Vector y_, v_;
   std::vector<bool> a_zero_;
   std::vector<PairRole> roles_;
+  // Per pair: the offset of its root function until the free side is armed (ArmRoots), or 0.
+  std::vector<double> root_offset_;
   std::vector<double> output_times_;
   std::size_t next_output_ = 0;
   std::string last_error_;
