@@ -751,8 +751,8 @@ class IdaRun {
         const bool free_b = a_zero_[static_cast<std::size_t>(k)];
         const int row = nz_ + static_cast<int>(r);
         p[row] = free_b ? point.B[k] : point.A[k];
-        p_y.row(row) = free_b ? point.B_y.row(k) : point.A_y.row(k);
-        p_z.row(row) = free_b ? point.B_z.row(k) : point.A_z.row(k);
+        p_y.row(row) = free_b ? point.B_y.dense().row(k) : point.A_y.dense().row(k);
+        p_z.row(row) = free_b ? point.B_z.dense().row(k) : point.A_z.dense().row(k);
       }
       if (p.lpNorm<Eigen::Infinity>() <= kProjectionTolerance) break;
       Matrix jacobian(rows, nx_ + nc_);
