@@ -14,6 +14,13 @@ CollocationStages::CollocationStages(LoweredSystem* system, int stages)
       np_(system->num_pairs()),
       stages_(static_cast<std::size_t>(stages)) {}
 
+void CollocationStages::Resize() {
+  nz_ = system_->num_algebraic();
+  ng_ = system_->num_equations();
+  np_ = system_->num_pairs();
+  cached_ratio_ = -1.0;
+}
+
 double CollocationStages::EstimatedJacobianNonzeros() const {
   const double n = unknowns();
   if (!system_->sparse()) return n * n;

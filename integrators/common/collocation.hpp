@@ -22,6 +22,8 @@ namespace moreau::internal {
 class CollocationStages {
  public:
   CollocationStages(LoweredSystem* system, int stages);
+  // Takes the lowered system's current sizes (after a change of its working set).
+  void Resize();
 
   int stages() const { return s_; }
   int num_states() const { return ny_; }

@@ -123,6 +123,17 @@ OptionBinding<Options> BindLinearSolver(LinearSolverKind Options::*member) {
   return BindChoice("linear_solver", member, {"auto", "dense", "sparse"}, ParseLinearSolverKind,
                     ToString, "LU backend (auto: dense up to 256 unknowns, sparse KLU above)");
 }
+// The near-active constraint filter of FESD and time-stepping (docs/sparse-systems.md).
+template <class Options>
+std::vector<OptionBinding<Options>> BindConstraintFilter(ConstraintFilter Options::*filter,
+                                                         double Options::*safety) {
+  return {BindChoice("constraint_filter", filter, {"auto", "off", "on"}, ParseConstraintFilter,
+                     ToString,
+                     "leave moving-set constraints far from contact out of the element systems "
+                     "(auto: on above 64 constraints)"),
+          BindReal("filter_safety", safety,
+                   "safety factor of the filter's margin (times H and the rate bound), >= 1")};
+}
 // The semismooth Newton settings of the complementarity integrators (FESD, time-stepping).
 template <class Options>
 std::vector<OptionBinding<Options>> BindNewton(SemismoothNewtonOptions Options::*member) {

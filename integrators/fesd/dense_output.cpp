@@ -73,7 +73,7 @@ void FesdRun::DenseOutput(const ElementPolynomial& element) {
       z = element.algebraic.col(nearest);
       if (system_.SolveVelocityLevel(y, element.a_zero, z, &v)) z = ConsistentGuess(y, v);
     }
-    result_.trajectory.Append(t, y.head(nx_), z, element.h);
+    result_.trajectory.Append(t, y.head(nx_), TrajectoryAlgebraic(z), element.h);
   }
 }
 

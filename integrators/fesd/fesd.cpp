@@ -60,6 +60,8 @@ void FesdOptions::Validate() const {
                     "step_sequence entries must be finite and >= 0 (0: to the segment end), got ",
                     h);
   }
+  RequireArgument(std::isfinite(filter_safety) && filter_safety >= 1.0,
+                  "filter safety must be >= 1, got ", filter_safety);
   newton.Validate();
 }
 
@@ -93,6 +95,8 @@ FesdStats& FesdStats::operator+=(const FesdStats& other) {
   max_complementarity = std::max(max_complementarity, other.max_complementarity);
   min_element_length = std::min(min_element_length, other.min_element_length);
   frozen_time += other.frozen_time;
+  num_filter_rechecks += other.num_filter_rechecks;
+  max_working_pairs = std::max(max_working_pairs, other.max_working_pairs);
   cpu_seconds += other.cpu_seconds;
   return *this;
 }
@@ -124,13 +128,17 @@ FesdResult FesdRun::Run() {
     y_ = options_.initial_state;
   }
   tau_ = scene.initial_time;
+  // With the near-active filter the system's unknowns change; trajectories keep every
+  // declared one (zeros for constraints left out).
+  const std::vector<std::string> algebraic_names =
+      filter_.enabled() ? system_.declared_algebraic_names() : system_.algebraic_names();
   for (Trajectory* t : {&result_.trajectory, &result_.stage_trajectory}) {
     t->state_names = scene.state_names;
-    t->algebraic_names = system_.algebraic_names();
+    t->algebraic_names = algebraic_names;
   }
   if (system_.time_freezing()) {
     result_.numerical_trajectory.state_names = system_.state_names();
-    result_.numerical_trajectory.algebraic_names = system_.algebraic_names();
+    result_.numerical_trajectory.algebraic_names = algebraic_names;
     for (const std::string& name : system_.relay_names()) {
       RelaySignal signal;
       signal.relay = name;
@@ -146,6 +154,9 @@ FesdResult FesdRun::Run() {
   check_jump_stages_ = options_.adaptive || !options_.step_sequence.empty();
   if (options_.initial_state.size() > 0 && !ProjectInitialState()) return Finish(start);
 
+  // The near-active filter's first working set (no statuses or multipliers yet).
+  UpdateWorkingSet(options_.step_size > 0.0 ? options_.step_size
+                                            : 1e-2 * (scene.final_time - scene.initial_time));
   // Statuses at the initial state: the slow solution if x0 lies on a switching surface or
   // on the boundary of a moving set.
   if (Decide(y_[system_.clock_index()], nullptr)) {
@@ -155,7 +166,9 @@ FesdResult FesdRun::Run() {
     boundary_a_ = initial.A;
     boundary_b_ = initial.B;
     result_.trajectory.Append(scene.initial_time, y_.head(nx_), Vector(), 0.0);
-    if (system_.time_freezing()) result_.numerical_trajectory.Append(tau_, y_, z_guess_, 0.0);
+    if (system_.time_freezing()) {
+      result_.numerical_trajectory.Append(tau_, y_, TrajectoryAlgebraic(z_guess_), 0.0);
+    }
     // With a speed of time the horizon is in numerical time: the fixed-grid loop.
     const bool clock_targets = system_.time_freezing() && scene.time_scale_input < 0;
     if (options_.adaptive || !options_.step_sequence.empty()) {
@@ -256,7 +269,7 @@ FesdResult FesdRun::Finish(std::chrono::steady_clock::time_point start) {
   result_.final_time = y_[system_.clock_index()];
   result_.final_state = y_.head(nx_);
   result_.final_lowered_state = y_;
-  result_.final_algebraic = z_last_;
+  result_.final_algebraic = TrajectoryAlgebraic(z_last_);
   // With dense output an output time at tf is the final point (the clock may differ from tf
   // by round-off).
   const bool final_output = dense_output_ && !result_.trajectory.t.empty() &&
@@ -264,7 +277,8 @@ FesdResult FesdRun::Finish(std::chrono::steady_clock::time_point start) {
                                 kClockTolerance * std::max(1.0, std::fabs(result_.final_time));
   if (!final_output &&
       (result_.trajectory.t.empty() || result_.trajectory.t.back() != result_.final_time)) {
-    result_.trajectory.Append(result_.final_time, result_.final_state, z_last_, 0.0);
+    result_.trajectory.Append(result_.final_time, result_.final_state, TrajectoryAlgebraic(z_last_),
+                              0.0);
   }
   if (options_.sensitivities) {
     const int np = system_.num_parameters();

@@ -72,6 +72,7 @@ FesdRun::Snapshot FesdRun::Save() const {
   s.last_h = last_h_;
   s.have_last_w = have_last_w_;
   s.a_zero = a_zero_;
+  s.working = filter_.working();
   s.last_z_matrix = last_z_matrix_;
   s.sensitivity = sensitivity_;
   s.d_step_end = d_step_end_;
@@ -87,6 +88,13 @@ FesdRun::Snapshot FesdRun::Save() const {
 }
 
 void FesdRun::Restore(const Snapshot& s) {
+  // The working set of the snapshot first: the vectors below are laid out in it.
+  LoweredSystem::WorkingLayout previous;
+  if (filter_.Restore(s.working, &previous)) {
+    nz_ = system_.num_algebraic();
+    np_ = system_.num_pairs();
+    group_.Resize();
+  }
   y_ = s.y;
   v_ = s.v;
   z_guess_ = s.z_guess;
@@ -454,8 +462,9 @@ double FesdRun::IndicatorResolution() const {
         }
         // Relative to the variation over the element, or to the distance from zero where that
         // is larger (a free side that stays far from zero cannot hide a pair of roots).
-        worst = std::max(worst, std::fabs(actual[k] - predicted[k]) /
-                                    (std::max(high - low, nearest) + kIndicatorFloor * (1.0 + size)));
+        worst =
+            std::max(worst, std::fabs(actual[k] - predicted[k]) /
+                                (std::max(high - low, nearest) + kIndicatorFloor * (1.0 + size)));
       }
     }
   }

@@ -16,6 +16,15 @@ namespace moreau::internal {
 // fixed-length elements; if a free side turns negative, a group solve of equal elements that
 // ends on the switch. Returns true if a switch ended the advance.
 bool FesdRun::Advance(double step_end, int* remaining) {
+  for (;;) {
+    UpdateWorkingSet(step_end - tau_);
+    bool retry = false;
+    const bool switched = AdvanceOnce(step_end, remaining, &retry);
+    if (!retry) return switched;
+  }
+}
+
+bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
   const double rest = step_end - tau_;
   const double h_trial = rest / *remaining;
   const Vector y_start = y_;
@@ -57,6 +66,11 @@ bool FesdRun::Advance(double step_end, int* remaining) {
                       ": " + solved.message + "), so a switch was assumed";
       violation = {true, e, 0.5};
       break;
+    }
+    excluded_min_.assign(1, std::numeric_limits<double>::infinity());
+    if (!FilterCheck(group_.element(0), y, solved.solution, 0)) {
+      *retry = true;  // a left-out constraint came into contact: solve again with it
+      return false;
     }
     violation = StageViolation(group_.element(0), scales, e);
     if (!violation.found && check_jump_stages_) {
@@ -139,6 +153,16 @@ bool FesdRun::Advance(double step_end, int* remaining) {
       h_guess = offset / m;
       continue;
     }
+    excluded_min_.assign(static_cast<std::size_t>(m), std::numeric_limits<double>::infinity());
+    bool filtered = true;
+    for (int k = 0; k < m; ++k) {
+      filtered &= FilterCheck(group_.element(k), group_.ElementStart(w, k),
+                              w.segment(group_.element_offset(k), group_.element_size()), k);
+    }
+    if (!filtered) {
+      *retry = true;
+      return false;
+    }
     const bool switched = h < setup.h_max * (1.0 - 1e-12);
     Commit(Record(w, h, switched, solved, *remaining, boundary_a_, boundary_b_));
     last_w_ = w.segment(group_.element_offset(m - 1), group_.element_size());
@@ -167,6 +191,63 @@ bool FesdRun::Advance(double step_end, int* remaining) {
            " but no group of equal elements ending on it converged in " +
            std::to_string(options_.max_event_retries) + " retries");
   return true;
+}
+
+// --- near-active constraint filter ------------------------------------------------------
+
+void FesdRun::UpdateWorkingSet(double horizon) {
+  if (!filter_.enabled()) return;
+  LoweredSystem::WorkingLayout previous;
+  if (filter_.Update(y_, a_zero_, z_guess_, horizon, &previous)) AdoptLayout(previous);
+  result_.stats.max_working_pairs =
+      std::max(result_.stats.max_working_pairs, static_cast<long>(np_));
+}
+
+void FesdRun::AdoptLayout(const LoweredSystem::WorkingLayout& previous) {
+  auto remap = [&](Vector* z) {
+    if (z->size() == previous.num_algebraic) *z = system_.RemapAlgebraic(*z, previous, 0.0);
+  };
+  remap(&v_);
+  remap(&z_guess_);
+  remap(&z_last_);
+  // Constraints joining the set are inactive (c > 0, lambda = 0).
+  if (static_cast<int>(a_zero_.size()) == previous.num_pairs) {
+    a_zero_ = system_.RemapStatuses(a_zero_, previous, false);
+  }
+  if (boundary_a_.size() == previous.num_pairs) {
+    boundary_a_ =
+        system_.RemapPairValues(boundary_a_, previous, std::numeric_limits<double>::quiet_NaN());
+    boundary_b_ = system_.RemapPairValues(boundary_b_, previous, 0.0);
+    PointEvaluation point;
+    system_.Evaluate(y_, z_guess_, Derivatives::kNone, &point);
+    for (Eigen::Index k = 0; k < boundary_a_.size(); ++k) {
+      if (std::isnan(boundary_a_[k])) boundary_a_[k] = point.A[k];
+    }
+  }
+  have_last_w_ = false;  // the previous element's unknowns are in the old layout
+  nz_ = system_.num_algebraic();
+  np_ = system_.num_pairs();
+  group_.Resize();
+}
+
+bool FesdRun::FilterCheck(const internal::CollocationStages& stages, const Vector& y0,
+                          const ConstVectorRef& w_e, int element) {
+  if (!filter_.enabled()) return true;
+  bool positive = true;
+  double smallest = std::numeric_limits<double>::infinity();
+  for (int i = 0; i < s_; ++i) {
+    const Vector yi = y0 + w_e.segment(stages.state_offset(i), ny_);
+    double value = 0.0;
+    positive &= filter_.Check(yi, &value);
+    smallest = std::min(smallest, value);
+  }
+  excluded_min_[static_cast<std::size_t>(element)] = smallest;
+  if (!positive) ++result_.stats.num_filter_rechecks;
+  return positive;
+}
+
+Vector FesdRun::TrajectoryAlgebraic(const Vector& z) const {
+  return filter_.enabled() && z.size() == nz_ ? system_.DeclaredAlgebraic(z) : z;
 }
 
 // A system without algebraic unknowns (no effects) and no sensitivities cannot switch: every

@@ -52,6 +52,9 @@ IntegratorEntry FesdEntry() {
       BindBool("record_trajectory", &O::record_trajectory,
                "record element ends (false: initial and final points only)"),
   };
+  for (auto& binding : BindConstraintFilter(&O::constraint_filter, &O::filter_safety)) {
+    options.push_back(binding);
+  }
   for (auto& binding : BindNewton(&O::newton)) options.push_back(binding);
   using S = FesdStats;
   std::vector<StatBinding<S>> stats = {
@@ -72,6 +75,10 @@ IntegratorEntry FesdEntry() {
                "max over elements and stages of |min(a, b)|"),
       BindStat("min_element_length", &S::min_element_length, "shortest element"),
       BindStat("frozen_time", &S::frozen_time, "numerical time with physical time frozen (relays)"),
+      BindStat("num_filter_rechecks", &S::num_filter_rechecks,
+               "steps solved again: a constraint left out by the filter was not positive"),
+      BindStat("max_working_pairs", &S::max_working_pairs,
+               "most complementarity pairs in an element system (near-active filter)"),
       BindStat("cpu_seconds", &S::cpu_seconds, "thread CPU time"),
   };
   return MakeEntry<O, FesdResult>(

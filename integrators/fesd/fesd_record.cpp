@@ -36,6 +36,13 @@ SolveRecord FesdRun::Record(const Vector& w, double h, bool ends_at_switch,
     element.newton_iterations = static_cast<int>(solved.stats.iterations);
     element.newton_residual = solved.residual_norm;
     Certificates(stages, y0, w_e, a_previous, b_previous, &element);
+    if (filter_.enabled() && static_cast<std::size_t>(e) < excluded_min_.size()) {
+      // Constraints left out by the near-active filter (lambda = 0): |min(c, 0)| at the
+      // stages, so that the certificates cover every declared constraint.
+      const double left_out = std::max(0.0, -excluded_min_[static_cast<std::size_t>(e)]);
+      element.complementarity = std::max(element.complementarity, left_out);
+      element.cross_complementarity = std::max(element.cross_complementarity, left_out);
+    }
     record.elements.push_back(element);
     if (keep_polynomials_) {
       ElementPolynomial polynomial;
@@ -55,7 +62,7 @@ SolveRecord FesdRun::Record(const Vector& w, double h, bool ends_at_switch,
       for (int i = 0; i < s_; ++i) {
         const Vector yi = y0 + w_e.segment(stages.state_offset(i), ny_);
         record.stage_points.Append(yi[system_.clock_index()], yi.head(nx_),
-                                   stages.Algebraic(w_e, i), h);
+                                   TrajectoryAlgebraic(stages.Algebraic(w_e, i)), h);
       }
     }
     y0 = stages.EndState(y0, w_e);
@@ -93,7 +100,7 @@ void FesdRun::Commit(const SolveRecord& record) {
       // elements leave the physical trajectory (x and the clock do not move).
       const bool last = e + 1 == record.elements.size();
       const Vector& y = last ? record.y_end : record.ends[e];
-      const Vector& z = last ? record.z_last : record.algebraic[e];
+      const Vector z = TrajectoryAlgebraic(last ? record.z_last : record.algebraic[e]);
       if (!record.frozen && !dense_output_) {  // dense output: the output times instead
         result_.trajectory.Append(y[system_.clock_index()], y.head(nx_), z, element.length);
       }

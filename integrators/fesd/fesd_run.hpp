@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "../common/constraint_filter.hpp"
 #include "../common/smooth_collocation.hpp"
 #include "group_system.hpp"
 #include "moreau/integrators/fesd.hpp"
@@ -86,6 +87,7 @@ class FesdRun {
                         : std::make_optional<LoweredSystem>(scene, Lowering(options))),
         system_(external ? *external : *owned_),
         group_(&system_, options.stages),
+        filter_(&system_, options.constraint_filter, options.filter_safety),
         newton_(NewtonOptions(options)),
         tableau_(RadauIIA(options.stages)),
         s_(options.stages),
@@ -146,8 +148,23 @@ class FesdRun {
 
   // Advances from tau_ towards step_end with `remaining` nominal elements: a trial pass of
   // fixed-length elements; if a free side turns negative, a group solve of equal elements that
-  // ends on the switch. Returns true if a switch ended the advance.
+  // ends on the switch. Returns true if a switch ended the advance. With the near-active
+  // filter, the working set is chosen first, and the advance is solved again (nothing is
+  // committed before) if a left-out constraint is not positive at a stage.
   bool Advance(double step_end, int* remaining);
+  bool AdvanceOnce(double step_end, int* remaining, bool* retry);
+
+  // --- near-active constraint filter (../common/constraint_filter.hpp) ---------------------
+  // Chooses the working set for the next `horizon` of integration time and moves the run's
+  // state into the new layout when it changed.
+  void UpdateWorkingSet(double horizon);
+  void AdoptLayout(const LoweredSystem::WorkingLayout& previous);
+  // True if every left-out constraint is positive at the stage points of element w_e (from
+  // y0); records the smallest value for the element's certificates (excluded_min_[element]).
+  bool FilterCheck(const internal::CollocationStages& stages, const Vector& y0,
+                   const ConstVectorRef& w_e, int element);
+  // Algebraic values as trajectories record them: every declared pair with the filter on.
+  Vector TrajectoryAlgebraic(const Vector& z) const;
 
   const Vector* last_w_ptr() const { return have_last_w_ ? &last_w_ : nullptr; }
 
@@ -254,6 +271,7 @@ class FesdRun {
     double tau = 0.0, last_h = 0.0;
     bool have_last_w = false;
     std::vector<bool> a_zero;
+    std::vector<bool> working;  // the near-active filter's working set
     Matrix last_z_matrix, sensitivity;
     Eigen::RowVectorXd d_step_end;
     std::size_t trajectory = 0, stage_trajectory = 0, numerical_trajectory = 0, events = 0,
@@ -316,6 +334,8 @@ class FesdRun {
   std::optional<LoweredSystem> owned_;  // empty when running on an external system
   LoweredSystem& system_;
   GroupSystem group_;
+  NearActiveFilter filter_;
+  std::vector<double> excluded_min_;  // per element of the current solve (FilterCheck)
   SemismoothNewton newton_;
   const RadauTableau& tableau_;
   int s_, nx_, ny_, nz_, np_;

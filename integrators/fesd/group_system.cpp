@@ -19,6 +19,17 @@ GroupSystem::GroupSystem(LoweredSystem* system, int stages)
   MOREAU_ASSERT(element_size_ == element_rows_, "FESD element system is not square");
 }
 
+void GroupSystem::Resize() {
+  nz_ = system_->num_algebraic();
+  ng_ = system_->num_equations();
+  np_ = system_->num_pairs();
+  element_size_ = s_ * (ny_ + nz_);
+  element_rows_ = s_ * (ny_ + ng_ + np_);
+  MOREAU_ASSERT(element_size_ == element_rows_, "FESD element system is not square");
+  elements_.clear();
+  value_elements_.clear();
+}
+
 void GroupSystem::Configure(const GroupSetup& setup) {
   MOREAU_ASSERT(setup.elements >= 1, "a group needs at least one element");
   MOREAU_ASSERT(static_cast<int>(setup.a_zero.size()) == np_, "wrong number of statuses");
@@ -69,12 +80,12 @@ double GroupSystem::EstimatedJacobianNonzeros() const {
   const double m = setup_.elements;
   const CollocationStages& stages = elements_.front();
   const LoweredSystem::Nonzeros& nz = system_->nonzeros();
-  double estimate = m * stages.EstimatedJacobianNonzeros() +
-                    m * (m - 1) / 2 * stages.EstimatedStartNonzeros();
+  double estimate =
+      m * stages.EstimatedJacobianNonzeros() + m * (m - 1) / 2 * stages.EstimatedStartNonzeros();
   if (setup_.with_event) {
-    estimate += 2.0 * (m * (nz.A_y + nz.B_y + nz.G_y + nz.F_y) + nz.A_z + nz.B_z + nz.G_z +
-                       nz.F_z) +
-                m * ny_ + nz_ + 1.0;
+    estimate +=
+        2.0 * (m * (nz.A_y + nz.B_y + nz.G_y + nz.F_y) + nz.A_z + nz.B_z + nz.G_z + nz.F_z) +
+        m * ny_ + nz_ + 1.0;
   }
   return estimate;
 }

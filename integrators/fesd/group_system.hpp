@@ -35,6 +35,8 @@ class GroupSystem final : public MixedComplementaritySystem {
  public:
   GroupSystem(LoweredSystem* system, int stages);
 
+  // Takes the lowered system's current sizes (after a change of its working set).
+  void Resize();
   void Configure(const GroupSetup& setup);
   const GroupSetup& setup() const { return setup_; }
 
@@ -90,8 +92,8 @@ class GroupSystem final : public MixedComplementaritySystem {
   // the group (index-1 indicators come from the state), so a relative tolerance costs no
   // accuracy. Other rows keep their absolute scale (their v locates switches).
   Vector velocity_scale_;
-  Vector start_scratch_;                           // scratch: element start state
-  Vector event_weights_;                           // scratch: weights of the event row
+  Vector start_scratch_;  // scratch: element start state
+  Vector event_weights_;  // scratch: weights of the event row
   VelocityLevelEvaluation velocity_;
   IndicatorEvaluation indicators_;
   double h_jacobian_ = 0.0;

@@ -3,9 +3,11 @@
 #include <Eigen/LU>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <sstream>
 
 #include "../common/collocation.hpp"
+#include "../common/constraint_filter.hpp"
 #include "moreau/core/error.hpp"
 #include "moreau/integrators/simulate.hpp"
 
@@ -24,6 +26,8 @@ void TimeSteppingOptions::Validate() const {
                   kMaxRadauStages, "], got ", stages);
   RequireArgument(std::isfinite(step_size) && step_size > 0.0,
                   "step size h must be positive and finite, got ", step_size);
+  RequireArgument(std::isfinite(filter_safety) && filter_safety >= 1.0,
+                  "filter safety must be >= 1, got ", filter_safety);
   newton.Validate();
 }
 
@@ -39,6 +43,8 @@ TimeSteppingStats& TimeSteppingStats::operator+=(const TimeSteppingStats& other)
   max_complementarity_residual =
       std::max(max_complementarity_residual, other.max_complementarity_residual);
   max_newton_residual = std::max(max_newton_residual, other.max_newton_residual);
+  num_filter_rechecks += other.num_filter_rechecks;
+  max_working_pairs = std::max(max_working_pairs, other.max_working_pairs);
   cpu_seconds += other.cpu_seconds;
   return *this;
 }
@@ -79,9 +85,7 @@ class StepSystem final : public MixedComplementaritySystem {
   void AssembleJacobian(const Vector& da, const Vector& db, SystemMatrix* jacobian) override {
     stages_->AddJacobian(h_, da, db, 0, num_equations(), 0, jacobian);
   }
-  double EstimatedJacobianNonzeros() const override {
-    return stages_->EstimatedJacobianNonzeros();
-  }
+  double EstimatedJacobianNonzeros() const override { return stages_->EstimatedJacobianNonzeros(); }
   void ResidualScale(const Vector&, Vector* scale) override {
     scale->setOnes(num_unknowns());
     const int ny = stages_->num_states(), ng = stages_->num_equations();
@@ -213,8 +217,14 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
   Vector z = system.InitialAlgebraicGuess(y);
   const int ny = static_cast<int>(y.size());
   const int np = system.num_parameters(), nu = system.num_inputs();
+  internal::NearActiveFilter filter(&system, options.constraint_filter, options.filter_safety);
+  // With the filter the system's unknowns change: trajectories keep every declared one.
+  auto declared = [&](const Vector& values) {
+    return filter.enabled() ? system.DeclaredAlgebraic(values) : values;
+  };
   result.trajectory.state_names = scene.state_names;
-  result.trajectory.algebraic_names = system.algebraic_names();
+  result.trajectory.algebraic_names =
+      filter.enabled() ? system.declared_algebraic_names() : system.algebraic_names();
   result.trajectory.Append(scene.initial_time, y.head(nx), Vector(), 0.0);
   PointEvaluation initial;
   system.Evaluate(y, z, Derivatives::kNone, &initial);
@@ -240,6 +250,16 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
         FixedStepGrid(ends[segment], ends[segment + 1], options.step_size);
     for (std::size_t k = 0; k + 1 < grid.size(); ++k) {
       const double h = grid[k + 1] - grid[k];
+      // Near-active filter: the working set for this step; the state moves to its layout.
+      LoweredSystem::WorkingLayout previous;
+      if (filter.Update(y, statuses, z, h, &previous)) {
+        z = system.RemapAlgebraic(z, previous, 0.0);
+        statuses = system.RemapStatuses(statuses, previous, false);
+        stages.Resize();
+        previous_h = 0.0;  // the previous step's unknowns are in the old layout
+      }
+      stats.max_working_pairs =
+          std::max(stats.max_working_pairs, static_cast<long>(system.num_pairs()));
       step_system.Prepare(y, h);
       // First attempt: state-informed guess (stages predicted across a switching surface
       // start in their new mode). Second attempt: the previous step's algebraic values at
@@ -271,6 +291,20 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
         break;
       }
       const Vector& w = solved.solution;
+      // Left-out constraints must stay positive at every stage; if one does not, it joins the
+      // working set and the step is solved again.
+      double left_out = std::numeric_limits<double>::infinity();
+      bool positive = true;
+      for (int i = 0; i < s; ++i) {
+        double value = 0.0;
+        positive &= filter.Check(y + w.segment(stages.state_offset(i), ny), &value);
+        left_out = std::min(left_out, value);
+      }
+      if (!positive) {
+        ++stats.num_filter_rechecks;
+        --k;  // the same step again (k + 1 after the loop's increment; unsigned wrap at 0)
+        continue;
+      }
       if (options.sensitivities) {
         if (!StepTransfer(&stages, y, w, h, options.newton, &transfer)) {
           std::ostringstream message;
@@ -300,7 +334,12 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
       stats.max_newton_residual = std::max(stats.max_newton_residual, solved.residual_norm);
       stats.max_complementarity_residual =
           std::max(stats.max_complementarity_residual, solved.complementarity_residual);
-      result.step_complementarity_residual.push_back(solved.complementarity_residual);
+      // Constraints left out (lambda = 0) enter the certificate as |min(c, 0)|.
+      const double certificate =
+          std::max(solved.complementarity_residual, std::max(0.0, -left_out));
+      stats.max_complementarity_residual =
+          std::max(stats.max_complementarity_residual, certificate);
+      result.step_complementarity_residual.push_back(certificate);
       // Events: pair statuses at the last stage against the previous step's.
       const std::vector<bool> now = PairStatuses(stages.stage(s - 1));
       for (Event& event : system.StatusEvents(grid[k + 1], statuses, now)) {
@@ -308,7 +347,7 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
       }
       statuses = now;
       if (options.record_trajectory) {
-        result.trajectory.Append(grid[k + 1], y.head(nx), z, h);
+        result.trajectory.Append(grid[k + 1], y.head(nx), declared(z), h);
       }
       if (progress) progress(grid[k + 1]);
     }
@@ -316,10 +355,10 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
   result.final_time = y[system.clock_index()];
   result.final_state = y.head(nx);
   result.final_lowered_state = y;
-  result.final_algebraic = z;
+  result.final_algebraic = declared(z);
   if (!options.record_trajectory || failed) {
     if (result.trajectory.t.back() != result.final_time) {
-      result.trajectory.Append(result.final_time, result.final_state, z, previous_h);
+      result.trajectory.Append(result.final_time, result.final_state, declared(z), previous_h);
     }
   }
   stats.cpu_seconds =

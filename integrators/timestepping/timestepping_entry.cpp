@@ -25,6 +25,9 @@ IntegratorEntry TimeSteppingEntry() {
       BindBool("sensitivities", &O::sensitivities,
                "dx(T)/dx(0), dx(T)/dp, dx(T)/du by the IFT on every step (no switch-time terms)"),
   };
+  for (auto& binding : BindConstraintFilter(&O::constraint_filter, &O::filter_safety)) {
+    options.push_back(binding);
+  }
   for (auto& binding : BindNewton(&O::newton)) options.push_back(binding);
   using S = TimeSteppingStats;
   std::vector<StatBinding<S>> stats = {
@@ -32,6 +35,10 @@ IntegratorEntry TimeSteppingEntry() {
       BindStat("num_newton_iterations", &S::num_newton_iterations, "Newton iterations"),
       BindStat("num_factorizations", &S::num_factorizations, "LU factorizations"),
       BindStat("num_backtracks", &S::num_backtracks, "line-search backtracks"),
+      BindStat("num_filter_rechecks", &S::num_filter_rechecks,
+               "steps solved again: a constraint left out by the filter was not positive"),
+      BindStat("max_working_pairs", &S::max_working_pairs,
+               "most complementarity pairs in a step system (near-active filter)"),
       BindStat("max_complementarity_residual", &S::max_complementarity_residual,
                "max over steps of max |min(a, b)|"),
       BindStat("max_newton_residual", &S::max_newton_residual,

@@ -29,9 +29,9 @@ void DerivativeMatrix::Add(int row, int col, double value) {
 }
 
 void DerivativeMatrix::AddBlock(int row0, int col0, const ConstMatrixRef& block, double scale) {
-  MOREAU_ASSERT(row0 >= 0 && col0 >= 0 && row0 + block.rows() <= rows_ &&
-                    col0 + block.cols() <= cols_,
-                "block outside the derivative matrix");
+  MOREAU_ASSERT(
+      row0 >= 0 && col0 >= 0 && row0 + block.rows() <= rows_ && col0 + block.cols() <= cols_,
+      "block outside the derivative matrix");
   if (!sparse_) {
     dense_.block(row0, col0, block.rows(), block.cols()) += scale * block;
     return;
@@ -48,8 +48,7 @@ void DerivativeMatrix::AddSparse(int row0, int col0, const SparseMatrix& block, 
                                  bool transposed) {
   const Eigen::Index block_rows = transposed ? block.cols() : block.rows();
   const Eigen::Index block_cols = transposed ? block.rows() : block.cols();
-  MOREAU_ASSERT(row0 >= 0 && col0 >= 0 && row0 + block_rows <= rows_ &&
-                    col0 + block_cols <= cols_,
+  MOREAU_ASSERT(row0 >= 0 && col0 >= 0 && row0 + block_rows <= rows_ && col0 + block_cols <= cols_,
                 "sparse block outside the derivative matrix");
   for (int j = 0; j < block.outerSize(); ++j) {
     for (SparseMatrix::InnerIterator it(block, j); it; ++it) {
@@ -66,9 +65,9 @@ void DerivativeMatrix::AddSparse(int row0, int col0, const SparseMatrix& block, 
 
 void DerivativeMatrix::AddOuter(int row0, int col0, const ConstVectorRef& column,
                                 const ConstVectorRef& row, double scale) {
-  MOREAU_ASSERT(row0 >= 0 && col0 >= 0 && row0 + column.size() <= rows_ &&
-                    col0 + row.size() <= cols_,
-                "outer product outside the derivative matrix");
+  MOREAU_ASSERT(
+      row0 >= 0 && col0 >= 0 && row0 + column.size() <= rows_ && col0 + row.size() <= cols_,
+      "outer product outside the derivative matrix");
   for (Eigen::Index j = 0; j < row.size(); ++j) {
     if (row[j] == 0.0) continue;
     const double factor = scale * row[j];
@@ -77,7 +76,8 @@ void DerivativeMatrix::AddOuter(int row0, int col0, const ConstVectorRef& column
       continue;
     }
     for (Eigen::Index i = 0; i < column.size(); ++i) {
-      entries_.push_back({row0 + static_cast<int>(i), col0 + static_cast<int>(j), factor * column[i]});
+      entries_.push_back(
+          {row0 + static_cast<int>(i), col0 + static_cast<int>(j), factor * column[i]});
     }
   }
 }

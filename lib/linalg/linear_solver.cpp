@@ -108,8 +108,11 @@ void SystemMatrix::AddWeightedRows(int row0, int col0, const ConstVectorRef& row
                 "sparse block outside the system matrix");
   for (int j = 0; j < block.outerSize(); ++j) {
     for (SparseMatrix::InnerIterator it(block, j); it; ++it) {
-      // Entries of rows with weight zero stay structural (the pattern must not depend on
-      // the weights, which change between Newton iterations).
+      // Rows with weight zero leave no entries: a pair kept at b = 0 then has a row with b's
+      // entry alone (a status equation), whose elimination creates no fill, where the a-side
+      // entries would couple everything a depends on. The pattern changes only when a weight
+      // becomes zero or nonzero (statuses: at switches), and the sparse LU analyzes anew then.
+      if (row_weights[it.row()] == 0.0) continue;
       const double value = row_weights[it.row()] * it.value();
       if (sparse_) {
         triplets_.emplace_back(row0 + it.row(), col0 + it.col(), value);

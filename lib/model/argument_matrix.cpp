@@ -3,6 +3,7 @@
 // compressed AD: docs/sparse-derivatives.md), scattered into the lowered system's blocks.
 
 #include <Eigen/Dense>
+#include <cmath>
 
 #include "lowered_block.hpp"
 #include "moreau/core/error.hpp"
@@ -40,7 +41,8 @@ int ArgumentMatrix::Target(int j, int* index) const {
 }
 
 void ArgumentMatrix::Jacobian(const BlockContext& context, const SmoothFunction& function,
-                              const ConstVectorRef& y, Derivatives derivatives, Vector* values) {
+                              const ConstVectorRef& y, Derivatives derivatives, Vector* values,
+                              const std::vector<int>* rows) {
   Layout(context, derivatives);
   x_ = y.head(nx_);
   const double t = y[clock_];
@@ -51,11 +53,28 @@ void ArgumentMatrix::Jacobian(const BlockContext& context, const SmoothFunction&
   }
   const Wrt wrt = all_ ? Wrt::All() : Wrt::XT();
   if (is_sparse_) {
-    function.SparseJacobian(x_, *context.inputs, t, *context.parameters, wrt, values, &columns_);
+    // Only the rows in `rows` are differentiated (the near-active filter's working set).
+    function.SparseJacobian(x_, *context.inputs, t, *context.parameters, wrt, values, &columns_,
+                            rows);
     rows_sparse_ = columns_;
   } else {
     function.Jacobian(x_, *context.inputs, t, *context.parameters, wrt, values, &dense_);
   }
+}
+
+double ArgumentMatrix::StateRowNorm1(int k) const {
+  if (!is_sparse_) return dense_.row(k).head(nx_).lpNorm<1>();
+  double sum = 0.0;
+  for (decltype(rows_sparse_)::InnerIterator it(rows_sparse_, k); it; ++it) {
+    if (it.col() < nx_) sum += std::fabs(it.value());
+  }
+  return sum;
+}
+
+double ArgumentMatrix::TimeEntry(int k) const {
+  const int t_col = all_ ? nx_ + nu_ : nx_;
+  if (!is_sparse_) return dense_(k, t_col);
+  return rows_sparse_.coeff(k, t_col);
 }
 
 void ArgumentMatrix::HessianDirections(const BlockContext& context, const SmoothFunction& function,
@@ -84,15 +103,16 @@ void ArgumentMatrix::HessianDirections(const BlockContext& context, const Smooth
 
 void ArgumentMatrix::WeightedHessian(const BlockContext& context, const SmoothFunction& function,
                                      const ConstVectorRef& y, const ConstVectorRef& weights,
-                                     Derivatives derivatives) {
+                                     Derivatives derivatives, const std::vector<int>* rows) {
   Layout(context, derivatives);
   x_ = y.head(nx_);
   const double t = y[clock_];
   const Wrt wrt = all_ ? Wrt::All() : Wrt::XT();
   rows_ = wrt.Columns(nx_, nu_, np_);
   if (is_sparse_) {
+    // The pattern is that of the outputs in `rows` (the working set), whatever the weights.
     function.SparseWeightedHessian(x_, *context.inputs, t, *context.parameters, wrt, weights,
-                                   &columns_);
+                                   &columns_, rows);
     rows_sparse_ = columns_;
   } else {
     function.WeightedHessian(x_, *context.inputs, t, *context.parameters, wrt, weights, &dense_);
@@ -151,6 +171,23 @@ void ArgumentMatrix::AddStateGradientProduct(const ConstVectorRef& weights,
   }
 }
 
+void ArgumentMatrix::AddStateGradient(int k, int col, const Matrix* projection,
+                                      DerivativeMatrix* target) const {
+  if (projection == nullptr) {
+    if (is_sparse_) {
+      for (decltype(rows_sparse_)::InnerIterator it(rows_sparse_, k); it; ++it) {
+        if (it.col() < nx_) target->Add(static_cast<int>(it.col()), col, it.value());
+      }
+    } else {
+      target->AddBlock(0, col, dense_.row(k).head(nx_).transpose());
+    }
+    return;
+  }
+  const Vector row = is_sparse_ ? Vector(Vector(rows_sparse_.row(k).transpose()).head(nx_))
+                                : Vector(dense_.row(k).head(nx_).transpose());
+  target->AddBlock(0, col, *projection * row);
+}
+
 void ArgumentMatrix::AddStateGradients(int col0, const Matrix* projection, double weight,
                                        DerivativeMatrix* target) const {
   if (is_sparse_ && projection == nullptr) {
@@ -162,7 +199,8 @@ void ArgumentMatrix::AddStateGradients(int col0, const Matrix* projection, doubl
     }
     return;
   }
-  const Matrix jx = is_sparse_ ? Matrix(Matrix(columns_).leftCols(nx_)) : Matrix(dense_.leftCols(nx_));
+  const Matrix jx =
+      is_sparse_ ? Matrix(Matrix(columns_).leftCols(nx_)) : Matrix(dense_.leftCols(nx_));
   if (projection == nullptr) {
     target->AddBlock(0, col0, jx.transpose(), weight);
   } else {
@@ -177,7 +215,8 @@ void ArgumentMatrix::AddStateRows(const Matrix* projection, double weight, Deriv
     return;
   }
   // P times the x rows (P = E E^T is dense in general).
-  const Matrix rows = is_sparse_ ? Matrix(Matrix(columns_).topRows(nx_)) : Matrix(dense_.topRows(nx_));
+  const Matrix rows =
+      is_sparse_ ? Matrix(Matrix(columns_).topRows(nx_)) : Matrix(dense_.topRows(nx_));
   const Matrix projected = *projection * rows;
   dy->AddBlock(0, 0, projected.leftCols(nx_), weight);
   dy->AddBlock(0, clock_, projected.col(all_ ? nx_ + nu_ : nx_), weight);

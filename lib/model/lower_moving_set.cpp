@@ -2,8 +2,15 @@
 //   x' += P grad_x c(x, t) lambda,  P = E E^T,   0 <= c(x, t) ⟂ lambda >= 0.
 // Time enters through the clock state; the clock row is not projected (E's clock row is 0),
 // which is the ePDS reformulation of the sweeping process (sweeping paper, Theorem 4).
+//
+// Near-active filter (docs/sparse-systems.md): the block holds a working set of its
+// constraints (all of them unless an integrator leaves some out); a left-out constraint has
+// lambda = 0 and no pair, unknown or equation. Its value is still computed (the function
+// evaluates all its outputs at once) but none of its derivatives.
 
 #include <Eigen/Dense>
+#include <cmath>
+#include <limits>
 
 #include "lowered_block.hpp"
 #include "moreau/core/error.hpp"
@@ -22,60 +29,121 @@ class MovingSetBlock final : public LoweredBlock {
                     "lambdas (MakeSmoothFunction), not with a hand-written Jacobian");
     has_projection_ = set.projection_basis.size() != 0;
     if (has_projection_) projection_ = set.projection_basis * set.projection_basis.transpose();
+    working_.resize(static_cast<std::size_t>(num_constraints_));
+    for (int k = 0; k < num_constraints_; ++k) working_[static_cast<std::size_t>(k)] = k;
   }
   std::unique_ptr<LoweredBlock> Clone() const override {
     return std::make_unique<MovingSetBlock>(*this);
   }
-  int num_algebraic() const override { return num_constraints_; }
+  int num_algebraic() const override { return num_working(); }
   int num_equations() const override { return 0; }
-  int num_pairs() const override { return num_constraints_; }
+  int num_pairs() const override { return num_working(); }
   std::vector<std::string> AlgebraicNames() const override {
     std::vector<std::string> names;
-    for (const std::string& c : set_.constraint_names) names.push_back(set_.name + ".lambda_" + c);
+    for (int k : working_) names.push_back(LambdaName(k));
+    return names;
+  }
+  std::vector<std::string> DeclaredAlgebraicNames() const override {
+    std::vector<std::string> names;
+    for (int k = 0; k < num_constraints_; ++k) names.push_back(LambdaName(k));
     return names;
   }
   std::vector<PairInfo> Pairs() const override {
     std::vector<PairInfo> pairs;
-    for (const std::string& c : set_.constraint_names) {
-      pairs.push_back({set_.name, set_.name + "." + c, ContinuousSide::kA, 0});
+    for (int k : working_) {
+      pairs.push_back({set_.name,
+                       set_.name + "." + set_.constraint_names[static_cast<std::size_t>(k)],
+                       ContinuousSide::kA, 0});
     }
     return pairs;
+  }
+
+  // --- near-active filter ------------------------------------------------------------------
+  int num_declared_pairs() const override { return num_constraints_; }
+  bool Filterable() const override { return true; }
+  std::vector<int> WorkingPairs() const override { return working_; }
+  void SetWorkingPairs(const std::vector<int>& working) override {
+    working_ = working;
+    all_working_ = num_working() == num_constraints_;
+  }
+
+  // c_k(y) and |grad_x c_k|_1 max |x'| + |dc_k/dt| for every constraint.
+  void DeclaredConstraints(const BlockContext& context, const ConstVectorRef& y,
+                           const Vector& velocity, VectorRef values,
+                           VectorRef rate_bounds) override {
+    all_.Jacobian(context, set_.constraints, y, Derivatives::kStates, &c_);
+    values = c_;
+    const double speed = velocity.head(num_states_).lpNorm<Eigen::Infinity>();
+    for (int k = 0; k < num_constraints_; ++k) {
+      rate_bounds[k] = all_.StateRowNorm1(k) * speed + std::fabs(all_.TimeEntry(k));
+    }
+  }
+  double MinExcluded(const BlockContext& context, const ConstVectorRef& y) override {
+    if (all_working_) return std::numeric_limits<double>::infinity();
+    EvaluateValues(context, y);
+    double smallest = std::numeric_limits<double>::infinity();
+    std::size_t next = 0;
+    for (int k = 0; k < num_constraints_; ++k) {
+      if (next < working_.size() && working_[next] == k) {
+        ++next;
+        continue;
+      }
+      smallest = std::min(smallest, c_[k]);
+    }
+    return smallest;
+  }
+  void ExcludedBelow(const BlockContext& context, const ConstVectorRef& y, double threshold,
+                     int offset, std::vector<bool>* include) override {
+    if (all_working_) return;
+    EvaluateValues(context, y);
+    std::size_t next = 0;
+    for (int k = 0; k < num_constraints_; ++k) {
+      if (next < working_.size() && working_[next] == k) {
+        ++next;
+        continue;
+      }
+      if (!(c_[k] >= threshold)) (*include)[static_cast<std::size_t>(offset + k)] = true;
+    }
   }
 
   void Evaluate(const BlockContext& context, const ConstVectorRef& y, const ConstVectorRef& z,
                 Derivatives derivatives, PointEvaluation* out) override {
     const int nx = num_states_;
-    const int nc = num_constraints_;
+    const int nw = num_working();
     const int z0 = layout.z_offset;
     const int k0 = layout.pair_offset;
-    const auto lambda = z.segment(z0, nc);
     const Matrix* projection = has_projection_ ? &projection_ : nullptr;
-    // grad c is needed for the values too (x' += P grad c lambda).
+    // Multipliers of every constraint (zero for those left out).
+    Scatter(z.segment(z0, nw), &lambda_);
+    // grad c is needed for the values too (x' += P grad c lambda); only the working rows.
     jacobian_.Jacobian(context, set_.constraints, y,
-                       derivatives == Derivatives::kNone ? Derivatives::kStates : derivatives, &c_);
+                       derivatives == Derivatives::kNone ? Derivatives::kStates : derivatives, &c_,
+                       rows());
     // (gradient form) x' += P grad c lambda.
-    jacobian_.AddStateGradientProduct(lambda, projection, out->F.head(nx));
+    jacobian_.AddStateGradientProduct(lambda_, projection, out->F.head(nx));
     // complementarity pair k: a = c_k(x, t), b = lambda_k.
-    out->A.segment(k0, nc) = c_;
-    out->B.segment(k0, nc) = lambda;
+    for (int j = 0; j < nw; ++j) out->A[k0 + j] = c_[working_[static_cast<std::size_t>(j)]];
+    out->B.segment(k0, nw) = z.segment(z0, nw);
     if (derivatives == Derivatives::kNone) return;
 
     // d/dy of P grad c lambda = P sum_k lambda_k Hess c_k (x rows; x, clock, u, p columns).
-    hessian_.WeightedHessian(context, set_.constraints, y, lambda, derivatives);
+    hessian_.WeightedHessian(context, set_.constraints, y, lambda_, derivatives, rows());
     hessian_.AddStateRows(projection, 1.0, &out->F_y, &out->F_u, &out->F_p);
-    jacobian_.AddStateGradients(z0, projection, 1.0, &out->F_z);
-    jacobian_.AddRows(0, nc, 1.0, k0, &out->A_y, &out->A_u, &out->A_p);
-    for (int k = 0; k < nc; ++k) out->B_z.Add(k0 + k, z0 + k, 1.0);
+    for (int j = 0; j < nw; ++j) {
+      const int k = working_[static_cast<std::size_t>(j)];
+      jacobian_.AddStateGradient(k, z0 + j, projection, &out->F_z);
+      jacobian_.AddRow(k, 1.0, k0 + j, &out->A_y, &out->A_u, &out->A_p);
+      out->B_z.Add(k0 + j, z0 + j, 1.0);
+    }
   }
 
   // lambda from `previous` (multipliers are not determined by the state alone), else 0.
   void InitialGuess(const BlockContext&, const ConstVectorRef&, const Vector* previous,
                     VectorRef z) override {
     if (previous != nullptr) {
-      z.segment(layout.z_offset, num_constraints_) =
-          previous->segment(layout.z_offset, num_constraints_);
+      z.segment(layout.z_offset, num_working()) = previous->segment(layout.z_offset, num_working());
     } else {
-      z.segment(layout.z_offset, num_constraints_).setZero();
+      z.segment(layout.z_offset, num_working()).setZero();
     }
   }
 
@@ -85,7 +153,7 @@ class MovingSetBlock final : public LoweredBlock {
 
   // lambda is a jump variable (it jumps at contact); there are no equations.
   std::vector<bool> ContinuousAlgebraic() const override {
-    return std::vector<bool>(static_cast<std::size_t>(num_constraints_), false);
+    return std::vector<bool>(static_cast<std::size_t>(num_working()), false);
   }
   std::vector<bool> DifferentiatedEquations() const override { return {}; }
 
@@ -93,9 +161,11 @@ class MovingSetBlock final : public LoweredBlock {
   void AddCurvature(const BlockContext& context, const ConstVectorRef& y,
                     const ConstVectorRef& direction, Derivatives derivatives,
                     CurvatureTerms* out) override {
-    directions_.HessianDirections(context, set_.constraints, y, direction, derivatives);
-    directions_.AddRows(0, num_constraints_, 1.0, layout.pair_offset, &out->pair_y, &out->pair_u,
-                        &out->pair_p);
+    directions_.HessianDirections(context, set_.constraints, y, direction, derivatives, rows());
+    for (int j = 0; j < num_working(); ++j) {
+      directions_.AddRow(working_[static_cast<std::size_t>(j)], 1.0, layout.pair_offset + j,
+                         &out->pair_y, &out->pair_u, &out->pair_p);
+    }
   }
 
   // Active constraint (c = 0 kept): its multiplier lambda (velocity level); inactive: c.
@@ -104,16 +174,17 @@ class MovingSetBlock final : public LoweredBlock {
                        Derivatives derivatives, IndicatorEvaluation* out) override {
     const int k0 = layout.pair_offset;
     const int z0 = layout.z_offset;
-    jacobian_.Jacobian(context, set_.constraints, y, derivatives, &c_);
-    for (int k = 0; k < num_constraints_; ++k) {
-      if (a_zero[static_cast<std::size_t>(k0 + k)]) {
-        out->values[k0 + k] = v[z0 + k];
-        if (derivatives != Derivatives::kNone) out->d_v.Add(k0 + k, z0 + k, 1.0);
+    jacobian_.Jacobian(context, set_.constraints, y, derivatives, &c_, rows());
+    for (int j = 0; j < num_working(); ++j) {
+      const int k = working_[static_cast<std::size_t>(j)];
+      if (a_zero[static_cast<std::size_t>(k0 + j)]) {
+        out->values[k0 + j] = v[z0 + j];
+        if (derivatives != Derivatives::kNone) out->d_v.Add(k0 + j, z0 + j, 1.0);
         continue;
       }
-      out->values[k0 + k] = c_[k];
+      out->values[k0 + j] = c_[k];
       if (derivatives != Derivatives::kNone) {
-        jacobian_.AddRow(k, 1.0, k0 + k, &out->d_y, &out->d_u, &out->d_p);
+        jacobian_.AddRow(k, 1.0, k0 + j, &out->d_y, &out->d_u, &out->d_p);
       }
     }
   }
@@ -121,25 +192,50 @@ class MovingSetBlock final : public LoweredBlock {
   std::vector<Event> StatusEvents(double t, const std::vector<bool>& before,
                                   const std::vector<bool>& after) const override {
     std::vector<Event> events;
-    for (int k = 0; k < num_constraints_; ++k) {
-      const auto i = static_cast<std::size_t>(k);
+    for (int j = 0; j < num_working(); ++j) {
+      const auto i = static_cast<std::size_t>(j);
       if (before[i] == after[i]) continue;
       // a = c_k = 0 means the constraint is active.
-      events.push_back({t, after[i] ? EventKind::kEnter : EventKind::kLeave,
-                        set_.name + "." + set_.constraint_names[i],
+      const std::string& name = set_.constraint_names[static_cast<std::size_t>(working_[i])];
+      events.push_back({t, after[i] ? EventKind::kEnter : EventKind::kLeave, set_.name + "." + name,
                         after[i] ? "constraint becomes active" : "constraint becomes inactive"});
     }
     return events;
   }
 
  private:
+  int num_working() const { return static_cast<int>(working_.size()); }
+  // The rows to differentiate: all (nullptr) or the working set.
+  const std::vector<int>* rows() const { return all_working_ ? nullptr : &working_; }
+  std::string LambdaName(int k) const {
+    return set_.name + ".lambda_" + set_.constraint_names[static_cast<std::size_t>(k)];
+  }
+  // Working-set multipliers into a vector over every constraint (zeros elsewhere).
+  void Scatter(const ConstVectorRef& working_values, Vector* all) const {
+    if (all_working_) {
+      *all = working_values;
+      return;
+    }
+    all->setZero(num_constraints_);
+    for (std::size_t j = 0; j < working_.size(); ++j) {
+      (*all)[working_[j]] = working_values[static_cast<Eigen::Index>(j)];
+    }
+  }
+  void EvaluateValues(const BlockContext& context, const ConstVectorRef& y) {
+    x_ = y.head(num_states_);
+    set_.constraints.Evaluate(x_, *context.inputs, y[context.clock_index], *context.parameters,
+                              &c_);
+  }
+
   MovingSet set_;
   int num_states_;
   int num_constraints_;
+  std::vector<int> working_;  // constraints in the system, increasing
+  bool all_working_ = true;
   bool has_projection_ = false;
   Matrix projection_;  // P = E E^T (only with a projection basis E; P = I otherwise)
-  Vector c_;
-  ArgumentMatrix jacobian_, hessian_, directions_;
+  Vector c_, x_, lambda_;
+  ArgumentMatrix jacobian_, hessian_, directions_, all_;
 };
 
 }  // namespace

@@ -158,8 +158,8 @@ class StewartBlock final : public SwitchingBlockBase {
     directions_.HessianDirections(context, effect_.surfaces, y, direction, derivatives);
     for (int j = 0; j < num_surfaces_; ++j) {
       for (int k = 0; k < num_modes_; ++k) {
-        directions_.AddRow(j, -Sign(k, j), layout.g_offset + k, &out->equation_y,
-                           &out->equation_u, &out->equation_p);
+        directions_.AddRow(j, -Sign(k, j), layout.g_offset + k, &out->equation_y, &out->equation_u,
+                           &out->equation_p);
       }
     }
   }
@@ -337,8 +337,8 @@ class HeavisideBlock final : public SwitchingBlockBase {
                     const ConstVectorRef& direction, Derivatives derivatives,
                     CurvatureTerms* out) override {
     directions_.HessianDirections(context, effect_.surfaces, y, direction, derivatives);
-    directions_.AddRows(0, num_surfaces_, 1.0, layout.g_offset, &out->equation_y,
-                        &out->equation_u, &out->equation_p);
+    directions_.AddRows(0, num_surfaces_, 1.0, layout.g_offset, &out->equation_y, &out->equation_u,
+                        &out->equation_p);
   }
 
   // Pair 2j (alpha ⟂ lambda_n): alpha = 0 kept -> lambda_n = -c_j; else alpha. Pair 2j+1

@@ -1,6 +1,7 @@
 #pragma once
 // Private interface of one lowered effect inside LoweredSystem (namespace moreau::internal).
 
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -45,7 +46,12 @@ class ArgumentMatrix {
   // Jacobian of `function` at the block's point x = y[0..n_x), t = y[clock] (values into
   // *values); with Derivatives::kNone only the values. Dense AD or sparse AD per context.
   void Jacobian(const BlockContext& context, const SmoothFunction& function,
-                const ConstVectorRef& y, Derivatives derivatives, Vector* values);
+                const ConstVectorRef& y, Derivatives derivatives, Vector* values,
+                const std::vector<int>* rows = nullptr);
+  // Row k of the x columns: its l1 norm (after Jacobian).
+  double StateRowNorm1(int k) const;
+  // The time column's entry of row k.
+  double TimeEntry(int k) const;
   // Row k = (d^2 g_k / d(args)^2 . d)^T, d the direction in y-space (x and clock components
   // taken), for the outputs in `outputs` (nullptr: all; dense storage computes them all).
   void HessianDirections(const BlockContext& context, const SmoothFunction& function,
@@ -61,6 +67,8 @@ class ArgumentMatrix {
   // target += P (dg/dx)^T weights (moving sets: x' += P grad c lambda); P null: identity.
   void AddStateGradientProduct(const ConstVectorRef& weights, const Matrix* projection,
                                VectorRef target) const;
+  // Column col of target (rows 0..n_x): P (dg_k/dx)^T (P null: identity).
+  void AddStateGradient(int k, int col, const Matrix* projection, DerivativeMatrix* target) const;
   // The x columns transposed, premultiplied by P (null: identity) and weighted:
   // target(0..n_x, col0 + k) += weight * P (dg_k/dx)^T (moving sets: F_z = P grad c).
   void AddStateGradients(int col0, const Matrix* projection, double weight,
@@ -69,7 +77,7 @@ class ArgumentMatrix {
   // F_p of x' += P grad g w get P sum_k w_k Hess g_k (x rows; x, clock, u and p columns).
   void WeightedHessian(const BlockContext& context, const SmoothFunction& function,
                        const ConstVectorRef& y, const ConstVectorRef& weights,
-                       Derivatives derivatives);
+                       Derivatives derivatives, const std::vector<int>* rows = nullptr);
   void AddStateRows(const Matrix* projection, double weight, DerivativeMatrix* dy,
                     DerivativeMatrix* du, DerivativeMatrix* dp) const;
 
@@ -81,7 +89,7 @@ class ArgumentMatrix {
   bool is_sparse_ = false, all_ = false;
   int rows_ = 0, nx_ = 0, nu_ = 0, np_ = 0, clock_ = 0;
   Matrix dense_;
-  SparseMatrix columns_;                                    // sparse AD result
+  SparseMatrix columns_;                                           // sparse AD result
   Eigen::SparseMatrix<double, Eigen::RowMajor, int> rows_sparse_;  // the same, by rows
   Vector x_, direction_, weights_;
   mutable Vector gradient_;
@@ -174,6 +182,34 @@ class LoweredBlock {
   // one), so that DecideStatuses need not try it.
   virtual bool AdmitsRoles(const std::vector<PairRole>& /*roles*/) const { return true; }
 
+  // --- near-active constraint filter (LoweredSystem::SetWorkingPairs) ------------------------
+  // Pairs the block declares (its working pairs are a subset for filterable blocks).
+  virtual int num_declared_pairs() const { return num_pairs(); }
+  // True if constraints of the block may be left out of the system (moving sets).
+  virtual bool Filterable() const { return false; }
+  // Block-local declared indices of the pairs in the system, increasing.
+  virtual std::vector<int> WorkingPairs() const {
+    std::vector<int> all(static_cast<std::size_t>(num_pairs()));
+    for (int k = 0; k < num_pairs(); ++k) all[static_cast<std::size_t>(k)] = k;
+    return all;
+  }
+  virtual void SetWorkingPairs(const std::vector<int>& /*working*/) {}
+  // Names of the algebraic unknowns of every declared pair (AlgebraicNames() when unfiltered).
+  virtual std::vector<std::string> DeclaredAlgebraicNames() const { return AlgebraicNames(); }
+  // Filterable blocks: value and rate bound of every declared constraint at y (see
+  // LoweredSystem::FilterableConstraints).
+  virtual void DeclaredConstraints(const BlockContext& /*context*/, const ConstVectorRef& /*y*/,
+                                   const Vector& /*velocity*/, VectorRef /*values*/,
+                                   VectorRef /*rate_bounds*/) {}
+  // Filterable blocks: the smallest left-out constraint at y (infinity if none).
+  virtual double MinExcluded(const BlockContext& /*context*/, const ConstVectorRef& /*y*/) {
+    return std::numeric_limits<double>::infinity();
+  }
+  // Filterable blocks: include[offset + k] = true for left-out constraints k below threshold.
+  virtual void ExcludedBelow(const BlockContext& /*context*/, const ConstVectorRef& /*y*/,
+                             double /*threshold*/, int /*offset*/, std::vector<bool>* /*include*/) {
+  }
+
   // True if the velocity-level problem in the block's jump variables is monotone: an LCP
   // whose matrix is symmetric positive semidefinite (moving sets: J P J^T), so that all its
   // solutions give the same velocity. DecideStatuses then solves for such candidates instead
@@ -187,7 +223,6 @@ class LoweredBlock {
 
   BlockLayout layout;
 };
-
 
 // Factories, one per lowering (lower_*.cpp).
 std::unique_ptr<LoweredBlock> LowerMovingSet(const Scene& scene, const MovingSet& set);

@@ -1,5 +1,8 @@
 #include "moreau/model/lowered_system.hpp"
 
+#include <algorithm>
+#include <limits>
+
 #include "lowered_block.hpp"
 #include "moreau/core/error.hpp"
 
@@ -25,6 +28,25 @@ std::string ToString(DerivativeStorage storage) {
       return "sparse";
   }
   return "?";
+}
+
+std::string ToString(ConstraintFilter filter) {
+  switch (filter) {
+    case ConstraintFilter::kAutomatic:
+      return "auto";
+    case ConstraintFilter::kOff:
+      return "off";
+    case ConstraintFilter::kOn:
+      return "on";
+  }
+  return "?";
+}
+
+ConstraintFilter ParseConstraintFilter(const std::string& name) {
+  if (name == "auto") return ConstraintFilter::kAutomatic;
+  if (name == "off") return ConstraintFilter::kOff;
+  if (name == "on") return ConstraintFilter::kOn;
+  ThrowInvalidArgument("unknown constraint filter '", name, "'; expected auto, off or on");
 }
 
 namespace internal {
@@ -63,28 +85,7 @@ LoweredSystem& LoweredSystem::operator=(const LoweredSystem& other) {
 void LoweredSystem::Build() {
   dynamics_jacobian_holder_ = std::make_unique<internal::ArgumentMatrix>();
   blocks_.clear();
-  clock_rate_block_ = -1;
-  num_algebraic_ = num_equations_ = num_pairs_ = 0;
-  algebraic_names_.clear();
-  pairs_.clear();
-  continuous_algebraic_.clear();
-  differentiated_.clear();
   relay_names_.clear();
-  auto add = [this](std::unique_ptr<internal::LoweredBlock> block, int y_offset) {
-    block->layout = {y_offset, num_algebraic_, num_equations_, num_pairs_};
-    num_algebraic_ += block->num_algebraic();
-    num_equations_ += block->num_equations();
-    num_pairs_ += block->num_pairs();
-    for (const std::string& name : block->AlgebraicNames()) algebraic_names_.push_back(name);
-    for (bool c : block->ContinuousAlgebraic()) continuous_algebraic_.push_back(c);
-    for (bool d : block->DifferentiatedEquations()) differentiated_.push_back(d);
-    for (PairInfo info : block->Pairs()) {
-      info.block = static_cast<int>(blocks_.size());
-      pairs_.push_back(info);
-    }
-    if (block->HasClockRate()) clock_rate_block_ = static_cast<int>(blocks_.size());
-    blocks_.push_back(std::move(block));
-  };
   std::vector<HysteresisRelay> relays;
   for (const Effect& effect : scene_.effects) {
     if (const auto* relay = std::get_if<HysteresisRelay>(&effect)) {
@@ -93,7 +94,7 @@ void LoweredSystem::Build() {
       continue;
     }
     std::unique_ptr<internal::LoweredBlock> block = internal::LowerEffect(scene_, effect, options_);
-    if (block) add(std::move(block), scene_.num_states());
+    if (block) blocks_.push_back(std::move(block));
   }
   // All relays share one time-freezing block; its memories follow the scene states.
   state_names_ = scene_.state_names;
@@ -104,12 +105,19 @@ void LoweredSystem::Build() {
                                 : internal::LowerDiscreteRelays(scene_, relays);
     if (!time_freezing_) memory_block_ = static_cast<int>(blocks_.size());
     for (const std::string& name : block->InternalStateNames()) state_names_.push_back(name);
-    add(std::move(block), scene_.num_states());
+    blocks_.push_back(std::move(block));
   }
   state_names_.push_back("clock");
   num_states_ = static_cast<int>(state_names_.size());
-  MOREAU_ASSERT(num_algebraic_ == num_equations_ + num_pairs_,
-                "lowered stage system is not square");
+  // Declared pairs: every pair of every block, before any filtering.
+  num_declared_pairs_ = 0;
+  int declared_algebraic = 0;
+  declared_pair_offset_.clear();
+  for (const auto& block : blocks_) {
+    declared_pair_offset_.push_back(num_declared_pairs_);
+    num_declared_pairs_ += block->num_declared_pairs();
+    declared_algebraic += block->num_algebraic();  // every working set is full here
+  }
   inputs_ = scene_.InputValues(scene_.initial_time);
   parameters_ = scene_.ParameterValues();
   sparse_dynamics_ = scene_.dynamics.has_sparse_state_jacobian();
@@ -117,12 +125,14 @@ void LoweredSystem::Build() {
     RequireArgument(blocks_.empty(), scene_.name,
                     ": dynamics with a hand-written sparse Jacobian cannot be combined with "
                     "effects (their lowering needs automatic differentiation)");
-    RequireArgument(options_.storage != DerivativeStorage::kDense, scene_.name,
-                    ": dynamics with a hand-written sparse Jacobian need sparse derivative storage");
+    RequireArgument(
+        options_.storage != DerivativeStorage::kDense, scene_.name,
+        ": dynamics with a hand-written sparse Jacobian need sparse derivative storage");
   }
+  // The storage follows the declared sizes, so that it does not change with the working set.
   switch (options_.storage) {
     case DerivativeStorage::kAutomatic:
-      sparse_ = sparse_dynamics_ || num_states_ + num_algebraic_ > kSparseStorageThreshold;
+      sparse_ = sparse_dynamics_ || num_states_ + declared_algebraic > kSparseStorageThreshold;
       break;
     case DerivativeStorage::kDense:
       sparse_ = false;
@@ -131,6 +141,37 @@ void LoweredSystem::Build() {
       sparse_ = true;
       break;
   }
+  Layout();
+}
+
+void LoweredSystem::Layout() {
+  clock_rate_block_ = -1;
+  num_algebraic_ = num_equations_ = num_pairs_ = 0;
+  algebraic_names_.clear();
+  pairs_.clear();
+  continuous_algebraic_.clear();
+  differentiated_.clear();
+  working_pairs_.clear();
+  for (std::size_t b = 0; b < blocks_.size(); ++b) {
+    internal::LoweredBlock& block = *blocks_[b];
+    block.layout = {scene_.num_states(), num_algebraic_, num_equations_, num_pairs_};
+    num_algebraic_ += block.num_algebraic();
+    num_equations_ += block.num_equations();
+    num_pairs_ += block.num_pairs();
+    for (const std::string& name : block.AlgebraicNames()) algebraic_names_.push_back(name);
+    for (bool c : block.ContinuousAlgebraic()) continuous_algebraic_.push_back(c);
+    for (bool d : block.DifferentiatedEquations()) differentiated_.push_back(d);
+    for (PairInfo info : block.Pairs()) {
+      info.block = static_cast<int>(b);
+      pairs_.push_back(info);
+    }
+    for (int local : block.WorkingPairs())
+      working_pairs_.push_back(declared_pair_offset_[b] + local);
+    if (block.HasClockRate()) clock_rate_block_ = static_cast<int>(b);
+  }
+  MOREAU_ASSERT(num_algebraic_ == num_equations_ + num_pairs_,
+                "lowered stage system is not square");
+  MOREAU_ASSERT(static_cast<int>(working_pairs_.size()) == num_pairs_, "working pairs mismatch");
   // Structural nonzeros from one evaluation at the initial point (sparse storage; the
   // pattern does not depend on the point), every entry with dense storage.
   const double ny = num_states_, nz = num_algebraic_, ng = num_equations_, np = num_pairs_;
@@ -142,6 +183,189 @@ void LoweredSystem::Build() {
     nonzeros_ = {e.F_y.NonZeros(), e.F_z.NonZeros(), e.G_y.NonZeros(), e.G_z.NonZeros(),
                  e.A_y.NonZeros(), e.A_z.NonZeros(), e.B_y.NonZeros(), e.B_z.NonZeros()};
   }
+}
+
+// --- near-active constraint filter ------------------------------------------------------
+
+bool LoweredSystem::PairFilterable(int declared) const {
+  const int b = DeclaredBlock(declared);
+  return blocks_[static_cast<std::size_t>(b)]->Filterable();
+}
+
+int LoweredSystem::DeclaredBlock(int declared) const {
+  MOREAU_ASSERT(declared >= 0 && declared < num_declared_pairs_, "declared pair out of range");
+  const auto it =
+      std::upper_bound(declared_pair_offset_.begin(), declared_pair_offset_.end(), declared);
+  return static_cast<int>(it - declared_pair_offset_.begin()) - 1;
+}
+
+bool LoweredSystem::has_filterable_pairs() const {
+  for (const auto& block : blocks_) {
+    if (block->Filterable() && block->num_declared_pairs() > 0) return true;
+  }
+  return false;
+}
+
+LoweredSystem::WorkingLayout LoweredSystem::working_layout() const {
+  WorkingLayout layout;
+  for (const auto& block : blocks_) {
+    layout.z_offset.push_back(block->layout.z_offset);
+    layout.pair_offset.push_back(block->layout.pair_offset);
+    layout.working.push_back(block->WorkingPairs());
+  }
+  layout.num_algebraic = num_algebraic_;
+  layout.num_pairs = num_pairs_;
+  return layout;
+}
+
+bool LoweredSystem::SetWorkingPairs(const std::vector<bool>& keep) {
+  RequireArgument(static_cast<int>(keep.size()) == num_declared_pairs_,
+                  "SetWorkingPairs: expected ", num_declared_pairs_, " flags, got ", keep.size());
+  bool changed = false;
+  for (std::size_t b = 0; b < blocks_.size(); ++b) {
+    internal::LoweredBlock& block = *blocks_[b];
+    const int first = declared_pair_offset_[b];
+    std::vector<int> working;
+    for (int local = 0; local < block.num_declared_pairs(); ++local) {
+      if (keep[static_cast<std::size_t>(first + local)]) working.push_back(local);
+    }
+    if (!block.Filterable()) {
+      RequireArgument(static_cast<int>(working.size()) == block.num_declared_pairs(),
+                      "SetWorkingPairs: only moving-set constraints can be left out");
+      continue;
+    }
+    if (working != block.WorkingPairs()) {
+      block.SetWorkingPairs(working);
+      changed = true;
+    }
+  }
+  if (changed) Layout();
+  return changed;
+}
+
+void LoweredSystem::FilterableConstraints(const Vector& y, const Vector& velocity, Vector* values,
+                                          Vector* rate_bounds) const {
+  values->setConstant(num_declared_pairs_, std::numeric_limits<double>::quiet_NaN());
+  rate_bounds->setConstant(num_declared_pairs_, std::numeric_limits<double>::quiet_NaN());
+  internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
+  context.sparse = sparse_;
+  for (std::size_t b = 0; b < blocks_.size(); ++b) {
+    internal::LoweredBlock& block = *blocks_[b];
+    if (!block.Filterable()) continue;
+    const int first = declared_pair_offset_[b];
+    const int count = block.num_declared_pairs();
+    block.DeclaredConstraints(context, y, velocity, values->segment(first, count),
+                              rate_bounds->segment(first, count));
+  }
+}
+
+double LoweredSystem::MinExcludedConstraint(const Vector& y) const {
+  double smallest = std::numeric_limits<double>::infinity();
+  internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
+  context.sparse = sparse_;
+  for (const auto& block : blocks_) {
+    if (block->Filterable()) smallest = std::min(smallest, block->MinExcluded(context, y));
+  }
+  return smallest;
+}
+
+void LoweredSystem::ExcludedViolations(const Vector& y, double threshold,
+                                       std::vector<bool>* include) const {
+  internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
+  context.sparse = sparse_;
+  for (std::size_t b = 0; b < blocks_.size(); ++b) {
+    if (!blocks_[b]->Filterable()) continue;
+    blocks_[b]->ExcludedBelow(context, y, threshold, declared_pair_offset_[b], include);
+  }
+}
+
+Vector LoweredSystem::RemapAlgebraic(const Vector& z, const WorkingLayout& from,
+                                     double fill) const {
+  MOREAU_ASSERT(z.size() == from.num_algebraic, "RemapAlgebraic: wrong size");
+  Vector out = Vector::Constant(num_algebraic_, fill);
+  for (std::size_t b = 0; b < blocks_.size(); ++b) {
+    const internal::LoweredBlock& block = *blocks_[b];
+    if (!block.Filterable()) {
+      out.segment(block.layout.z_offset, block.num_algebraic()) =
+          z.segment(from.z_offset[b], block.num_algebraic());
+      continue;
+    }
+    // Moving sets: one multiplier per working constraint, in the order of the constraints.
+    const std::vector<int>& old_working = from.working[b];
+    const std::vector<int> new_working = block.WorkingPairs();
+    std::size_t i = 0;
+    for (std::size_t j = 0; j < new_working.size(); ++j) {
+      while (i < old_working.size() && old_working[i] < new_working[j]) ++i;
+      if (i < old_working.size() && old_working[i] == new_working[j]) {
+        out[block.layout.z_offset + static_cast<int>(j)] =
+            z[from.z_offset[b] + static_cast<int>(i)];
+      }
+    }
+  }
+  return out;
+}
+
+Vector LoweredSystem::RemapPairValues(const Vector& values, const WorkingLayout& from,
+                                      double fill) const {
+  MOREAU_ASSERT(values.size() == from.num_pairs, "RemapPairValues: wrong size");
+  Vector out = Vector::Constant(num_pairs_, fill);
+  for (std::size_t b = 0; b < blocks_.size(); ++b) {
+    const internal::LoweredBlock& block = *blocks_[b];
+    const std::vector<int>& old_working = from.working[b];
+    const std::vector<int> new_working = block.WorkingPairs();
+    std::size_t i = 0;
+    for (std::size_t j = 0; j < new_working.size(); ++j) {
+      while (i < old_working.size() && old_working[i] < new_working[j]) ++i;
+      if (i < old_working.size() && old_working[i] == new_working[j]) {
+        out[block.layout.pair_offset + static_cast<int>(j)] =
+            values[from.pair_offset[b] + static_cast<int>(i)];
+      }
+    }
+  }
+  return out;
+}
+
+std::vector<bool> LoweredSystem::RemapStatuses(const std::vector<bool>& a_zero,
+                                               const WorkingLayout& from, bool fill) const {
+  Vector values(static_cast<Eigen::Index>(a_zero.size()));
+  for (std::size_t k = 0; k < a_zero.size(); ++k) values[static_cast<Eigen::Index>(k)] = a_zero[k];
+  const Vector mapped = RemapPairValues(values, from, fill ? 1.0 : 0.0);
+  std::vector<bool> out(static_cast<std::size_t>(num_pairs_));
+  for (int k = 0; k < num_pairs_; ++k) out[static_cast<std::size_t>(k)] = mapped[k] != 0.0;
+  return out;
+}
+
+Vector LoweredSystem::DeclaredAlgebraic(const Vector& z) const {
+  MOREAU_ASSERT(z.size() == num_algebraic_, "DeclaredAlgebraic: wrong size");
+  if (num_pairs_ == num_declared_pairs_) return z;
+  Vector out = Vector::Zero(num_declared_algebraic());
+  int offset = 0;
+  for (const auto& block : blocks_) {
+    if (!block->Filterable()) {
+      out.segment(offset, block->num_algebraic()) =
+          z.segment(block->layout.z_offset, block->num_algebraic());
+      offset += block->num_algebraic();
+      continue;
+    }
+    const std::vector<int> working = block->WorkingPairs();
+    for (std::size_t j = 0; j < working.size(); ++j) {
+      out[offset + working[j]] = z[block->layout.z_offset + static_cast<int>(j)];
+    }
+    offset += block->num_declared_pairs();
+  }
+  return out;
+}
+
+int LoweredSystem::num_declared_algebraic() const {
+  return num_algebraic_ - num_pairs_ + num_declared_pairs_;
+}
+
+std::vector<std::string> LoweredSystem::declared_algebraic_names() const {
+  std::vector<std::string> names;
+  for (const auto& block : blocks_) {
+    for (const std::string& name : block->DeclaredAlgebraicNames()) names.push_back(name);
+  }
+  return names;
 }
 
 Vector LoweredSystem::InitialState() const {
@@ -371,13 +595,13 @@ void LoweredSystem::EvaluatePoint(const ConstVectorRef& y, const ConstVectorRef&
 
 void LoweredSystem::FinalizeEvaluation(Derivatives derivatives, PointEvaluation* out) const {
   if (!sparse_ || derivatives == Derivatives::kNone) return;
-  for (DerivativeMatrix* m : {&out->F_y, &out->F_z, &out->G_y, &out->G_z, &out->A_y, &out->A_z,
-                              &out->B_y, &out->B_z}) {
+  for (DerivativeMatrix* m :
+       {&out->F_y, &out->F_z, &out->G_y, &out->G_z, &out->A_y, &out->A_z, &out->B_y, &out->B_z}) {
     m->Finalize();
   }
   if (derivatives != Derivatives::kAll) return;
-  for (DerivativeMatrix* m : {&out->F_u, &out->G_u, &out->A_u, &out->B_u, &out->F_p, &out->G_p,
-                              &out->A_p, &out->B_p}) {
+  for (DerivativeMatrix* m :
+       {&out->F_u, &out->G_u, &out->A_u, &out->B_u, &out->F_p, &out->G_p, &out->A_p, &out->B_p}) {
     m->Finalize();
   }
 }

@@ -13,7 +13,6 @@
 
 namespace moreau {
 
-
 std::vector<PairRole> LoweredSystem::RolesFor(const std::vector<bool>& a_zero) {
   std::vector<PairRole> roles;
   roles.reserve(a_zero.size());
@@ -149,7 +148,8 @@ static void AssembleVelocityLevel(const LoweredSystem& system, const PointEvalua
   }
   const std::vector<int> source_rows = {ng, ng, np, np, any_both ? np : 0};
   RowSelection equations(5, source_rows), a_rows(5, source_rows), b_rows(5, source_rows);
-  for (int r = 0; r < ng; ++r) equations.Take(differentiated[static_cast<std::size_t>(r)] ? 1 : 0, r);
+  for (int r = 0; r < ng; ++r)
+    equations.Take(differentiated[static_cast<std::size_t>(r)] ? 1 : 0, r);
   for (int k = 0; k < np; ++k) {
     const ContinuousSide side = pairs[static_cast<std::size_t>(k)].continuous;
     const bool continuous_a = side != ContinuousSide::kB;
@@ -422,7 +422,8 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
   // enumerated (their assignments can give different velocities: ambiguity).
   std::vector<int> enumerated, monotone;
   for (int k : candidates) {
-    const auto& block = *blocks_[static_cast<std::size_t>(pairs_[static_cast<std::size_t>(k)].block)];
+    const auto& block =
+        *blocks_[static_cast<std::size_t>(pairs_[static_cast<std::size_t>(k)].block)];
     (block.MonotoneVelocityLevel() ? monotone : enumerated).push_back(k);
   }
   if (static_cast<int>(enumerated.size()) <= kMaxEnumeratedCandidates) candidates = enumerated;

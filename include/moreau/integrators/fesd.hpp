@@ -107,6 +107,14 @@ struct FesdOptions {
   /// active boundaries. Off (the default): such a switch counts as an element, and the map
   /// jumps there by the change of the discretization error (docs/ocp.md).
   bool keep_elements_after_early_switch = false;
+  /// Near-active constraint filter (docs/sparse-systems.md): moving-set constraints whose
+  /// value exceeds filter_safety * H * (a bound on their rate at the step start) are left out
+  /// of the element systems and checked at every stage afterwards (a step whose left-out
+  /// constraint is not positive there is solved again with it). kAutomatic: on when the scene
+  /// declares more than kFilterThreshold moving-set constraints.
+  ConstraintFilter constraint_filter = ConstraintFilter::kAutomatic;
+  /// Safety factor of the filter's margin, >= 1.
+  double filter_safety = 4.0;
   /// Compute dx(T)/dx(0), dx(T)/dp, dx(T)/du (FesdResult::sensitivities).
   bool sensitivities = false;
   /// Step-size control by the local error estimate (see the file comment and
@@ -208,6 +216,10 @@ struct FesdStats {
   double max_complementarity = 0.0;
   double min_element_length = 0.0;
   double frozen_time = 0.0;  ///< numerical time spent with physical time frozen (relays)
+  /// Near-active filter: steps solved again because a left-out constraint was not positive
+  /// at a stage, and the largest number of pairs in an element system.
+  long num_filter_rechecks = 0;
+  long max_working_pairs = 0;
   double cpu_seconds = 0.0;
 
   FesdStats& operator+=(const FesdStats& other);

@@ -50,6 +50,12 @@ struct TimeSteppingOptions {
   /// map is only piecewise smooth: a pair changing status inside a step is not a switch time,
   /// so these derivatives carry no switch-time terms; see docs/ocp.md).
   bool sensitivities = false;
+  /// Near-active constraint filter (docs/sparse-systems.md), as FesdOptions::constraint_filter:
+  /// moving-set constraints far from contact are left out of the step systems and checked at
+  /// every stage afterwards (the step is solved again with those that are not positive there).
+  ConstraintFilter constraint_filter = ConstraintFilter::kAutomatic;
+  /// Safety factor of the filter's margin, >= 1.
+  double filter_safety = 4.0;
   /// Start from this lowered state y0 = (x, clock) instead of the scene's x0 (shooting codes;
   /// empty: the scene's). Need not lie in the moving sets: the first step catches up.
   Vector initial_state;
@@ -74,6 +80,10 @@ struct TimeSteppingStats {
   long num_backtracks = 0;
   double max_complementarity_residual = 0.0;  ///< max over steps of max |min(a, b)|
   double max_newton_residual = 0.0;           ///< max over steps of ||S Phi||_inf
+  /// Near-active filter: steps solved again (a left-out constraint not positive at a
+  /// stage), and the most pairs in a step system.
+  long num_filter_rechecks = 0;
+  long max_working_pairs = 0;
   double cpu_seconds = 0.0;
 
   TimeSteppingStats& operator+=(const TimeSteppingStats& other);

@@ -49,7 +49,8 @@ class SystemMatrix {
   /// A(row0 + i, col0 + j) += scale * M(i, j) for the stored entries of a derivative matrix
   /// (every entry of a dense one).
   void AddDerivative(int row0, int col0, const DerivativeMatrix& m, double scale = 1.0);
-  /// A(row0 + i, col0 + j) += row_weights(i) * M(i, j) (rows weighted, e.g. by NCP derivatives).
+  /// A(row0 + i, col0 + j) += row_weights(i) * M(i, j) (rows weighted, e.g. by NCP derivatives;
+  /// with sparse storage rows of weight zero add no entries).
   void AddWeightedRows(int row0, int col0, const ConstVectorRef& row_weights,
                        const DerivativeMatrix& m);
   /// A(row, col0 + j) += sum_k weights(k) M(k, j): a combination of the rows of M into one

@@ -71,6 +71,19 @@ inline DerivativeStorage StorageForLinearSolver(LinearSolverKind kind) {
                                              : DerivativeStorage::kAutomatic;
 }
 
+/// The near-active constraint filter of the integrators (docs/sparse-systems.md): moving-set
+/// constraints far from zero are left out of the element systems and checked afterwards.
+enum class ConstraintFilter {
+  kAutomatic,  ///< on when the scene declares more than kFilterThreshold moving-set constraints
+  kOff,        ///< every constraint in every element system
+  kOn,         ///< the filter on whatever the number of constraints
+};
+std::string ToString(ConstraintFilter filter);
+/// Parses "auto", "off" or "on"; throws std::invalid_argument otherwise.
+ConstraintFilter ParseConstraintFilter(const std::string& name);
+/// ConstraintFilter::kAutomatic turns the filter on above this many moving-set constraints.
+inline constexpr int kFilterThreshold = 64;
+
 /// Under DerivativeStorage::kAutomatic, systems with more than this many states and algebraic
 /// unknowns (n_y + n_z) are stored sparse: a Radau IIA stage system of s >= 2 stages then has
 /// more than kDenseSizeLimit = 256 unknowns, where the sparse LU takes over from the dense one.
@@ -170,7 +183,7 @@ inline bool PairStatusIsAZero(double a, double b) { return a <= b; }
 namespace internal {
 class LoweredBlock;
 class ArgumentMatrix;
-}
+}  // namespace internal
 
 /// A scene lowered to a DCS (see file comment).
 class LoweredSystem {
@@ -249,6 +262,50 @@ class LoweredSystem {
   /// velocity-level complementarity problem instead of enumeration (no ambiguity check).
   static constexpr int kMaxEnumeratedCandidates = 10;
 
+  // --- near-active constraint filter (docs/sparse-systems.md) ------------------------------
+  // The pairs a scene declares are the "declared pairs" (every constraint of every effect);
+  // the system holds a working set of them. Moving-set constraints may be left out (their
+  // multiplier is zero and they have no pair, unknown or equation); every other pair is
+  // always in. Integrators move their state between working sets with the Remap functions.
+
+  /// Every pair the scene declares (num_pairs() when nothing is left out).
+  int num_declared_pairs() const { return num_declared_pairs_; }
+  /// The declared index of every pair of the system (increasing).
+  const std::vector<int>& working_pairs() const { return working_pairs_; }
+  /// True if the system has moving-set constraints (which may be left out).
+  bool has_filterable_pairs() const;
+  /// True if declared pair `declared` may be left out.
+  bool PairFilterable(int declared) const;
+  /// Keeps the declared pairs with keep[k] true (every pair that is not filterable must be
+  /// kept) and lays the system out anew. Returns true if the working set changed.
+  bool SetWorkingPairs(const std::vector<bool>& keep);
+  /// Where the state of an integrator sits in a working set (for the Remap functions).
+  struct WorkingLayout {
+    std::vector<int> z_offset, pair_offset;
+    std::vector<std::vector<int>> working;  // per block: its working pairs (block-local)
+    int num_algebraic = 0, num_pairs = 0;
+  };
+  WorkingLayout working_layout() const;
+  /// z (laid out as in `from`) in the current layout; unknowns new to it get `fill`.
+  Vector RemapAlgebraic(const Vector& z, const WorkingLayout& from, double fill) const;
+  /// Per-pair values (laid out as in `from`) in the current layout; new pairs get `fill`.
+  Vector RemapPairValues(const Vector& values, const WorkingLayout& from, double fill) const;
+  std::vector<bool> RemapStatuses(const std::vector<bool>& a_zero, const WorkingLayout& from,
+                                  bool fill) const;
+  /// For every declared moving-set constraint (NaN for other declared pairs): its value
+  /// c_k(y) and the bound |grad_x c_k(y)|_1 max_i |velocity_i| + |dc_k/dt(y)| on its rate
+  /// (velocity: n_x scene-state rates).
+  void FilterableConstraints(const Vector& y, const Vector& velocity, Vector* values,
+                             Vector* rate_bounds) const;
+  /// The smallest value at y of the constraints left out (infinity if none).
+  double MinExcludedConstraint(const Vector& y) const;
+  /// Sets include[declared] for every left-out constraint whose value at y is below threshold.
+  void ExcludedViolations(const Vector& y, double threshold, std::vector<bool>* include) const;
+  /// The algebraic unknowns of every declared pair: z with zeros for left-out multipliers.
+  Vector DeclaredAlgebraic(const Vector& z) const;
+  int num_declared_algebraic() const;
+  std::vector<std::string> declared_algebraic_names() const;
+
   /// True if derivatives are stored sparse (LoweringOptions::storage resolved).
   bool sparse() const { return sparse_; }
   /// Structurally nonzero entries of each derivative block with respect to y and z at the
@@ -305,6 +362,10 @@ class LoweredSystem {
 
  private:
   void Build();
+  // Offsets, names and pair descriptions of the blocks' current working sets.
+  void Layout();
+  // The block that declares pair `declared`.
+  int DeclaredBlock(int declared) const;
   // Evaluate; with `velocity_roles` (EvaluateVelocityLevel, z = v) blocks see the roles and v
   // in their context (BlockContext::velocity_roles).
   void EvaluatePoint(const ConstVectorRef& y, const ConstVectorRef& z, Derivatives derivatives,
@@ -318,6 +379,9 @@ class LoweredSystem {
   int num_algebraic_ = 0;
   int num_equations_ = 0;
   int num_pairs_ = 0;
+  int num_declared_pairs_ = 0;
+  std::vector<int> declared_pair_offset_;  // per block: its first declared pair
+  std::vector<int> working_pairs_;         // per pair: its declared index
   std::vector<std::string> state_names_;
   std::vector<std::string> relay_names_;
   std::vector<std::string> algebraic_names_;
