@@ -120,8 +120,10 @@ OptionBinding<Options> BindSwitching(SwitchingForm Options::*member) {
 }
 template <class Options>
 OptionBinding<Options> BindLinearSolver(LinearSolverKind Options::*member) {
-  return BindChoice("linear_solver", member, {"auto", "dense", "sparse"}, ParseLinearSolverKind,
-                    ToString, "LU backend (auto: dense up to 256 unknowns, sparse KLU above)");
+  return BindChoice("linear_solver", member, {"auto", "dense", "sparse", "klu"},
+                    ParseLinearSolverKind, ToString,
+                    "LU backend (auto: dense up to 256 unknowns, sparse UMFPACK above; klu: "
+                    "SuiteSparse KLU)");
 }
 // The near-active constraint filter of FESD and time-stepping (docs/sparse-systems.md).
 template <class Options>

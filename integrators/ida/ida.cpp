@@ -143,6 +143,7 @@ class IdaRun {
     }
     const bool sparse_dynamics = scene.dynamics.has_sparse_state_jacobian();
     sparse_ = options.linear_solver == LinearSolverKind::kSparseLu ||
+              options.linear_solver == LinearSolverKind::kKlu ||
               (options.linear_solver == LinearSolverKind::kAutomatic &&
                (sparse_dynamics || n_ > kDenseSizeLimit));
     RequireArgument(!sparse_dynamics || sparse_,

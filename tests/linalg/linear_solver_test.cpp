@@ -26,42 +26,91 @@ SystemMatrix RandomSparse(int n, bool sparse, unsigned seed) {
 // a few hundred ulps of O(1) solutions.
 constexpr double kAgreement = 1e-13;
 
+// Both sparse backends: UMFPACK (LinearSolverKind::kSparseLu) and KLU.
+const LinearSolverKind kSparseKinds[] = {LinearSolverKind::kSparseLu, LinearSolverKind::kKlu};
+
 TEST(LinearSolverTest, DenseAndSparseAgreeOnLargeSparseSystem) {
   constexpr int n = 3000;
   const SystemMatrix dense = RandomSparse(n, false, 7);
   const SystemMatrix sparse = RandomSparse(n, true, 7);
   auto dense_lu = MakeLinearSolver(LinearSolverKind::kDenseLu, n, n * n);
-  auto klu = MakeLinearSolver(LinearSolverKind::kSparseLu, n, 5.0 * n);
   ASSERT_EQ(dense_lu->Factorize(dense), FactorizationStatus::kSuccess);
-  ASSERT_EQ(klu->Factorize(sparse), FactorizationStatus::kSuccess);
-  Vector b = Vector::LinSpaced(n, -1.0, 2.0);
-  Vector x_dense = b, x_sparse = b;
+  const Vector b = Vector::LinSpaced(n, -1.0, 2.0);
+  Vector x_dense = b, t_dense = b;
   dense_lu->Solve(x_dense);
-  klu->Solve(x_sparse);
-  EXPECT_LE((x_dense - x_sparse).lpNorm<Eigen::Infinity>(), kAgreement);
-  EXPECT_LE((sparse.Multiply(x_sparse) - b).lpNorm<Eigen::Infinity>(), kAgreement);
-  // Transposed solves agree too.
-  Vector t_dense = b, t_sparse = b;
   dense_lu->SolveTransposed(t_dense);
-  klu->SolveTransposed(t_sparse);
-  EXPECT_LE((t_dense - t_sparse).lpNorm<Eigen::Infinity>(), kAgreement);
+  for (LinearSolverKind kind : kSparseKinds) {
+    auto lu = MakeLinearSolver(kind, n, 5.0 * n);
+    ASSERT_EQ(lu->kind(), kind);
+    ASSERT_EQ(lu->Factorize(sparse), FactorizationStatus::kSuccess) << ToString(kind);
+    Vector x_sparse = b;
+    lu->Solve(x_sparse);
+    EXPECT_LE((x_dense - x_sparse).lpNorm<Eigen::Infinity>(), kAgreement) << ToString(kind);
+    EXPECT_LE((sparse.Multiply(x_sparse) - b).lpNorm<Eigen::Infinity>(), kAgreement)
+        << ToString(kind);
+    // Transposed solves agree too.
+    Vector t_sparse = b;
+    lu->SolveTransposed(t_sparse);
+    EXPECT_LE((t_dense - t_sparse).lpNorm<Eigen::Infinity>(), kAgreement) << ToString(kind);
+    // Several right-hand sides at once.
+    Matrix several(n, 2);
+    several << b, 2.0 * b;
+    lu->SolveMatrix(several);
+    EXPECT_LE((several.col(1) - 2.0 * x_dense).lpNorm<Eigen::Infinity>(), 2.0 * kAgreement);
+  }
 }
 
-TEST(LinearSolverTest, KluRefactorizationWithSamePattern) {
-  constexpr int n = 500;
-  auto klu = MakeLinearSolver(LinearSolverKind::kSparseLu, n, 5.0 * n);
-  for (unsigned seed : {1u, 1u, 2u}) {  // same pattern twice (refactor), then a new pattern
-    const SystemMatrix a = RandomSparse(n, true, seed);
-    ASSERT_EQ(klu->Factorize(a), FactorizationStatus::kSuccess);
-    Vector x = Vector::Ones(n);
-    klu->Solve(x);
-    EXPECT_LE((a.Multiply(x) - Vector::Ones(n)).lpNorm<Eigen::Infinity>(), kAgreement);
+// A saddle-point matrix [I  J^T; J  0] (a zero diagonal block, as the multipliers of active
+// constraints give): both backends solve it; the solution is checked by its residual.
+TEST(LinearSolverTest, SaddlePointSystems) {
+  constexpr int n = 400, m = 150;
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> value(-1.0, 1.0);
+  std::uniform_int_distribution<int> column(0, n - 1);
+  SystemMatrix a;
+  a.Reset(n + m, true);
+  for (int i = 0; i < n; ++i) a.AddEntry(i, i, 1.0);
+  for (int k = 0; k < m; ++k) {
+    a.AddEntry(n + k, k, 1.0);  // full row rank: column k of the identity plus noise
+    for (int e = 0; e < 3; ++e) {
+      const int j = column(rng);
+      const double v = value(rng);
+      a.AddEntry(n + k, j, v);
+      a.AddEntry(j, n + k, v);
+    }
+    a.AddEntry(k, n + k, 1.0);
   }
-  EXPECT_EQ(klu->num_factorizations(), 3);
+  a.Finalize();
+  const Vector b = Vector::LinSpaced(n + m, 1.0, -1.0);
+  for (LinearSolverKind kind : kSparseKinds) {
+    auto lu = MakeLinearSolver(kind, n + m, 7.0 * (n + m));
+    ASSERT_EQ(lu->Factorize(a), FactorizationStatus::kSuccess) << ToString(kind);
+    Vector x = b;
+    lu->Solve(x);
+    EXPECT_LE((a.Multiply(x) - b).lpNorm<Eigen::Infinity>(), 1e-11) << ToString(kind);
+  }
+}
+
+TEST(LinearSolverTest, RefactorizationWithSamePattern) {
+  constexpr int n = 500;
+  for (LinearSolverKind kind : kSparseKinds) {
+    auto lu = MakeLinearSolver(kind, n, 5.0 * n);
+    for (unsigned seed : {1u, 1u, 2u}) {  // same pattern twice (refactor), then a new pattern
+      const SystemMatrix a = RandomSparse(n, true, seed);
+      ASSERT_EQ(lu->Factorize(a), FactorizationStatus::kSuccess);
+      Vector x = Vector::Ones(n);
+      lu->Solve(x);
+      EXPECT_LE((a.Multiply(x) - Vector::Ones(n)).lpNorm<Eigen::Infinity>(), kAgreement)
+          << ToString(kind);
+    }
+    EXPECT_EQ(lu->num_factorizations(), 3);
+  }
 }
 
 TEST(LinearSolverTest, SingularAndNonFiniteMatricesAreReported) {
-  for (bool sparse : {false, true}) {
+  for (LinearSolverKind kind :
+       {LinearSolverKind::kDenseLu, LinearSolverKind::kSparseLu, LinearSolverKind::kKlu}) {
+    const bool sparse = kind != LinearSolverKind::kDenseLu;
     SystemMatrix a;
     a.Reset(3, sparse);
     a.AddEntry(0, 0, 1.0);
@@ -70,15 +119,14 @@ TEST(LinearSolverTest, SingularAndNonFiniteMatricesAreReported) {
     a.AddEntry(0, 2, 0.0);
     a.AddEntry(2, 2, 0.0);
     a.Finalize();
-    auto solver =
-        MakeLinearSolver(sparse ? LinearSolverKind::kSparseLu : LinearSolverKind::kDenseLu, 3, 9);
-    EXPECT_EQ(solver->Factorize(a), FactorizationStatus::kSingular) << "sparse = " << sparse;
+    auto solver = MakeLinearSolver(kind, 3, 9);
+    EXPECT_EQ(solver->Factorize(a), FactorizationStatus::kSingular) << ToString(kind);
     SystemMatrix b;
     b.Reset(2, sparse);
     b.AddEntry(0, 0, std::numeric_limits<double>::quiet_NaN());
     b.AddEntry(1, 1, 1.0);
     b.Finalize();
-    EXPECT_EQ(solver->Factorize(b), FactorizationStatus::kNonFinite);
+    EXPECT_EQ(solver->Factorize(b), FactorizationStatus::kNonFinite) << ToString(kind);
   }
 }
 
@@ -89,6 +137,7 @@ TEST(LinearSolverTest, AutomaticChoiceBySizeAndDensity) {
             LinearSolverKind::kSparseLu);
   EXPECT_EQ(MakeLinearSolver(LinearSolverKind::kAutomatic, 5000, 5000.0 * 5000)->kind(),
             LinearSolverKind::kDenseLu);
+  EXPECT_EQ(ParseLinearSolverKind("klu"), LinearSolverKind::kKlu);
   EXPECT_THROW(ParseLinearSolverKind("cholesky"), std::invalid_argument);
 }
 

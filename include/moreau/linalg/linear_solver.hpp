@@ -22,10 +22,15 @@ namespace moreau {
 enum class LinearSolverKind {
   kAutomatic,  ///< dense LU if n <= kDenseSizeLimit or the matrix is dense, else sparse LU
   kDenseLu,    ///< Eigen PartialPivLU on a dense matrix
-  kSparseLu,   ///< SuiteSparse KLU on a CSC matrix (symbolic analysis reused across calls)
+  /// SuiteSparse UMFPACK on a CSC matrix (multifrontal, threshold pivoting; symbolic analysis
+  /// reused while the pattern holds): robust on saddle-point structures
+  kSparseLu,
+  /// SuiteSparse KLU (left-looking, BTF + AMD; symbolic analysis reused): fast on matrices
+  /// close to diagonally dominant (circuits, diffusion), poor on saddle points
+  kKlu,
 };
 std::string ToString(LinearSolverKind kind);
-/// Parses "auto", "dense" or "sparse"; throws std::invalid_argument otherwise.
+/// Parses "auto", "dense", "sparse" or "klu"; throws std::invalid_argument otherwise.
 LinearSolverKind ParseLinearSolverKind(const std::string& name);
 
 /// Systems up to this size always use the dense LU under kAutomatic.
@@ -101,7 +106,9 @@ class LinearSolver {
   virtual ~LinearSolver() = default;
   virtual LinearSolverKind kind() const = 0;
   /// True if this solver wants sparse storage in SystemMatrix.
-  bool wants_sparse() const { return kind() == LinearSolverKind::kSparseLu; }
+  bool wants_sparse() const {
+    return kind() == LinearSolverKind::kSparseLu || kind() == LinearSolverKind::kKlu;
+  }
   /// Factorizes A (whose storage must match wants_sparse()).
   virtual FactorizationStatus Factorize(const SystemMatrix& a) = 0;
   /// Overwrites rhs with A^{-1} rhs (after a successful Factorize).

@@ -67,8 +67,9 @@ std::string ToString(DerivativeStorage storage);
 /// The storage an integrator asks for given its linear solver option: sparse with the sparse
 /// LU, otherwise automatic (a dense LU also accepts sparse blocks).
 inline DerivativeStorage StorageForLinearSolver(LinearSolverKind kind) {
-  return kind == LinearSolverKind::kSparseLu ? DerivativeStorage::kSparse
-                                             : DerivativeStorage::kAutomatic;
+  return kind == LinearSolverKind::kSparseLu || kind == LinearSolverKind::kKlu
+             ? DerivativeStorage::kSparse
+             : DerivativeStorage::kAutomatic;
 }
 
 /// The near-active constraint filter of the integrators (docs/sparse-systems.md): moving-set
@@ -314,9 +315,9 @@ class LoweredSystem {
   struct Nonzeros {
     double F_y = 0, F_z = 0, G_y = 0, G_z = 0, A_y = 0, A_z = 0, B_y = 0, B_z = 0;
   };
-  const Nonzeros& nonzeros() const { return nonzeros_; }
+  const Nonzeros& nonzeros() const;
   /// Number of structurally nonzero entries of F_y (for choosing dense or sparse LU).
-  double EstimatedNonzerosFy() const { return nonzeros_.F_y; }
+  double EstimatedNonzerosFy() const { return nonzeros().F_y; }
 
   // --- velocity level -------------------------------------------------------------------
   /// The velocity-level problem at state y (docs/fesd-formulation.md): unknowns v in the
@@ -396,7 +397,8 @@ class LoweredSystem {
   bool time_freezing_ = false;
   bool sparse_dynamics_ = false;  // dynamics with a hand-written sparse Jacobian
   bool sparse_ = false;           // sparse derivative storage
-  Nonzeros nonzeros_;
+  mutable Nonzeros nonzeros_;  // counted on first use after a layout (nonzeros())
+  mutable bool nonzeros_valid_ = false;
   mutable Vector f_scratch_;
   mutable Eigen::RowVectorXd rate_gradient_;
   mutable PointEvaluation velocity_point_;  // EvaluateVelocityLevel's workspace
