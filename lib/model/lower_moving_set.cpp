@@ -126,8 +126,18 @@ class MovingSetBlock final : public LoweredBlock {
     out->B.segment(k0, nw) = z.segment(z0, nw);
     if (derivatives == Derivatives::kNone) return;
 
-    // d/dy of P grad c lambda = P sum_k lambda_k Hess c_k (x rows; x, clock, u, p columns).
-    hessian_.WeightedHessian(context, set_.constraints, y, lambda_, derivatives, rows());
+    // d/dy of P grad c lambda = P sum_k lambda_k Hess c_k (x rows; x, clock, u, p columns),
+    // summed over the constraints with lambda_k != 0: the same values, and with sparse storage
+    // a pattern that couples only states of pushing constraints. (Inactive constraints of an
+    // element system, held at lambda = 0 by their status rows, would otherwise couple every
+    // pair of neighbours and fill the sparse LU; the pattern changes when a multiplier becomes
+    // zero or nonzero, i.e. at switches.)
+    pushing_.clear();
+    for (int k : working_) {
+      if (lambda_[k] != 0.0) pushing_.push_back(k);
+    }
+    hessian_.WeightedHessian(context, set_.constraints, y, lambda_, derivatives,
+                             context.sparse ? &pushing_ : rows());
     hessian_.AddStateRows(projection, 1.0, &out->F_y, &out->F_u, &out->F_p);
     for (int j = 0; j < nw; ++j) {
       const int k = working_[static_cast<std::size_t>(j)];
@@ -231,6 +241,7 @@ class MovingSetBlock final : public LoweredBlock {
   int num_states_;
   int num_constraints_;
   std::vector<int> working_;  // constraints in the system, increasing
+  std::vector<int> pushing_;  // working constraints with lambda != 0 (scratch)
   bool all_working_ = true;
   bool has_projection_ = false;
   Matrix projection_;  // P = E E^T (only with a projection basis E; P = I otherwise)

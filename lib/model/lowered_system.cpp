@@ -172,17 +172,24 @@ void LoweredSystem::Layout() {
   MOREAU_ASSERT(num_algebraic_ == num_equations_ + num_pairs_,
                 "lowered stage system is not square");
   MOREAU_ASSERT(static_cast<int>(working_pairs_.size()) == num_pairs_, "working pairs mismatch");
+  nonzeros_valid_ = false;  // counted again when asked for (nonzeros())
+}
+
+const LoweredSystem::Nonzeros& LoweredSystem::nonzeros() const {
+  if (nonzeros_valid_) return nonzeros_;
   // Structural nonzeros from one evaluation at the initial point (sparse storage; the
   // pattern does not depend on the point), every entry with dense storage.
   const double ny = num_states_, nz = num_algebraic_, ng = num_equations_, np = num_pairs_;
   nonzeros_ = {ny * ny, ny * nz, ng * ny, ng * nz, np * ny, np * nz, np * ny, np * nz};
   if (sparse_) {
     PointEvaluation e;
-    EvaluatePoint(InitialState(), InitialAlgebraicGuess(InitialState()), Derivatives::kStates,
-                  nullptr, &e);
+    const Vector y = InitialState();
+    EvaluatePoint(y, InitialAlgebraicGuess(y), Derivatives::kStates, nullptr, &e);
     nonzeros_ = {e.F_y.NonZeros(), e.F_z.NonZeros(), e.G_y.NonZeros(), e.G_z.NonZeros(),
                  e.A_y.NonZeros(), e.A_z.NonZeros(), e.B_y.NonZeros(), e.B_z.NonZeros()};
   }
+  nonzeros_valid_ = true;
+  return nonzeros_;
 }
 
 // --- near-active constraint filter ------------------------------------------------------
