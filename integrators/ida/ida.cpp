@@ -350,6 +350,14 @@ class IdaRun {
     if (sparse_) {
       matrix_ = SUNSparseMatrix(n_, n_, std::max<sunindextype>(n_, 1), CSC_MAT, context_.context);
       linear_solver_ = SUNLinSol_KLU(Y_->vector, matrix_, context_.context);
+      // AMD fill-reducing ordering instead of SUNDIALS' default COLAMD: the phase Jacobian is
+      // structurally nearly symmetric (F_y, the Gram-like rows J F_z of the kept pairs), and
+      // on the crowd KLU's refactorizations took 12% of the run with AMD against 45% with
+      // COLAMD (N = 1000, tf = 0.5: 5.5 s against 8.5 s; docs/ida.md, "Linear algebra").
+      if (linear_solver_ != nullptr) {
+        Check(SUNLinSol_KLUSetOrdering(linear_solver_, kKluOrderingAmd),
+              "SUNLinSol_KLUSetOrdering");
+      }
     } else {
       matrix_ = SUNDenseMatrix(n_, n_, context_.context);
       linear_solver_ = SUNLinSol_Dense(Y_->vector, matrix_, context_.context);
@@ -378,6 +386,9 @@ class IdaRun {
     // the local error test applies to y and z_c only.
     Check(IDASetSuppressAlg(memory_, SUNTRUE), "IDASetSuppressAlg");
   }
+
+  // KLU's ordering codes (SUNLinSol_KLUSetOrdering): 0 AMD, 1 COLAMD, 2 natural.
+  static constexpr int kKluOrderingAmd = 0;
 
   static void Check(int flag, const char* what) {
     MOREAU_ASSERT(flag >= 0, std::string(what) + " failed with flag " + std::to_string(flag));
