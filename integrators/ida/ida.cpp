@@ -13,11 +13,11 @@
 #include <sunmatrix/sunmatrix_sparse.h>
 
 #include <Eigen/Dense>
+#include <Eigen/SparseCholesky>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
-#include <cstring>
 #include <limits>
 #include <sstream>
 #include <stdexcept>
@@ -76,8 +76,9 @@ std::string ToString(IdaStatus status) {
 std::string IdaStats::Summary() const {
   std::ostringstream s;
   s << num_steps << " steps, " << num_phases << " phases, " << num_events << " events, "
-    << num_residual_evaluations << " residuals, " << num_jacobian_evaluations
-    << " Jacobians, max drift " << max_drift << ", " << cpu_seconds << " s";
+    << num_residual_evaluations << " residuals, " << num_jacobian_evaluations << " Jacobians";
+  if (num_symbolic_analyses > 0) s << " (" << num_symbolic_analyses << " KLU analyses)";
+  s << ", max drift " << max_drift << ", " << cpu_seconds << " s";
   return s.str();
 }
 
@@ -110,10 +111,106 @@ Eigen::Map<Vector> View(N_Vector v) {
   return Eigen::Map<Vector>(N_VGetArrayPointer(v), N_VGetLength(v));
 }
 
+// f(row, column, value) for every entry of a finished derivative matrix: the stored entries
+// of sparse storage (structural zeros included), every entry of dense storage.
+template <class F>
+void ForEachEntry(const DerivativeMatrix& m, F&& f) {
+  if (m.is_sparse()) {
+    const SparseMatrix& s = m.sparse();
+    for (int j = 0; j < s.outerSize(); ++j) {
+      for (SparseMatrix::InnerIterator it(s, j); it; ++it)
+        f(static_cast<int>(it.row()), j, it.value());
+    }
+    return;
+  }
+  const Matrix& d = m.dense();
+  for (Eigen::Index j = 0; j < d.cols(); ++j) {
+    for (Eigen::Index i = 0; i < d.rows(); ++i) {
+      f(static_cast<int>(i), static_cast<int>(j), d(i, j));
+    }
+  }
+}
+
+// Triplets (row, column, value) compressed into CSC arrays (duplicates summed, rows sorted
+// within each column). The map from triplet to CSC slot is kept: while the sequence of
+// (row, column) is the one it was made for (the same blocks with the same patterns), a
+// compression is one pass over the values, O(triplets), without sorting or allocation.
+class TripletAssembly {
+ public:
+  void Clear() {
+    rows_.clear();
+    cols_.clear();
+    values_.clear();
+  }
+  void Add(int row, int col, double value) {
+    rows_.push_back(row);
+    cols_.push_back(col);
+    values_.push_back(value);
+  }
+  const std::vector<double>& values() const { return values_; }
+
+  // Compresses the triplets of an n x n matrix; true if the CSC pattern differs from the
+  // previous compression's.
+  bool Compress(int n) {
+    bool new_pattern = false;
+    if (rows_ != slot_rows_ || cols_ != slot_cols_) {
+      new_pattern = BuildSlots(n);
+      slot_rows_ = rows_;
+      slot_cols_ = cols_;
+    }
+    compressed_.assign(inner_.size(), 0.0);
+    for (std::size_t t = 0; t < values_.size(); ++t) compressed_[slot_[t]] += values_[t];
+    return new_pattern;
+  }
+  const std::vector<sunindextype>& outer() const { return outer_; }
+  const std::vector<sunindextype>& inner() const { return inner_; }
+  const std::vector<double>& compressed() const { return compressed_; }
+
+ private:
+  // Counting sort by column, then by row within each column; equal (row, column) share a
+  // slot. Returns true if the pattern changed.
+  bool BuildSlots(int n) {
+    const std::size_t m = rows_.size();
+    std::vector<std::size_t> start(static_cast<std::size_t>(n) + 1, 0);
+    for (int c : cols_) ++start[static_cast<std::size_t>(c) + 1];
+    for (std::size_t j = 0; j < static_cast<std::size_t>(n); ++j) start[j + 1] += start[j];
+    std::vector<std::size_t> order(m), next(start.begin(), start.end() - 1);
+    for (std::size_t t = 0; t < m; ++t) order[next[static_cast<std::size_t>(cols_[t])]++] = t;
+    std::vector<sunindextype> outer(static_cast<std::size_t>(n) + 1, 0), inner;
+    inner.reserve(m);
+    slot_.resize(m);
+    for (std::size_t j = 0; j < static_cast<std::size_t>(n); ++j) {
+      const auto first = order.begin() + static_cast<std::ptrdiff_t>(start[j]);
+      const auto last = order.begin() + static_cast<std::ptrdiff_t>(start[j + 1]);
+      std::sort(first, last, [this](std::size_t a, std::size_t b) { return rows_[a] < rows_[b]; });
+      outer[j] = static_cast<sunindextype>(inner.size());
+      for (auto it = first; it != last; ++it) {
+        if (inner.size() == static_cast<std::size_t>(outer[j]) || inner.back() != rows_[*it]) {
+          inner.push_back(rows_[*it]);
+        }
+        slot_[*it] = inner.size() - 1;
+      }
+    }
+    outer[static_cast<std::size_t>(n)] = static_cast<sunindextype>(inner.size());
+    const bool changed = outer != outer_ || inner != inner_;
+    outer_ = std::move(outer);
+    inner_ = std::move(inner);
+    return changed;
+  }
+
+  std::vector<int> rows_, cols_;
+  std::vector<double> values_;
+  // The triplet sequence the slots were made for, and per triplet its CSC slot.
+  std::vector<int> slot_rows_, slot_cols_;
+  std::vector<std::size_t> slot_;
+  std::vector<sunindextype> outer_, inner_;
+  std::vector<double> compressed_;
+};
+
 class IdaRun {
  public:
   IdaRun(const Scene& scene, const IdaOptions& options, const ProgressCallback& progress)
-      : options_(options), progress_(progress), system_(scene, Lowering(scene, options)) {
+      : options_(options), progress_(progress), system_(scene, Lowering(options)) {
     ny_ = system_.num_states();
     nx_ = system_.num_scene_states();
     nz_ = system_.num_algebraic();
@@ -121,8 +218,7 @@ class IdaRun {
     np_ = system_.num_pairs();
     nr_ = static_cast<int>(system_.relay_names().size());
     for (int i = 0; i < nz_; ++i) {
-      (system_.continuous_algebraic()[static_cast<std::size_t>(i)] ? continuous_ : jump_)
-          .push_back(i);
+      if (system_.continuous_algebraic()[static_cast<std::size_t>(i)]) continuous_.push_back(i);
     }
     nc_ = static_cast<int>(continuous_.size());
     n_ = ny_ + nc_ + nz_;
@@ -135,6 +231,16 @@ class IdaRun {
       const auto it = std::find(continuous_.begin(), continuous_.end(), info.b_unknown);
       MOREAU_ASSERT(it != continuous_.end(), "an index-1 pair's b must be a continuous unknown");
       position_pair_[static_cast<std::size_t>(it - continuous_.begin())] = k;
+    }
+    // IDA column of each algebraic unknown: continuous ones are carried as z_c, jump ones are
+    // their velocity-level slots. IDA row of each index-1 position-level condition.
+    z_column_.resize(static_cast<std::size_t>(nz_));
+    for (int i = 0; i < nz_; ++i) z_column_[static_cast<std::size_t>(i)] = ny_ + nc_ + i;
+    position_row_.assign(static_cast<std::size_t>(nz_), -1);
+    for (int c = 0; c < nc_; ++c) {
+      z_column_[static_cast<std::size_t>(continuous_[static_cast<std::size_t>(c)])] = ny_ + c;
+      const int k = position_pair_[static_cast<std::size_t>(c)];
+      if (k >= 0) position_row_[static_cast<std::size_t>(ng_ + k)] = ny_ + c;
     }
     tested_.assign(static_cast<std::size_t>(n_), false);
     for (int i = 0; i < nx_; ++i) tested_[static_cast<std::size_t>(i)] = true;
@@ -206,14 +312,13 @@ class IdaRun {
   }
 
  private:
-  static LoweringOptions Lowering(const Scene& scene, const IdaOptions& options) {
+  static LoweringOptions Lowering(const IdaOptions& options) {
     LoweringOptions lowering;
     lowering.switching_form = options.switching_form;
     lowering.relay_form = RelayForm::kDiscreteMemory;
-    // The phase Jacobian below is assembled dense (then copied into KLU's CSC matrix when the
-    // sparse solver is used); hand-written sparse dynamics (no effects) are read sparse.
-    lowering.storage = scene.dynamics.has_sparse_state_jacobian() ? DerivativeStorage::kSparse
-                                                                  : DerivativeStorage::kDense;
+    // Sparse with KLU, else automatic (sparse for large systems and hand-written sparse
+    // dynamics): the phase Jacobian is assembled from either storage (AssembleJacobian).
+    lowering.storage = StorageForLinearSolver(options.linear_solver);
     return lowering;
   }
 
@@ -246,6 +351,14 @@ class IdaRun {
     if (sparse_) {
       matrix_ = SUNSparseMatrix(n_, n_, std::max<sunindextype>(n_, 1), CSC_MAT, context_.context);
       linear_solver_ = SUNLinSol_KLU(Y_->vector, matrix_, context_.context);
+      // AMD fill-reducing ordering instead of SUNDIALS' default COLAMD: the phase Jacobian is
+      // structurally nearly symmetric (F_y, the Gram-like rows J F_z of the kept pairs), and
+      // on the crowd KLU's refactorizations took 12% of the run with AMD against 45% with
+      // COLAMD (N = 1000, tf = 0.5: 5.5 s against 8.5 s; docs/ida.md, "Linear algebra").
+      if (linear_solver_ != nullptr) {
+        Check(SUNLinSol_KLUSetOrdering(linear_solver_, kKluOrderingAmd),
+              "SUNLinSol_KLUSetOrdering");
+      }
     } else {
       matrix_ = SUNDenseMatrix(n_, n_, context_.context);
       linear_solver_ = SUNLinSol_Dense(Y_->vector, matrix_, context_.context);
@@ -275,6 +388,9 @@ class IdaRun {
     Check(IDASetSuppressAlg(memory_, SUNTRUE), "IDASetSuppressAlg");
   }
 
+  // KLU's ordering codes (SUNLinSol_KLUSetOrdering): 0 AMD, 1 COLAMD, 2 natural.
+  static constexpr int kKluOrderingAmd = 0;
+
   static void Check(int flag, const char* what) {
     MOREAU_ASSERT(flag >= 0, std::string(what) + " failed with flag " + std::to_string(flag));
   }
@@ -302,6 +418,14 @@ class IdaRun {
       }
     }
     a_zero_ = decision.a_zero;
+    position_side_.assign(static_cast<std::size_t>(np_), PositionSide::kNone);
+    for (int k = 0; k < np_; ++k) {
+      const ContinuousSide side = system_.pairs()[static_cast<std::size_t>(k)].continuous;
+      const bool keeps_a = a_zero_[static_cast<std::size_t>(k)];
+      // Only continuous kept sides have a position-level condition (kBoth: both are).
+      if (side != ContinuousSide::kBoth && keeps_a != (side == ContinuousSide::kA)) continue;
+      position_side_[static_cast<std::size_t>(k)] = keeps_a ? PositionSide::kA : PositionSide::kB;
+    }
     roles_ = LoweredSystem::RolesFor(a_zero_);
     v_ = decision.v;
     StartPhase(t);
@@ -369,20 +493,22 @@ class IdaRun {
   }
 
   // Adds IDA's counters since the last accumulation (IDAReInit resets them; ReInit below
-  // accumulates first), so that calling it twice counts nothing twice.
+  // accumulates first), so that calling it twice counts nothing twice. Jacobian evaluations
+  // are counted by the callback instead: IDA's count (IDAGetNumJacEvals) belongs to the
+  // linear-solver interface, which IDAReInit does not reset (the next IDASolve does), so a
+  // run ending with a restart at tf counted its last phase's Jacobians twice (the heat
+  // equation: 46 for 23 evaluations).
   void AccumulateStats() {
-    long steps = 0, residuals = 0, jacobians = 0, iterations = 0, failures = 0;
+    long steps = 0, residuals = 0, iterations = 0, failures = 0;
     IDAGetNumSteps(memory_, &steps);
     IDAGetNumResEvals(memory_, &residuals);
-    IDAGetNumJacEvals(memory_, &jacobians);
     IDAGetNumNonlinSolvIters(memory_, &iterations);
     IDAGetNumErrTestFails(memory_, &failures);
     result_.stats.num_steps += steps - counted_.steps;
     result_.stats.num_residual_evaluations += residuals - counted_.residuals;
-    result_.stats.num_jacobian_evaluations += jacobians - counted_.jacobians;
     result_.stats.num_nonlinear_iterations += iterations - counted_.iterations;
     result_.stats.num_error_test_failures += failures - counted_.failures;
-    counted_ = {steps, residuals, jacobians, iterations, failures};
+    counted_ = {steps, residuals, iterations, failures};
   }
 
   // IDAReInit at (t, Y_, Yp_), its counters accumulated first.
@@ -548,33 +674,46 @@ class IdaRun {
   }
 
   // --- the phase DAE ----------------------------------------------------------------------
-  // Position-level conditions P (nz rows, aligned with the velocity-level rows) and, with
-  // `with_jacobian`, dP/dy and dP/dz at the evaluation `point`.
-  void PositionLevel(const PointEvaluation& point, bool with_jacobian, Vector* p, Matrix* p_y,
-                     Matrix* p_z) const {
+  // Position-level conditions P (nz rows, aligned with the velocity-level rows) at the
+  // evaluation `point`: the differentiated equations G and the continuous kept sides.
+  void PositionLevel(const PointEvaluation& point, Vector* p) const {
     p->setZero(nz_);
-    if (with_jacobian) {
-      p_y->setZero(nz_, ny_);
-      p_z->setZero(nz_, nz_);
-    }
     for (int r = 0; r < ng_; ++r) {
-      if (!system_.differentiated_equations()[static_cast<std::size_t>(r)]) continue;
-      (*p)[r] = point.G[r];
-      if (with_jacobian) {
-        p_y->row(r) = point.G_y.dense().row(r);
-        p_z->row(r) = point.G_z.dense().row(r);
-      }
+      if (system_.differentiated_equations()[static_cast<std::size_t>(r)]) (*p)[r] = point.G[r];
     }
     for (int k = 0; k < np_; ++k) {
-      const ContinuousSide side = system_.pairs()[static_cast<std::size_t>(k)].continuous;
-      const bool keeps_a = a_zero_[static_cast<std::size_t>(k)];
-      // Only continuous kept sides have a position-level condition (kBoth: both are).
-      if (side != ContinuousSide::kBoth && keeps_a != (side == ContinuousSide::kA)) continue;
-      (*p)[ng_ + k] = keeps_a ? point.A[k] : point.B[k];
-      if (with_jacobian) {
-        p_y->row(ng_ + k) = keeps_a ? point.A_y.dense().row(k) : point.B_y.dense().row(k);
-        p_z->row(ng_ + k) = keeps_a ? point.A_z.dense().row(k) : point.B_z.dense().row(k);
-      }
+      const PositionSide side = position_side_[static_cast<std::size_t>(k)];
+      if (side != PositionSide::kNone)
+        (*p)[ng_ + k] = side == PositionSide::kA ? point.A[k] : point.B[k];
+    }
+  }
+
+  // f(row, column, wrt_z, value) for every stored entry of dP/dy (wrt_z false, column in y)
+  // and dP/dz (wrt_z true, column in z) at `point`, streamed from the rows of G_y, G_z, A_y,
+  // A_z, B_y, B_z that P selects: no P matrix is formed, and with sparse storage the cost is
+  // the nonzeros of those blocks.
+  template <class F>
+  void ForEachPositionEntry(const PointEvaluation& point, F&& f) const {
+    const auto& differentiated = system_.differentiated_equations();
+    auto equation = [&](bool wrt_z) {
+      return [&, wrt_z](int r, int j, double value) {
+        if (differentiated[static_cast<std::size_t>(r)]) f(r, j, wrt_z, value);
+      };
+    };
+    auto pair = [&](PositionSide kept, bool wrt_z) {
+      return [&, kept, wrt_z](int k, int j, double value) {
+        if (position_side_[static_cast<std::size_t>(k)] == kept) f(ng_ + k, j, wrt_z, value);
+      };
+    };
+    if (ng_ > 0) {
+      ForEachEntry(point.G_y, equation(false));
+      ForEachEntry(point.G_z, equation(true));
+    }
+    if (np_ > 0) {
+      ForEachEntry(point.A_y, pair(PositionSide::kA, false));
+      ForEachEntry(point.A_z, pair(PositionSide::kA, true));
+      ForEachEntry(point.B_y, pair(PositionSide::kB, false));
+      ForEachEntry(point.B_z, pair(PositionSide::kB, true));
     }
   }
 
@@ -597,7 +736,7 @@ class IdaRun {
     system_.Evaluate(y, z, Derivatives::kNone, &point_);
     r.head(ny_) = yp.head(ny_) - point_.F;
     Vector p;
-    if (nz_ > 0) PositionLevel(point_, false, &p, nullptr, nullptr);
+    if (nz_ > 0) PositionLevel(point_, &p);
     for (int c = 0; c < nc_; ++c) {
       const int k = position_pair_[static_cast<std::size_t>(c)];
       r[ny_ + c] = k >= 0 ? p[ng_ + k] : yp[ny_ + c] - v[continuous_[static_cast<std::size_t>(c)]];
@@ -609,94 +748,89 @@ class IdaRun {
     return r.allFinite() ? 0 : 1;  // non-finite: recoverable, IDA retries a smaller step
   }
 
-  // J = dR/dY + c_j dR/dY'.
+  // J = dR/dY + c_j dR/dY', assembled straight into the solver's matrix: SUNDIALS' dense
+  // matrix, or KLU's CSC matrix from triplets (no dense n x n intermediate).
   int Jacobian(double c_j, N_Vector Y, SUNMatrix J) {
+    ++result_.stats.num_jacobian_evaluations;
     Vector y, z, v;
     Unpack(Y, &y, &z, &v);
     system_.Evaluate(y, z, Derivatives::kStates, &point_);
-    if (point_.F_y.is_sparse()) return SparseDynamicsJacobian(c_j, J);
-    Matrix& jac = jacobian_;
-    jac.setZero(n_, n_);
-    // y' - F(y, z): F depends on y, z_c (continuous columns) and v_J (jump columns).
-    jac.topLeftCorner(ny_, ny_) = c_j * Matrix::Identity(ny_, ny_) - point_.F_y.dense();
+    if (nz_ > 0) system_.EvaluateVelocityLevel(y, v, roles_, Derivatives::kStates, &velocity_);
+    if (sparse_) {
+      triplets_.Clear();
+      AssembleJacobian(c_j,
+                       [this](int row, int col, double value) { triplets_.Add(row, col, value); });
+      return WriteSparse(J);
+    }
+    double* data = SUNDenseMatrix_Data(J);
+    const auto size = static_cast<std::size_t>(n_) * static_cast<std::size_t>(n_);
+    std::fill(data, data + size, 0.0);
+    // SUNDIALS' dense matrices are column-major with leading dimension n.
+    AssembleJacobian(c_j, [data, n = static_cast<std::size_t>(n_)](int row, int col, double value) {
+      data[static_cast<std::size_t>(col) * n + static_cast<std::size_t>(row)] += value;
+    });
+    return std::all_of(data, data + size, [](double x) { return std::isfinite(x); }) ? 0 : 1;
+  }
+
+  // add(row, column, value) for every entry of J at (point_, velocity_) (values summed). The
+  // entries depend on the structure of the blocks and the phase's statuses only, never on
+  // values: sparse blocks give their stored entries (structural zeros included), and the
+  // diagonal is always present, so that the pattern holds within a phase and KLU's symbolic
+  // analysis is reused (WriteSparse). With dense storage every entry of every block is added.
+  template <class Add>
+  void AssembleJacobian(double c_j, Add&& add) const {
+    for (int i = 0; i < n_; ++i) add(i, i, 0.0);
+    // (1) y' - F(y, z): F depends on y, z_c (continuous columns) and v_J (jump columns).
+    for (int i = 0; i < ny_; ++i) add(i, i, c_j);
+    ForEachEntry(point_.F_y, [&](int r, int j, double value) { add(r, j, -value); });
+    ForEachEntry(point_.F_z, [&](int r, int i, double value) {
+      add(r, z_column_[static_cast<std::size_t>(i)], -value);
+    });
+    // (2) z_c' - v_c, or P_k(y, z) for the multiplier of an index-1 pair (no z_c' term).
     for (int c = 0; c < nc_; ++c) {
-      const int i = continuous_[static_cast<std::size_t>(c)];
-      jac.block(0, ny_ + c, ny_, 1) = -point_.F_z.dense().col(i);
-      jac(ny_ + c, ny_ + c) = c_j;  // z_c' - v_c
-      jac(ny_ + c, ny_ + nc_ + i) = -1.0;
+      if (position_pair_[static_cast<std::size_t>(c)] >= 0) continue;
+      add(ny_ + c, ny_ + c, c_j);
+      add(ny_ + c, ny_ + nc_ + continuous_[static_cast<std::size_t>(c)], -1.0);
     }
-    for (int i : jump_) jac.block(0, ny_ + nc_ + i, ny_, 1) = -point_.F_z.dense().col(i);
-    if (nz_ > 0) {
-      system_.EvaluateVelocityLevel(y, v, roles_, Derivatives::kStates, &velocity_);
-      Vector p;
-      Matrix p_y, p_z;
-      PositionLevel(point_, true, &p, &p_y, &p_z);
-      for (int c = 0; c < nc_; ++c) {
-        const int k = position_pair_[static_cast<std::size_t>(c)];
-        if (k < 0) continue;
-        // Index-1 multiplier: the row is P_k(y, z) (no z_c' term).
-        jac.row(ny_ + c).setZero();
-        jac.block(ny_ + c, 0, 1, ny_) = p_y.row(ng_ + k);
-        for (int c2 = 0; c2 < nc_; ++c2) {
-          jac(ny_ + c, ny_ + c2) = p_z(ng_ + k, continuous_[static_cast<std::size_t>(c2)]);
-        }
-        for (int i : jump_) jac(ny_ + c, ny_ + nc_ + i) = p_z(ng_ + k, i);
-      }
-      const double kappa = options_.drift_rate;
-      const int row = ny_ + nc_;
-      jac.block(row, 0, nz_, ny_) = velocity_.equations_y.dense() + kappa * p_y;
-      jac.block(row, row, nz_, nz_) = velocity_.equations_v.dense();
-      for (int c = 0; c < nc_; ++c) {
-        jac.block(row, ny_ + c, nz_, 1) = kappa * p_z.col(continuous_[static_cast<std::size_t>(c)]);
-      }
-      for (int i : jump_) jac.block(row, row + i, nz_, 1) += kappa * p_z.col(i);
-    }
-    if (!jac.allFinite()) return 1;
-    if (sparse_) return CopySparse(jac.sparseView(), J);
-    std::memcpy(SUNDenseMatrix_Data(J), jac.data(), sizeof(double) * jac.size());
-    return 0;
+    if (nz_ == 0) return;
+    // (3) V(y, v) + kappa P(y, z_c, v_J).
+    const int row0 = ny_ + nc_;
+    ForEachEntry(velocity_.equations_y,
+                 [&](int r, int j, double value) { add(row0 + r, j, value); });
+    ForEachEntry(velocity_.equations_v,
+                 [&](int r, int i, double value) { add(row0 + r, row0 + i, value); });
+    const double kappa = options_.drift_rate;
+    ForEachPositionEntry(point_, [&](int r, int j, bool wrt_z, double value) {
+      const int col = wrt_z ? z_column_[static_cast<std::size_t>(j)] : j;
+      if (kappa != 0.0) add(row0 + r, col, kappa * value);
+      const int position_row = position_row_[static_cast<std::size_t>(r)];
+      if (position_row >= 0) add(position_row, col, value);
+    });
   }
 
-  // Scenes without effects and a hand-written sparse Jacobian: J = c_j I - F_y.
-  int SparseDynamicsJacobian(double c_j, SUNMatrix J) {
-    SparseMatrix identity(n_, n_);
-    identity.setIdentity();
-    SparseMatrix jac = c_j * identity - point_.F_y.sparse();
-    return CopySparse(jac, J);
-  }
-
-  // Copies a sparse Jacobian into the CSC SUNMatrix with the diagonal always stored, so that
-  // its pattern changes rarely; KLU's symbolic analysis is redone when it does.
-  int CopySparse(const SparseMatrix& source, SUNMatrix J) {
-    SparseMatrix jac = source;
-    for (int i = 0; i < n_; ++i) jac.coeffRef(i, i) += 0.0;
-    jac.makeCompressed();
-    const auto nnz = static_cast<sunindextype>(jac.nonZeros());
-    bool same_pattern = nnz == pattern_nnz_ && pattern_outer_.size() == std::size_t(n_ + 1);
-    for (int j = 0; same_pattern && j <= n_; ++j) {
-      same_pattern = pattern_outer_[static_cast<std::size_t>(j)] == jac.outerIndexPtr()[j];
+  // Compresses the triplets into KLU's CSC matrix. A new pattern (a phase with other
+  // statuses) redoes KLU's symbolic analysis (SUNLinSol_KLUReInit); otherwise KLU refactors
+  // numerically on the analysis it has.
+  int WriteSparse(SUNMatrix J) {
+    if (!std::all_of(triplets_.values().begin(), triplets_.values().end(),
+                     [](double x) { return std::isfinite(x); })) {
+      return 1;
     }
-    for (sunindextype k = 0; same_pattern && k < nnz; ++k) {
-      same_pattern = pattern_inner_[static_cast<std::size_t>(k)] == jac.innerIndexPtr()[k];
-    }
-    if (!same_pattern) {
-      if (SUNSparseMatrix_NNZ(J) < nnz && SUNSparseMatrix_Reallocate(J, nnz) != 0) return -1;
-      pattern_outer_.assign(jac.outerIndexPtr(), jac.outerIndexPtr() + n_ + 1);
-      pattern_inner_.assign(jac.innerIndexPtr(), jac.innerIndexPtr() + nnz);
-      pattern_nnz_ = nnz;
+    const bool new_pattern = triplets_.Compress(n_);
+    const auto nnz = static_cast<sunindextype>(triplets_.inner().size());
+    if (SUNSparseMatrix_NNZ(J) < nnz && SUNSparseMatrix_Reallocate(J, nnz) != 0) return -1;
+    if (new_pattern) {
       if (SUNLinSol_KLUReInit(linear_solver_, J, SUNSparseMatrix_NNZ(J), SUNKLU_REINIT_PARTIAL) !=
           0) {
         return -1;
       }
+      ++result_.stats.num_symbolic_analyses;
     }
-    sunindextype* outer = SUNSparseMatrix_IndexPointers(J);
-    sunindextype* inner = SUNSparseMatrix_IndexValues(J);
-    double* data = SUNSparseMatrix_Data(J);
-    for (int j = 0; j <= n_; ++j) outer[j] = jac.outerIndexPtr()[j];
-    for (sunindextype k = 0; k < nnz; ++k) {
-      inner[k] = jac.innerIndexPtr()[k];
-      data[k] = jac.valuePtr()[k];
-    }
+    // IDA zeroes the matrix, indices included, before every Jacobian evaluation.
+    std::copy(triplets_.outer().begin(), triplets_.outer().end(), SUNSparseMatrix_IndexPointers(J));
+    std::copy(triplets_.inner().begin(), triplets_.inner().end(), SUNSparseMatrix_IndexValues(J));
+    std::copy(triplets_.compressed().begin(), triplets_.compressed().end(),
+              SUNSparseMatrix_Data(J));
     return 0;
   }
 
@@ -727,45 +861,100 @@ class IdaRun {
   // the left disc, a status-decision failure).
   void EndPhase(const std::vector<int>* roots = nullptr) {
     if (nz_ == 0) return;
-    std::vector<int> reached;  // pairs whose continuous free side is a root
+    // Rows: P (nz), then per pair whose continuous free side is a root, that free side.
+    std::vector<int> reached_row(static_cast<std::size_t>(np_), -1);
+    int rows = nz_;
     for (int k = 0; roots != nullptr && k < np_; ++k) {
-      if ((*roots)[static_cast<std::size_t>(k)] != 0 && FreeSideIsContinuous(k))
-        reached.push_back(k);
+      if ((*roots)[static_cast<std::size_t>(k)] != 0 && FreeSideIsContinuous(k)) {
+        reached_row[static_cast<std::size_t>(k)] = rows++;
+      }
     }
-    const int rows = nz_ + static_cast<int>(reached.size());
     auto Y = View(Y_->vector);
     for (int iteration = 0; iteration < kProjectionIterations; ++iteration) {
       Vector y, z, v;
       Unpack(Y_->vector, &y, &z, &v);
-      PointEvaluation point;
-      system_.Evaluate(y, z, Derivatives::kStates, &point);
+      system_.Evaluate(y, z, Derivatives::kStates, &point_);
       Vector p;
-      Matrix p_y, p_z;
-      PositionLevel(point, true, &p, &p_y, &p_z);
+      PositionLevel(point_, &p);
       const double size = p.lpNorm<Eigen::Infinity>();
       if (iteration == 0) result_.stats.max_drift = std::max(result_.stats.max_drift, size);
       p.conservativeResize(rows);
-      p_y.conservativeResize(rows, Eigen::NoChange);
-      p_z.conservativeResize(rows, Eigen::NoChange);
-      for (std::size_t r = 0; r < reached.size(); ++r) {
-        const int k = reached[r];
-        const bool free_b = a_zero_[static_cast<std::size_t>(k)];
-        const int row = nz_ + static_cast<int>(r);
-        p[row] = free_b ? point.B[k] : point.A[k];
-        p_y.row(row) = free_b ? point.B_y.dense().row(k) : point.A_y.dense().row(k);
-        p_z.row(row) = free_b ? point.B_z.dense().row(k) : point.A_z.dense().row(k);
+      for (int k = 0; k < np_; ++k) {
+        const int row = reached_row[static_cast<std::size_t>(k)];
+        if (row >= 0) p[row] = a_zero_[static_cast<std::size_t>(k)] ? point_.B[k] : point_.A[k];
       }
       if (p.lpNorm<Eigen::Infinity>() <= kProjectionTolerance) break;
-      Matrix jacobian(rows, nx_ + nc_);
-      jacobian.leftCols(nx_) = p_y.leftCols(nx_);
-      for (int c = 0; c < nc_; ++c) {
-        jacobian.col(nx_ + c) = p_z.col(continuous_[static_cast<std::size_t>(c)]);
-      }
-      const Vector step = jacobian.completeOrthogonalDecomposition().solve(-p);
+      Vector step;
+      if (!ProjectionStep(reached_row, p, &step)) break;
       Y.head(nx_) += step.head(nx_);
       Y.segment(ny_, nc_) += step.tail(nc_);
     }
     y_ = Y.head(ny_);
+  }
+
+  // add(row, column, value) for the derivatives of the projection's rows (EndPhase) with
+  // respect to its unknowns: the scene states x (columns 0..nx) and z_c (nx + c).
+  template <class Add>
+  void ForEachProjectionEntry(const std::vector<int>& reached_row, Add&& add) const {
+    auto column = [this](int j, bool wrt_z) {
+      if (!wrt_z) return j < nx_ ? j : -1;  // relay memories and the clock stay
+      const int col = z_column_[static_cast<std::size_t>(j)];
+      return col < ny_ + nc_ ? nx_ + col - ny_ : -1;  // jump unknowns are not moved
+    };
+    ForEachPositionEntry(point_, [&](int r, int j, bool wrt_z, double value) {
+      const int col = column(j, wrt_z);
+      if (col >= 0) add(r, col, value);
+    });
+    auto free_side = [&](bool b_side, bool wrt_z) {
+      return [&, b_side, wrt_z](int k, int j, double value) {
+        const int row = reached_row[static_cast<std::size_t>(k)];
+        if (row < 0 || a_zero_[static_cast<std::size_t>(k)] != b_side) return;
+        const int col = column(j, wrt_z);
+        if (col >= 0) add(row, col, value);
+      };
+    };
+    if (std::none_of(reached_row.begin(), reached_row.end(), [](int row) { return row >= 0; })) {
+      return;
+    }
+    ForEachEntry(point_.A_y, free_side(false, false));
+    ForEachEntry(point_.A_z, free_side(false, true));
+    ForEachEntry(point_.B_y, free_side(true, false));
+    ForEachEntry(point_.B_z, free_side(true, true));
+  }
+
+  // The minimum-norm Gauss-Newton step of (x, z_c) for the projection rows with values p at
+  // point_. Dense storage: complete orthogonal decomposition of the rows x (nx + nc)
+  // Jacobian. Sparse storage: step = -D^T (D D^T + delta I)^{-1} p with a sparse Cholesky
+  // (LDL^T) factorization of the Gram matrix; delta (kProjectionRegularization relative to
+  // its largest diagonal entry) keeps it definite when rows are redundant (a jammed crowd has
+  // more contacts than degrees of freedom) or empty (pairs without a condition), and moves the
+  // step from the minimum-norm one by a relative delta / sigma (sigma the smallest nonzero
+  // eigenvalue of D D^T), which the next iteration corrects. False if the factorization fails.
+  bool ProjectionStep(const std::vector<int>& reached_row, const Vector& p, Vector* step) const {
+    const auto rows = p.size();
+    const int cols = nx_ + nc_;
+    if (!system_.sparse()) {
+      Matrix jacobian = Matrix::Zero(rows, cols);
+      ForEachProjectionEntry(reached_row,
+                             [&](int r, int c, double value) { jacobian(r, c) += value; });
+      *step = jacobian.completeOrthogonalDecomposition().solve(-p);
+      return true;
+    }
+    std::vector<Eigen::Triplet<double, int>> entries;
+    ForEachProjectionEntry(reached_row,
+                           [&](int r, int c, double value) { entries.emplace_back(r, c, value); });
+    SparseMatrix jacobian(rows, cols);
+    jacobian.setFromTriplets(entries.begin(), entries.end());
+    SparseMatrix gram = jacobian * SparseMatrix(jacobian.transpose());
+    const double largest = gram.diagonal().size() > 0 ? gram.diagonal().maxCoeff() : 0.0;
+    const double delta = kProjectionRegularization * std::max(largest, 1.0);
+    for (Eigen::Index i = 0; i < rows; ++i) gram.coeffRef(i, i) += delta;
+    Eigen::SimplicialLDLT<SparseMatrix> cholesky(gram);
+    if (cholesky.info() != Eigen::Success) return false;
+    const Vector w = cholesky.solve(-p);
+    if (cholesky.info() != Eigen::Success || !w.allFinite()) return false;
+    *step = jacobian.transpose() * w;
+    return true;
   }
 
   // True if pair k's free side for the current statuses is a continuous variable (a
@@ -782,6 +971,9 @@ class IdaRun {
   // is at round-off level.
   static constexpr int kProjectionIterations = 3;
   static constexpr double kProjectionTolerance = 1e-15;
+  // Regularization of the sparse projection's Gram matrix relative to its largest diagonal
+  // entry (ProjectionStep): a contraction of 1e-8 per iteration down to sigma = 1e-4 of it.
+  static constexpr double kProjectionRegularization = 1e-12;
 
   // C callbacks: exceptions (a throwing model function) stop IDA with an unrecoverable error.
   static int ResidualCallback(double, N_Vector Y, N_Vector Yp, N_Vector R, void* user_data) {
@@ -840,7 +1032,7 @@ class IdaRun {
   ProgressCallback progress_;
   LoweredSystem system_;
   int ny_ = 0, nx_ = 0, nz_ = 0, ng_ = 0, np_ = 0, nr_ = 0, nc_ = 0, n_ = 0;
-  std::vector<int> continuous_, jump_;  // indices in z of continuous and jump variables
+  std::vector<int> continuous_;  // indices in z of the continuous variables
   // Per continuous variable: the index-1 pair whose multiplier it is (position-level row), or -1.
   std::vector<int> position_pair_;
   // Per IDA component: in the local error test with the scaled weight (WeightCallback): the
@@ -863,14 +1055,19 @@ class IdaRun {
   std::size_t next_output_ = 0;
   std::string last_error_;
   struct Counters {
-    long steps = 0, residuals = 0, jacobians = 0, iterations = 0, failures = 0;
+    long steps = 0, residuals = 0, iterations = 0, failures = 0;
   } counted_;  // IDA's counters already added to the stats since the last IDAReInit
   PointEvaluation point_;
   VelocityLevelEvaluation velocity_;
   IndicatorEvaluation indicators_;
-  Matrix jacobian_;
-  std::vector<sunindextype> pattern_outer_, pattern_inner_;
-  sunindextype pattern_nnz_ = -1;
+  // Per algebraic unknown i: its IDA column (ny + c for the c-th continuous one, carried as
+  // z_c; ny + nc + i for a jump one). Per position-level row: the IDA row of the index-1
+  // multiplier it determines, or -1.
+  std::vector<int> z_column_, position_row_;
+  // Per pair: which side is a position-level condition in this phase (PositionLevel).
+  enum class PositionSide : unsigned char { kNone, kA, kB };
+  std::vector<PositionSide> position_side_;
+  TripletAssembly triplets_;  // the KLU Jacobian's triplets and CSC pattern
 };
 
 }  // namespace

@@ -40,6 +40,8 @@ IntegratorEntry IdaEntry() {
       BindStat("num_events", &S::num_events, "located events"),
       BindStat("num_residual_evaluations", &S::num_residual_evaluations, "residual evaluations"),
       BindStat("num_jacobian_evaluations", &S::num_jacobian_evaluations, "Jacobian evaluations"),
+      BindStat("num_symbolic_analyses", &S::num_symbolic_analyses,
+               "KLU symbolic analyses (Jacobian pattern changes)"),
       BindStat("num_nonlinear_iterations", &S::num_nonlinear_iterations, "Newton iterations"),
       BindStat("num_error_test_failures", &S::num_error_test_failures, "error-test failures"),
       BindStat("max_drift", &S::max_drift, "largest position-level drift before projection"),

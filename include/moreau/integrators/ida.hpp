@@ -59,7 +59,10 @@ struct IdaOptions {
   /// Lowering of switching surfaces.
   SwitchingForm switching_form = SwitchingForm::kStewart;
   /// Dense LU (SUNDIALS dense) or sparse LU (SUNDIALS KLU); automatic: KLU for more than
-  /// kDenseSizeLimit unknowns or for dynamics with a hand-written sparse Jacobian.
+  /// kDenseSizeLimit unknowns or for dynamics with a hand-written sparse Jacobian. The
+  /// derivatives are stored as StorageForLinearSolver says (sparse with KLU; automatic
+  /// otherwise, sparse above kSparseStorageThreshold), and the phase Jacobian is assembled in
+  /// the solver's format from them (docs/ida.md, "Linear algebra").
   LinearSolverKind linear_solver = LinearSolverKind::kAutomatic;
   /// Pairs whose continuous side is within this of zero are decided by the velocity-level
   /// problem at events; at breakpoints and tf, free sides below it count as events. > 0.
@@ -107,6 +110,9 @@ struct IdaStats {
   long num_error_test_failures = 0;
   long num_phases = 0;  ///< (re)starts of IDA: events and breakpoints
   long num_events = 0;
+  /// KLU symbolic analyses: Jacobian evaluations whose sparsity pattern differed from the
+  /// previous one (at most one per phase; 0 with the dense LU).
+  long num_symbolic_analyses = 0;
   /// Largest |P| (position-level conditions of the phase) at the end of a phase, before the
   /// projection: the drift certificate.
   double max_drift = 0.0;
