@@ -68,6 +68,9 @@ class StepSystem final : public MixedComplementaritySystem {
     y0_ = y0;
     h_ = h;
   }
+  // The lowered system's layout changed (near-active filter) and the stages were resized:
+  // the values-only copy is rebuilt at its next use.
+  void LayoutChanged() { value_stages_.reset(); }
   int num_unknowns() const override { return stages_->unknowns(); }
   int num_equations() const override { return stages_->equation_rows(); }
   int num_pairs() const override { return stages_->pair_rows(); }
@@ -256,6 +259,7 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
         z = system.RemapAlgebraic(z, previous, 0.0);
         statuses = system.RemapStatuses(statuses, previous, false);
         stages.Resize();
+        step_system.LayoutChanged();
         previous_h = 0.0;  // the previous step's unknowns are in the old layout
       }
       stats.max_working_pairs =

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "moreau/integrators/fesd.hpp"
+#include "moreau/integrators/timestepping.hpp"
 #include "moreau/scenes/crowd.hpp"
 
 namespace moreau {
@@ -91,6 +92,42 @@ TEST(CrowdLargeTest, HundredAgentsCertifiedAndTheFilterChangesNothing) {
     ASSERT_LE((filtered.trajectory.x[k] - full.trajectory.x[k]).lpNorm<Eigen::Infinity>(),
               kFilterAgreement)
         << "t " << full.trajectory.t[k];
+  }
+}
+
+// The time-stepping baseline with the filter: the layout changes between steps (its stage
+// systems and their values-only copies are resized), every step's certificate covers the
+// left-out constraints, and the states equal those of the run without the filter.
+TEST(CrowdLargeTest, TimeSteppingWithTheFilterEqualsTheFullSystem) {
+  CrowdOptions crowd;
+  crowd.agents = 100;
+  crowd.final_time = kHorizon;
+  const CrowdLayout layout = MakeCrowdLayout(crowd);
+  const Scene scene = MakeCrowdScene(layout);
+  TimeSteppingResult runs[2];
+  for (int filtered = 0; filtered < 2; ++filtered) {
+    TimeSteppingOptions options;
+    options.stages = 2;
+    options.step_size = 0.05;
+    options.constraint_filter = filtered ? ConstraintFilter::kOn : ConstraintFilter::kOff;
+    runs[filtered] = SimulateTimeStepping(scene, options);
+    const TimeSteppingResult& run = runs[filtered];
+    ASSERT_EQ(run.status, TimeSteppingStatus::kSuccess) << run.message;
+    for (double residual : run.step_complementarity_residual) {
+      ASSERT_LE(residual, kComplementarityTolerance);
+    }
+    for (std::size_t k = 0; k < run.trajectory.size(); ++k) {
+      const CrowdCertificate c = CertifyCrowdState(layout, run.trajectory.x[k]);
+      ASSERT_TRUE(c.Feasible(kOverlapTolerance)) << "t " << run.trajectory.t[k] << c.Summary();
+    }
+  }
+  EXPECT_LT(runs[1].stats.max_working_pairs,
+            static_cast<long>(layout.pairs.size() + layout.walls.size()) / 2);
+  ASSERT_EQ(runs[0].trajectory.size(), runs[1].trajectory.size());
+  for (std::size_t k = 0; k < runs[0].trajectory.size(); ++k) {
+    ASSERT_LE((runs[0].trajectory.x[k] - runs[1].trajectory.x[k]).lpNorm<Eigen::Infinity>(),
+              kFilterAgreement)
+        << "t " << runs[0].trajectory.t[k];
   }
 }
 
