@@ -286,6 +286,22 @@ void LoweredSystem::ExcludedViolations(const Vector& y, double threshold,
   }
 }
 
+namespace {
+// Calls f(i, j) for every pair that is old_working[i] and new_working[j] (both increasing):
+// a value of the old layout that has a place in the new one.
+template <class F>
+void ForCommonWorkingPairs(const std::vector<int>& old_working,
+                           const std::vector<int>& new_working, F f) {
+  std::size_t i = 0;
+  for (std::size_t j = 0; j < new_working.size(); ++j) {
+    while (i < old_working.size() && old_working[i] < new_working[j]) ++i;
+    if (i < old_working.size() && old_working[i] == new_working[j]) {
+      f(static_cast<int>(i), static_cast<int>(j));
+    }
+  }
+}
+}  // namespace
+
 Vector LoweredSystem::RemapAlgebraic(const Vector& z, const WorkingLayout& from,
                                      double fill) const {
   MOREAU_ASSERT(z.size() == from.num_algebraic, "RemapAlgebraic: wrong size");
@@ -298,16 +314,9 @@ Vector LoweredSystem::RemapAlgebraic(const Vector& z, const WorkingLayout& from,
       continue;
     }
     // Moving sets: one multiplier per working constraint, in the order of the constraints.
-    const std::vector<int>& old_working = from.working[b];
-    const std::vector<int> new_working = block.WorkingPairs();
-    std::size_t i = 0;
-    for (std::size_t j = 0; j < new_working.size(); ++j) {
-      while (i < old_working.size() && old_working[i] < new_working[j]) ++i;
-      if (i < old_working.size() && old_working[i] == new_working[j]) {
-        out[block.layout.z_offset + static_cast<int>(j)] =
-            z[from.z_offset[b] + static_cast<int>(i)];
-      }
-    }
+    ForCommonWorkingPairs(from.working[b], block.WorkingPairs(), [&](int i, int j) {
+      out[block.layout.z_offset + j] = z[from.z_offset[b] + i];
+    });
   }
   return out;
 }
@@ -318,16 +327,9 @@ Vector LoweredSystem::RemapPairValues(const Vector& values, const WorkingLayout&
   Vector out = Vector::Constant(num_pairs_, fill);
   for (std::size_t b = 0; b < blocks_.size(); ++b) {
     const internal::LoweredBlock& block = *blocks_[b];
-    const std::vector<int>& old_working = from.working[b];
-    const std::vector<int> new_working = block.WorkingPairs();
-    std::size_t i = 0;
-    for (std::size_t j = 0; j < new_working.size(); ++j) {
-      while (i < old_working.size() && old_working[i] < new_working[j]) ++i;
-      if (i < old_working.size() && old_working[i] == new_working[j]) {
-        out[block.layout.pair_offset + static_cast<int>(j)] =
-            values[from.pair_offset[b] + static_cast<int>(i)];
-      }
-    }
+    ForCommonWorkingPairs(from.working[b], block.WorkingPairs(), [&](int i, int j) {
+      out[block.layout.pair_offset + j] = values[from.pair_offset[b] + i];
+    });
   }
   return out;
 }
