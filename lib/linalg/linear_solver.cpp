@@ -4,6 +4,8 @@
 
 #include <Eigen/LU>
 #include <cmath>
+#include <utility>
+#include <vector>
 
 #include "moreau/core/error.hpp"
 
@@ -201,6 +203,13 @@ void LinearSolver::SolveMatrix(MatrixRef rhs) const {
 namespace {
 
 // ---- dense LU ------------------------------------------------------------------------------
+// Up to this size the LU with partial pivoting is computed by the plain loops below; Eigen's
+// PartialPivLU dispatches every column through dynamic-size block expressions, whose set-up
+// costs several times the arithmetic of the small systems that integrators solve most often
+// (FESD elements of 10 to 60 unknowns, velocity-level problems of a few). Larger systems use
+// Eigen's blocked factorization.
+constexpr int kSmallDenseLu = 64;
+
 class DenseLuSolver final : public LinearSolver {
  public:
   LinearSolverKind kind() const override { return LinearSolverKind::kDenseLu; }
@@ -209,27 +218,132 @@ class DenseLuSolver final : public LinearSolver {
     MOREAU_ASSERT(!a.sparse(), "dense LU needs dense storage");
     ++num_factorizations_;
     if (!a.dense().allFinite()) return FactorizationStatus::kNonFinite;
-    lu_.compute(a.dense());
+    n_ = a.size();
+    if (n_ == 0) {
+      rcond_ = 1.0;
+      return FactorizationStatus::kSuccess;
+    }
+    small_ = n_ <= kSmallDenseLu;
+    if (small_) {
+      FactorizeSmall(a.dense());
+    } else {
+      lu_.compute(a.dense());
+    }
     // Singularity from the pivots of U (O(n)): min |u_ii| / max |u_ii|. This is a lower bound
     // on nothing in general, but with partial pivoting a tiny ratio is how rank deficiency shows,
     // and it costs nothing next to the L1 condition estimator (which dominated the cost of the
     // small factorizations of collocation steps).
-    if (a.size() == 0) {
-      rcond_ = 1.0;
-      return FactorizationStatus::kSuccess;
-    }
-    const auto pivots = lu_.matrixLU().diagonal().cwiseAbs();
+    const auto pivots = (small_ ? small_lu_ : lu_.matrixLU()).diagonal().cwiseAbs();
     const double largest = pivots.maxCoeff();
     rcond_ = largest > 0.0 ? pivots.minCoeff() / largest : 0.0;
     if (!(rcond_ >= kSingularRcond)) return FactorizationStatus::kSingular;
     return FactorizationStatus::kSuccess;
   }
-  void Solve(VectorRef rhs) const override { rhs = lu_.solve(rhs); }
-  void SolveMatrix(MatrixRef rhs) const override { rhs = lu_.solve(rhs); }
-  void SolveTransposed(VectorRef rhs) const override { rhs = lu_.transpose().solve(rhs); }
+  void Solve(VectorRef rhs) const override {
+    if (small_) {
+      SolveSmall(rhs);
+    } else {
+      rhs = lu_.solve(rhs);
+    }
+  }
+  void SolveMatrix(MatrixRef rhs) const override {
+    if (small_) {
+      for (Eigen::Index j = 0; j < rhs.cols(); ++j) SolveSmall(rhs.col(j));
+    } else {
+      rhs = lu_.solve(rhs);
+    }
+  }
+  void SolveTransposed(VectorRef rhs) const override {
+    if (small_) {
+      SolveTransposedSmall(rhs);
+    } else {
+      rhs = lu_.transpose().solve(rhs);
+    }
+  }
   double reciprocal_condition() const override { return rcond_; }
 
  private:
+  // P A = L U in place (L unit lower, U upper), right-looking, column by column; pivot_[k] is
+  // the row swapped with row k at step k. A zero pivot leaves its column unscaled (the matrix
+  // is reported singular by the pivot ratio).
+  void FactorizeSmall(const Matrix& a) {
+    small_lu_ = a;
+    pivot_.resize(static_cast<std::size_t>(n_));
+    double* lu = small_lu_.data();
+    const int n = n_;
+    for (int k = 0; k < n; ++k) {
+      double* column_k = lu + static_cast<std::ptrdiff_t>(k) * n;
+      int p = k;
+      double biggest = std::fabs(column_k[k]);
+      for (int i = k + 1; i < n; ++i) {
+        if (std::fabs(column_k[i]) > biggest) {
+          biggest = std::fabs(column_k[i]);
+          p = i;
+        }
+      }
+      pivot_[static_cast<std::size_t>(k)] = p;
+      if (p != k) {
+        for (int j = 0; j < n; ++j) std::swap(lu[k + j * n], lu[p + j * n]);
+      }
+      const double pivot = column_k[k];
+      if (pivot == 0.0) continue;
+      for (int i = k + 1; i < n; ++i) column_k[i] /= pivot;
+      for (int j = k + 1; j < n; ++j) {
+        double* column_j = lu + static_cast<std::ptrdiff_t>(j) * n;
+        const double u = column_j[k];
+        if (u == 0.0) continue;
+        for (int i = k + 1; i < n; ++i) column_j[i] -= column_k[i] * u;
+      }
+    }
+  }
+  // A x = b: b permuted, L y = P b forward, U x = y backward.
+  void SolveSmall(VectorRef x) const {
+    const int n = n_;
+    const double* lu = small_lu_.data();
+    for (int k = 0; k < n; ++k) {
+      const int p = pivot_[static_cast<std::size_t>(k)];
+      if (p != k) std::swap(x[k], x[p]);
+    }
+    for (int k = 0; k < n; ++k) {
+      const double xk = x[k];
+      if (xk == 0.0) continue;
+      const double* column = lu + static_cast<std::ptrdiff_t>(k) * n;
+      for (int i = k + 1; i < n; ++i) x[i] -= column[i] * xk;
+    }
+    for (int k = n - 1; k >= 0; --k) {
+      const double* column = lu + static_cast<std::ptrdiff_t>(k) * n;
+      x[k] /= column[k];
+      const double xk = x[k];
+      if (xk == 0.0) continue;
+      for (int i = 0; i < k; ++i) x[i] -= column[i] * xk;
+    }
+  }
+  // A^T x = b with A = P^T L U: U^T y = b forward, L^T z = y backward, x = P^T z.
+  void SolveTransposedSmall(VectorRef x) const {
+    const int n = n_;
+    const double* lu = small_lu_.data();
+    for (int k = 0; k < n; ++k) {
+      const double* column = lu + static_cast<std::ptrdiff_t>(k) * n;
+      double sum = x[k];
+      for (int i = 0; i < k; ++i) sum -= column[i] * x[i];
+      x[k] = sum / column[k];
+    }
+    for (int k = n - 1; k >= 0; --k) {
+      const double* column = lu + static_cast<std::ptrdiff_t>(k) * n;
+      double sum = x[k];
+      for (int i = k + 1; i < n; ++i) sum -= column[i] * x[i];
+      x[k] = sum;
+    }
+    for (int k = n - 1; k >= 0; --k) {
+      const int p = pivot_[static_cast<std::size_t>(k)];
+      if (p != k) std::swap(x[k], x[p]);
+    }
+  }
+
+  int n_ = 0;
+  bool small_ = true;
+  Matrix small_lu_;
+  std::vector<int> pivot_;
   Eigen::PartialPivLU<Matrix> lu_;
   double rcond_ = 0.0;
 };
