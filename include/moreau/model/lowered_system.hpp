@@ -170,6 +170,7 @@ inline bool PairStatusIsAZero(double a, double b) { return a <= b; }
 namespace internal {
 class LoweredBlock;
 class ArgumentMatrix;
+class VelocitySolver;
 }
 
 /// A scene lowered to a DCS (see file comment).
@@ -338,6 +339,8 @@ class LoweredSystem {
   mutable PointEvaluation velocity_point_;  // EvaluateVelocityLevel's workspace
   mutable CurvatureTerms curvature_;
   mutable std::unique_ptr<internal::ArgumentMatrix> dynamics_jacobian_holder_;
+  // SolveVelocityLevel's solver and its last solutions (velocity_level.cpp); not copied.
+  mutable std::shared_ptr<internal::VelocitySolver> velocity_solver_;
 };
 
 }  // namespace moreau
