@@ -131,6 +131,11 @@ const Matrix& DerivativeMatrix::dense() const {
   return dense_;
 }
 
+Matrix& DerivativeMatrix::MutableDense() {
+  MOREAU_ASSERT(!sparse_, "MutableDense() of a sparse derivative matrix");
+  return dense_;
+}
+
 const SparseMatrix& DerivativeMatrix::sparse() const {
   MOREAU_ASSERT(sparse_ && finalized_, "sparse() of a dense or unfinished derivative matrix");
   return sparse_matrix_;

@@ -215,6 +215,139 @@ static void AssembleVelocityLevel(const LoweredSystem& system, const PointEvalua
   select(b_rows, &out->b, &out->b_v, &out->b_y, &out->b_u, &out->b_p);
 }
 
+// Dense storage: every output row is computed on its own from one row of the point's blocks
+// and written in place (coefficient-wise products, no temporaries). The systems that are
+// stored dense are small (n_y + n_z <= kSparseStorageThreshold), where whole-matrix products
+// through selection matrices cost many times the rows themselves (they dominated FESD's
+// element cost on F1). The rows are those of the sparse path below, source by source.
+static void AssembleVelocityLevelDense(const LoweredSystem& system, const PointEvaluation& e,
+                                       const CurvatureTerms& curvature, const ConstVectorRef& v,
+                                       const std::vector<PairRole>& roles,
+                                       Derivatives derivatives, VelocityLevelEvaluation* out) {
+  const bool with_y = derivatives != Derivatives::kNone;
+  const bool all = derivatives == Derivatives::kAll;
+  const int ny = system.num_states(), nz = system.num_algebraic();
+  const int ng = system.num_equations(), np = system.num_pairs();
+  const auto& pairs = system.pairs();
+  const auto& differentiated = system.differentiated_equations();
+  const auto& continuous = system.continuous_algebraic();
+  int complementary = 0;
+  for (PairRole role : roles) complementary += role == PairRole::kComplementary ? 1 : 0;
+
+  // One output (equations, or the a or b sides of complementary pairs).
+  struct Target {
+    Vector* values;
+    Matrix *dv, *dy, *du, *dp;
+  };
+  auto prepare = [&](int rows, Vector* values, DerivativeMatrix* dv, DerivativeMatrix* dy,
+                     DerivativeMatrix* du, DerivativeMatrix* dp) {
+    values->resize(rows);
+    dv->SetZero(rows, nz, false);
+    Target t{values, &dv->MutableDense(), nullptr, nullptr, nullptr};
+    if (with_y) {
+      dy->SetZero(rows, ny, false);
+      t.dy = &dy->MutableDense();
+    }
+    if (all) {
+      du->SetZero(rows, system.num_inputs(), false);
+      dp->SetZero(rows, system.num_parameters(), false);
+      t.du = &du->MutableDense();
+      t.dp = &dp->MutableDense();
+    }
+    return t;
+  };
+  const Target equations = prepare(ng + np - complementary, &out->equations, &out->equations_v,
+                                   &out->equations_y, &out->equations_u, &out->equations_p);
+  const Target a_rows = prepare(complementary, &out->a, &out->a_v, &out->a_y, &out->a_u, &out->a_p);
+  const Target b_rows = prepare(complementary, &out->b, &out->b_v, &out->b_y, &out->b_u, &out->b_p);
+
+  const Matrix& F_z = e.F_z.dense();
+  // Rate of X along the flow, X_y F + X_z v_c (v_c: the continuous slots of v), from row r of
+  // x_y, x_z; curvature rows c_* (null: none) complete d/d(y, u, p).
+  auto rate_row = [&](const Target& t, int i, const DerivativeMatrix& x_y,
+                      const DerivativeMatrix& x_z, int r, const DerivativeMatrix* c_y,
+                      const DerivativeMatrix* c_u, const DerivativeMatrix* c_p) {
+    const auto gradient = x_y.dense().row(r);
+    const auto z_row = x_z.dense().row(r);
+    double value = gradient.dot(e.F);
+    auto dv = t.dv->row(i);
+    dv.noalias() = gradient.lazyProduct(F_z);
+    for (int j = 0; j < nz; ++j) {
+      if (!continuous[static_cast<std::size_t>(j)]) continue;
+      value += z_row[j] * v[j];
+      dv[j] += z_row[j];
+    }
+    (*t.values)[i] = value;
+    if (with_y) {
+      t.dy->row(i).noalias() = gradient.lazyProduct(e.F_y.dense());
+      if (c_y != nullptr) t.dy->row(i) += c_y->dense().row(r);
+    }
+    if (all) {
+      t.du->row(i).noalias() = gradient.lazyProduct(e.F_u.dense());
+      t.dp->row(i).noalias() = gradient.lazyProduct(e.F_p.dense());
+      if (c_u != nullptr) t.du->row(i) += c_u->dense().row(r);
+      if (c_p != nullptr) t.dp->row(i) += c_p->dense().row(r);
+    }
+  };
+  // A value X with its derivatives, row r.
+  auto value_row = [&](const Target& t, int i, const Vector& x, const DerivativeMatrix& x_z,
+                       const DerivativeMatrix& x_y, const DerivativeMatrix& x_u,
+                       const DerivativeMatrix& x_p, int r) {
+    (*t.values)[i] = x[r];
+    t.dv->row(i) = x_z.dense().row(r);
+    if (with_y) t.dy->row(i) = x_y.dense().row(r);
+    if (all) {
+      t.du->row(i) = x_u.dense().row(r);
+      t.dp->row(i) = x_p.dense().row(r);
+    }
+  };
+
+  // G rows: differentiated along the flow, or on values.
+  for (int r = 0; r < ng; ++r) {
+    if (differentiated[static_cast<std::size_t>(r)]) {
+      rate_row(equations, r, e.G_y, e.G_z, r, with_y ? &curvature.equation_y : nullptr,
+               all ? &curvature.equation_u : nullptr, all ? &curvature.equation_p : nullptr);
+    } else {
+      value_row(equations, r, e.G, e.G_z, e.G_y, e.G_u, e.G_p, r);
+    }
+  }
+  int row = ng, pair_row = 0;
+  for (int k = 0; k < np; ++k) {
+    const ContinuousSide side = pairs[static_cast<std::size_t>(k)].continuous;
+    const bool continuous_a = side != ContinuousSide::kB;
+    // The rate of the continuous side (a for kA and kBoth, b for kB).
+    auto continuous_rate = [&](const Target& t, int i) {
+      rate_row(t, i, continuous_a ? e.A_y : e.B_y, continuous_a ? e.A_z : e.B_z, k,
+               with_y ? &curvature.pair_y : nullptr, all ? &curvature.pair_u : nullptr,
+               all ? &curvature.pair_p : nullptr);
+    };
+    // The jump side's value (kBoth pairs: both sides continuous, b's rate).
+    auto jump = [&](const Target& t, int i) {
+      if (side == ContinuousSide::kBoth) {
+        rate_row(t, i, e.B_y, e.B_z, k, nullptr, nullptr, nullptr);
+      } else if (continuous_a) {
+        value_row(t, i, e.B, e.B_z, e.B_y, e.B_u, e.B_p, k);
+      } else {
+        value_row(t, i, e.A, e.A_z, e.A_y, e.A_u, e.A_p, k);
+      }
+    };
+    const PairRole role = roles[static_cast<std::size_t>(k)];
+    if (role == PairRole::kComplementary) {
+      jump(a_rows, pair_row);
+      continuous_rate(b_rows, pair_row);
+      ++pair_row;
+      continue;
+    }
+    // The kept side: its rate if continuous, its value if a jump variable.
+    const bool keeps_a = role == PairRole::kAZero;
+    if (keeps_a == continuous_a) {
+      continuous_rate(equations, row++);
+    } else {
+      jump(equations, row++);
+    }
+  }
+}
+
 void LoweredSystem::EvaluateVelocityLevel(const ConstVectorRef& y, const ConstVectorRef& v,
                                           const std::vector<PairRole>& roles,
                                           Derivatives derivatives,
@@ -227,11 +360,6 @@ void LoweredSystem::EvaluateVelocityLevel(const ConstVectorRef& y, const ConstVe
   PointEvaluation& e = velocity_point_;
   EvaluatePoint(y, v, all ? Derivatives::kAll : Derivatives::kStates, &roles, &e);
 
-  // Rates of continuous variables sit in v's continuous slots; jump variables are values.
-  Vector mask(nz);
-  for (int i = 0; i < nz; ++i)
-    mask[i] = continuous_algebraic_[static_cast<std::size_t>(i)] ? 1.0 : 0.0;
-  const Vector rates = mask.cwiseProduct(v);
   CurvatureTerms& curvature = curvature_;
   if (with_y) {
     curvature.pair_y.SetZero(num_pairs_, ny, sparse_);
@@ -250,11 +378,16 @@ void LoweredSystem::EvaluateVelocityLevel(const ConstVectorRef& y, const ConstVe
       m->Finalize();
     }
   }
-  if (sparse_) {
-    AssembleVelocityLevel<SparseMatrix>(*this, e, curvature, mask, rates, roles, derivatives, out);
-  } else {
-    AssembleVelocityLevel<Matrix>(*this, e, curvature, mask, rates, roles, derivatives, out);
+  if (!sparse_) {
+    AssembleVelocityLevelDense(*this, e, curvature, v, roles, derivatives, out);
+    return;
   }
+  // Rates of continuous variables sit in v's continuous slots; jump variables are values.
+  Vector mask(nz);
+  for (int i = 0; i < nz; ++i)
+    mask[i] = continuous_algebraic_[static_cast<std::size_t>(i)] ? 1.0 : 0.0;
+  const Vector rates = mask.cwiseProduct(v);
+  AssembleVelocityLevel<SparseMatrix>(*this, e, curvature, mask, rates, roles, derivatives, out);
 }
 
 void LoweredSystem::EvaluateEventIndicators(const ConstVectorRef& y, const ConstVectorRef& v,
@@ -284,8 +417,26 @@ namespace {
 // Velocity-level problem as a mixed complementarity system in v (roles fixed).
 class VelocitySystem final : public MixedComplementaritySystem {
  public:
+  explicit VelocitySystem(const LoweredSystem& system) : system_(system) {}
   VelocitySystem(const LoweredSystem& system, const Vector& y, std::vector<PairRole> roles)
-      : system_(system), y_(y), roles_(std::move(roles)) {
+      : system_(system) {
+    roles_ = std::move(roles);
+    Reset(y);
+  }
+  // Fixed statuses (every pair decided), keeping the workspaces.
+  void Reset(const Vector& y, const std::vector<bool>& a_zero) {
+    roles_.resize(a_zero.size());
+    for (std::size_t k = 0; k < a_zero.size(); ++k) {
+      roles_[k] = a_zero[k] ? PairRole::kAZero : PairRole::kBZero;
+    }
+    Reset(y);
+  }
+
+ private:
+  // y and the row scales for roles_.
+  void Reset(const Vector& y) {
+    y_ = y;
+    complementary_ = 0;
     for (PairRole role : roles_) complementary_ += role == PairRole::kComplementary ? 1 : 0;
     // Row scales from the data: the rows are affine in v, and their values at v = 0 (the
     // free velocities grad c . f + c_t) set the size of their terms. Stiff dynamics (|f| ~
@@ -303,6 +454,8 @@ class VelocitySystem final : public MixedComplementaritySystem {
     }
     if (!scale_.allFinite()) scale_.setOnes();  // a non-finite model is reported by Evaluate
   }
+
+ public:
   void ResidualScale(const Vector& /*v*/, Vector* scale) override { *scale = scale_; }
   int num_unknowns() const override { return system_.num_algebraic(); }
   int num_equations() const override { return system_.num_algebraic() - complementary_; }
@@ -347,17 +500,76 @@ SemismoothNewtonOptions VelocityNewtonOptions(bool sparse) {
 
 }  // namespace
 
+namespace internal {
+
+// SolveVelocityLevel's workspace: the system and its Newton solver are kept across solves (no
+// allocation in steady state), and the last few solves are remembered: a solve at the same
+// state, statuses, inputs and parameters returns the same solution instead of solving again.
+// FESD asks for such repeats on every element (the last stage of a Radau IIA element is its
+// end state: the end-of-element check and the stage certificates solve at the same point).
+// The solution for fixed statuses is unique where the problem is regular, so only the
+// starting guess is ignored, and a converged solve from another guess would differ by
+// round-off within the Newton tolerance.
+class VelocitySolver {
+ public:
+  explicit VelocitySolver(const LoweredSystem& system)
+      : problem_(system), newton_(VelocityNewtonOptions(system.sparse())) {}
+
+  bool Solve(const LoweredSystem& system, const Vector& y, const std::vector<bool>& a_zero,
+             const Vector& v0, Vector* v) {
+    for (const Entry& entry : entries_) {
+      if (entry.Matches(system, y, a_zero)) {
+        *v = entry.v;
+        return entry.converged;
+      }
+    }
+    problem_.Reset(y, a_zero);
+    const SemismoothNewtonResult result = newton_.Solve(problem_, v0);
+    *v = result.solution;
+    Entry& entry = entries_[next_];
+    next_ = (next_ + 1) % kEntries;
+    entry.y = y;
+    entry.a_zero = a_zero;
+    entry.inputs = system.inputs();
+    entry.parameters = system.parameters();
+    entry.v = result.solution;
+    entry.converged = result.converged();
+    entry.valid = true;
+    return entry.converged;
+  }
+
+ private:
+  struct Entry {
+    bool valid = false;
+    Vector y, inputs, parameters, v;
+    std::vector<bool> a_zero;
+    bool converged = false;
+    static bool Same(const Vector& a, const Vector& b) {
+      return a.size() == b.size() && (a.array() == b.array()).all();
+    }
+    bool Matches(const LoweredSystem& system, const Vector& at, const std::vector<bool>& z) const {
+      return valid && a_zero == z && Same(y, at) && Same(inputs, system.inputs()) &&
+             Same(parameters, system.parameters());
+    }
+  };
+  // Interior element ends of a group are checked before its certificates are computed.
+  static constexpr int kEntries = 4;
+  VelocitySystem problem_;
+  SemismoothNewton newton_;
+  Entry entries_[kEntries];
+  int next_ = 0;
+};
+
+}  // namespace internal
+
 bool LoweredSystem::SolveVelocityLevel(const Vector& y, const std::vector<bool>& a_zero,
                                        const Vector& v0, Vector* v) const {
   if (num_algebraic_ == 0) {
     v->resize(0);
     return true;
   }
-  VelocitySystem system(*this, y, RolesFor(a_zero));
-  SemismoothNewton newton(VelocityNewtonOptions(sparse_));
-  const SemismoothNewtonResult result = newton.Solve(system, v0);
-  *v = result.solution;
-  return result.converged();
+  if (!velocity_solver_) velocity_solver_ = std::make_shared<internal::VelocitySolver>(*this);
+  return velocity_solver_->Solve(*this, y, a_zero, v0, v);
 }
 
 StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_tolerance) const {

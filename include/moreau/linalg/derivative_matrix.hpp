@@ -50,6 +50,9 @@ class DerivativeMatrix {
 
   // --- reading (after Finalize) ------------------------------------------------------------
   const Matrix& dense() const;         ///< dense storage only
+  /// Dense storage only: the matrix to write in place (sizes from SetZero; writing keeps it
+  /// finished). For producers that compute whole rows at once (velocity level).
+  Matrix& MutableDense();
   const SparseMatrix& sparse() const;  ///< sparse storage only
   Matrix ToDense() const;
   /// f(m) with m the dense Matrix or the SparseMatrix: code written once for both storages.
