@@ -219,6 +219,9 @@ class StewartBlock final : public SwitchingBlockBase {
     z[z0 + 2 * m] = g_min;
   }
 
+  // x' += sum theta_k f_k(x), g(x) - lambda - mu e, e^T theta - 1, (theta, lambda).
+  bool AffineInAlgebraic() const override { return true; }
+
   // Some theta must be free: they sum to one.
   bool AdmitsRoles(const std::vector<PairRole>& roles) const override {
     for (PairRole role : roles) {
@@ -321,6 +324,9 @@ class HeavisideBlock final : public SwitchingBlockBase {
       out->B_z.Add(k0 + 2 * j + 1, z0 + 2 * nc + j, 1.0);
     }
   }
+
+  // The weights w_k(alpha) are multi-affine: affine in alpha for one surface only.
+  bool AffineInAlgebraic() const override { return num_surfaces_ == 1; }
 
   // alpha is a jump variable; lambda_n and lambda_p are continuous.
   std::vector<bool> ContinuousAlgebraic() const override {

@@ -425,12 +425,16 @@ class VelocitySystem final : public MixedComplementaritySystem {
   }
   // Fixed statuses (every pair decided), keeping the workspaces.
   void Reset(const Vector& y, const std::vector<bool>& a_zero) {
+    SetRoles(a_zero);
+    Reset(y);
+  }
+  void SetRoles(const std::vector<bool>& a_zero) {
     roles_.resize(a_zero.size());
     for (std::size_t k = 0; k < a_zero.size(); ++k) {
       roles_[k] = a_zero[k] ? PairRole::kAZero : PairRole::kBZero;
     }
-    Reset(y);
   }
+  const std::vector<PairRole>& roles() const { return roles_; }
 
  private:
   // y and the row scales for roles_.
@@ -510,10 +514,19 @@ namespace internal {
 // The solution for fixed statuses is unique where the problem is regular, so only the
 // starting guess is ignored, and a converged solve from another guess would differ by
 // round-off within the Newton tolerance.
+//
+// Systems whose blocks are all affine in the algebraic unknowns (LoweredBlock::
+// AffineInAlgebraic: Stewart, one-surface Heaviside, moving sets; no time-freezing) have
+// velocity-level rows E(v) = M(y) v + q(y). Newton's first step from v0 then solves them
+// exactly, and its second evaluation (the convergence test at v1) and the evaluation at v = 0
+// for the row scales add nothing that the first does not give: E(0) = E(v0) - M v0 and
+// E(v1) = E(v0) + M (v1 - v0), up to rounding. One evaluation, one factorization and the same
+// step (same linear solver kind) give the same v1 as Newton; the convergence test is applied to
+// E(v0) + M (v1 - v0), and a solve that fails it (or a singular M) falls back to Newton.
 class VelocitySolver {
  public:
-  explicit VelocitySolver(const LoweredSystem& system)
-      : problem_(system), newton_(VelocityNewtonOptions(system.sparse())) {}
+  explicit VelocitySolver(const LoweredSystem& system, bool affine)
+      : problem_(system), newton_(VelocityNewtonOptions(system.sparse())), affine_(affine) {}
 
   bool Solve(const LoweredSystem& system, const Vector& y, const std::vector<bool>& a_zero,
              const Vector& v0, Vector* v) {
@@ -523,22 +536,70 @@ class VelocitySolver {
         return entry.converged;
       }
     }
-    problem_.Reset(y, a_zero);
-    const SemismoothNewtonResult result = newton_.Solve(problem_, v0);
-    *v = result.solution;
+    bool converged = false;
+    if (!affine_ || !SolveAffine(system, y, a_zero, v0, v, &converged)) {
+      problem_.Reset(y, a_zero);
+      const SemismoothNewtonResult result = newton_.Solve(problem_, v0);
+      *v = result.solution;
+      converged = result.converged();
+    }
+    Remember(system, y, a_zero, *v, converged);
+    return converged;
+  }
+
+ private:
+  // The affine path; returns false if Newton must decide (singular M, test failed).
+  bool SolveAffine(const LoweredSystem& system, const Vector& y, const std::vector<bool>& a_zero,
+                   const Vector& v0, Vector* v, bool* converged) {
+    const int n = system.num_algebraic();
+    problem_.SetRoles(a_zero);
+    system.EvaluateVelocityLevel(y, v0, problem_.roles(), Derivatives::kNone, &evaluation_);
+    const Vector& r = evaluation_.equations;
+    if (r.size() != n || !r.allFinite()) return false;
+    // Row scales 1 / (1 + |E(0)|), E(0) = E(v0) - M v0 (VelocitySystem).
+    const DerivativeMatrix& m = evaluation_.equations_v;
+    linear_.noalias() = -r;
+    m.MultiplyAdd(v0, linear_);  // -E(0)
+    scale_ = (1.0 + linear_.array().abs()).inverse().matrix();
+    if (!scale_.allFinite()) scale_.setOnes();
+    const double tolerance = newton_.options().tolerance;
+    if (scale_.cwiseProduct(r).lpNorm<Eigen::Infinity>() <= tolerance) {
+      *v = v0;
+      *converged = true;
+      return true;
+    }
+    if (solver_ == nullptr || solver_size_ != n) {
+      solver_ = MakeLinearSolver(newton_.options().linear_solver, n, m.NonZeros());
+      solver_size_ = n;
+    }
+    jacobian_.Reset(n, solver_->wants_sparse());
+    jacobian_.AddDerivative(0, 0, m);
+    jacobian_.Finalize();
+    if (solver_->Factorize(jacobian_) != FactorizationStatus::kSuccess) return false;
+    step_ = -r;
+    solver_->Solve(step_);
+    if (!step_.allFinite()) return false;
+    linear_ = r;
+    m.MultiplyAdd(step_, linear_);  // E(v1) = E(v0) + M (v1 - v0)
+    if (!(scale_.cwiseProduct(linear_).lpNorm<Eigen::Infinity>() <= tolerance)) return false;
+    *v = v0 + step_;
+    *converged = true;
+    return true;
+  }
+
+  void Remember(const LoweredSystem& system, const Vector& y, const std::vector<bool>& a_zero,
+                const Vector& v, bool converged) {
     Entry& entry = entries_[next_];
     next_ = (next_ + 1) % kEntries;
     entry.y = y;
     entry.a_zero = a_zero;
     entry.inputs = system.inputs();
     entry.parameters = system.parameters();
-    entry.v = result.solution;
-    entry.converged = result.converged();
+    entry.v = v;
+    entry.converged = converged;
     entry.valid = true;
-    return entry.converged;
   }
 
- private:
   struct Entry {
     bool valid = false;
     Vector y, inputs, parameters, v;
@@ -556,8 +617,15 @@ class VelocitySolver {
   static constexpr int kEntries = 4;
   VelocitySystem problem_;
   SemismoothNewton newton_;
+  bool affine_;
   Entry entries_[kEntries];
   int next_ = 0;
+  // The affine path's workspace.
+  VelocityLevelEvaluation evaluation_;
+  Vector scale_, step_, linear_;
+  SystemMatrix jacobian_;
+  std::unique_ptr<LinearSolver> solver_;
+  int solver_size_ = -1;
 };
 
 }  // namespace internal
@@ -568,7 +636,11 @@ bool LoweredSystem::SolveVelocityLevel(const Vector& y, const std::vector<bool>&
     v->resize(0);
     return true;
   }
-  if (!velocity_solver_) velocity_solver_ = std::make_shared<internal::VelocitySolver>(*this);
+  if (!velocity_solver_) {
+    bool affine = clock_rate_block_ < 0;  // time-freezing multiplies F by a rate P(z)
+    for (const auto& block : blocks_) affine &= block->AffineInAlgebraic();
+    velocity_solver_ = std::make_shared<internal::VelocitySolver>(*this, affine);
+  }
   return velocity_solver_->Solve(*this, y, a_zero, v0, v);
 }
 
