@@ -306,6 +306,9 @@ class LoweredSystem {
 
  private:
   void Build();
+  // True if every block is affine in the algebraic unknowns and no clock rate multiplies F:
+  // the velocity-level rows are then affine in v (velocity_level.cpp).
+  bool VelocityLevelIsLinear() const;
   // Evaluate; with `velocity_roles` (EvaluateVelocityLevel, z = v) blocks see the roles and v
   // in their context (BlockContext::velocity_roles).
   void EvaluatePoint(const ConstVectorRef& y, const ConstVectorRef& z, Derivatives derivatives,
