@@ -415,30 +415,29 @@ void LoweredSystem::EvaluateEventIndicators(const ConstVectorRef& y, const Const
 namespace {
 
 // Velocity-level problem as a mixed complementarity system in v (roles fixed).
+//
+// With `linear` (systems affine in the algebraic unknowns, LoweredBlock::AffineInAlgebraic:
+// Stewart, one-surface Heaviside, moving sets; no time-freezing) the rows are exactly
+// E(v) = M(y) v + q(y), and so are the pair sides a(v), b(v). The lowered system is then
+// evaluated once, at the solve's initial point v0, and every value Newton asks for is
+// E(v0) + M (v - v0), the values at v = 0 for the row scales included. Newton takes the same
+// steps as on the evaluated rows (up to rounding) for the cost of one evaluation: a solve of
+// fixed statuses is one factorization and one step, and a status decision's trial assignment
+// without a solution no longer evaluates the system at each of its ~20 failing iterations.
 class VelocitySystem final : public MixedComplementaritySystem {
  public:
-  explicit VelocitySystem(const LoweredSystem& system) : system_(system) {}
-  VelocitySystem(const LoweredSystem& system, const Vector& y, std::vector<PairRole> roles)
-      : system_(system) {
-    roles_ = std::move(roles);
-    Reset(y);
-  }
-  // Fixed statuses (every pair decided), keeping the workspaces.
-  void Reset(const Vector& y, const std::vector<bool>& a_zero) {
-    SetRoles(a_zero);
-    Reset(y);
-  }
-  void SetRoles(const std::vector<bool>& a_zero) {
+  VelocitySystem(const LoweredSystem& system, bool linear) : system_(system), linear_(linear) {}
+  // Fixed statuses (every pair decided).
+  void SetStatuses(const std::vector<bool>& a_zero) {
     roles_.resize(a_zero.size());
     for (std::size_t k = 0; k < a_zero.size(); ++k) {
       roles_[k] = a_zero[k] ? PairRole::kAZero : PairRole::kBZero;
     }
   }
-  const std::vector<PairRole>& roles() const { return roles_; }
-
- private:
-  // y and the row scales for roles_.
-  void Reset(const Vector& y) {
+  void SetRoles(const std::vector<PairRole>& roles) { roles_ = roles; }
+  // The state and the row scales; v0 is the point Newton starts from (the linear model's
+  // expansion point).
+  void Reset(const Vector& y, const Vector& v0) {
     y_ = y;
     complementary_ = 0;
     for (PairRole role : roles_) complementary_ += role == PairRole::kComplementary ? 1 : 0;
@@ -446,30 +445,42 @@ class VelocitySystem final : public MixedComplementaritySystem {
     // free velocities grad c . f + c_t) set the size of their terms. Stiff dynamics (|f| ~
     // 1e5) make an absolute tolerance of 1e-12 unreachable in double precision; relative to
     // the data it is (hard-case suite: stiff set).
-    system_.EvaluateVelocityLevel(y_, Vector::Zero(num_unknowns()), roles_, Derivatives::kNone,
-                                  &values_);
-    scale_.resize(num_unknowns());
-    for (int i = 0; i < num_equations(); ++i) {
-      scale_[i] = 1.0 / (1.0 + std::fabs(values_.equations[i]));
+    if (linear_) {
+      system_.EvaluateVelocityLevel(y_, v0, roles_, Derivatives::kNone, &evaluation_);
+      v0_ = v0;
+      step_ = -v0;  // the values at v = 0
+      Model(step_, &zero_r_, &zero_a_, &zero_b_);
+    } else {
+      system_.EvaluateVelocityLevel(y_, Vector::Zero(num_unknowns()), roles_, Derivatives::kNone,
+                                    &values_);
     }
+    const Vector& r0 = linear_ ? zero_r_ : values_.equations;
+    const Vector& a0 = linear_ ? zero_a_ : values_.a;
+    const Vector& b0 = linear_ ? zero_b_ : values_.b;
+    scale_.resize(num_unknowns());
+    for (int i = 0; i < num_equations(); ++i) scale_[i] = 1.0 / (1.0 + std::fabs(r0[i]));
     for (int k = 0; k < complementary_; ++k) {
-      const double size = std::max(std::fabs(values_.a[k]), std::fabs(values_.b[k]));
+      const double size = std::max(std::fabs(a0[k]), std::fabs(b0[k]));
       scale_[num_equations() + k] = 1.0 / (1.0 + size);
     }
     if (!scale_.allFinite()) scale_.setOnes();  // a non-finite model is reported by Evaluate
   }
 
- public:
   void ResidualScale(const Vector& /*v*/, Vector* scale) override { *scale = scale_; }
   int num_unknowns() const override { return system_.num_algebraic(); }
   int num_equations() const override { return system_.num_algebraic() - complementary_; }
   int num_pairs() const override { return complementary_; }
   bool Evaluate(const Vector& v, bool with_jacobian, Vector* r, Vector* a, Vector* b) override {
-    VelocityLevelEvaluation& target = with_jacobian ? evaluation_ : values_;
-    system_.EvaluateVelocityLevel(y_, v, roles_, Derivatives::kNone, &target);
-    *r = target.equations;
-    *a = target.a;
-    *b = target.b;
+    if (linear_) {
+      step_ = v - v0_;
+      Model(step_, r, a, b);
+    } else {
+      VelocityLevelEvaluation& target = with_jacobian ? evaluation_ : values_;
+      system_.EvaluateVelocityLevel(y_, v, roles_, Derivatives::kNone, &target);
+      *r = target.equations;
+      *a = target.a;
+      *b = target.b;
+    }
     return r->allFinite() && a->allFinite() && b->allFinite();
   }
   void AssembleJacobian(const Vector& da, const Vector& db, SystemMatrix* jacobian) override {
@@ -480,15 +491,33 @@ class VelocitySystem final : public MixedComplementaritySystem {
     }
   }
   double EstimatedJacobianNonzeros() const override {
-    return values_.equations_v.NonZeros() + values_.a_v.NonZeros() + values_.b_v.NonZeros();
+    const VelocityLevelEvaluation& e = linear_ ? evaluation_ : values_;
+    return e.equations_v.NonZeros() + e.a_v.NonZeros() + e.b_v.NonZeros();
   }
 
  private:
+  // The linear model's values at v0 + d.
+  void Model(const Vector& d, Vector* r, Vector* a, Vector* b) const {
+    *r = evaluation_.equations;
+    *a = evaluation_.a;
+    *b = evaluation_.b;
+    evaluation_.equations_v.MultiplyAdd(d, *r);
+    if (complementary_ > 0) {
+      evaluation_.a_v.MultiplyAdd(d, *a);
+      evaluation_.b_v.MultiplyAdd(d, *b);
+    }
+  }
+
   const LoweredSystem& system_;
+  const bool linear_;
   Vector y_;
   std::vector<PairRole> roles_;
   int complementary_ = 0;
+  // Nonlinear: the last with-Jacobian evaluation and values-only evaluations; linear: the
+  // evaluation at v0.
   VelocityLevelEvaluation evaluation_, values_;
+  Vector v0_, zero_r_, zero_a_, zero_b_;
+  mutable Vector step_;
   Vector scale_;
 };
 
@@ -514,19 +543,10 @@ namespace internal {
 // The solution for fixed statuses is unique where the problem is regular, so only the
 // starting guess is ignored, and a converged solve from another guess would differ by
 // round-off within the Newton tolerance.
-//
-// Systems whose blocks are all affine in the algebraic unknowns (LoweredBlock::
-// AffineInAlgebraic: Stewart, one-surface Heaviside, moving sets; no time-freezing) have
-// velocity-level rows E(v) = M(y) v + q(y). Newton's first step from v0 then solves them
-// exactly, and its second evaluation (the convergence test at v1) and the evaluation at v = 0
-// for the row scales add nothing that the first does not give: E(0) = E(v0) - M v0 and
-// E(v1) = E(v0) + M (v1 - v0), up to rounding. One evaluation, one factorization and the same
-// step (same linear solver kind) give the same v1 as Newton; the convergence test is applied to
-// E(v0) + M (v1 - v0), and a solve that fails it (or a singular M) falls back to Newton.
 class VelocitySolver {
  public:
-  explicit VelocitySolver(const LoweredSystem& system, bool affine)
-      : problem_(system), newton_(VelocityNewtonOptions(system.sparse())), affine_(affine) {}
+  VelocitySolver(const LoweredSystem& system, bool linear)
+      : problem_(system, linear), newton_(VelocityNewtonOptions(system.sparse())), linear_(linear) {}
 
   bool Solve(const LoweredSystem& system, const Vector& y, const std::vector<bool>& a_zero,
              const Vector& v0, Vector* v) {
@@ -536,68 +556,58 @@ class VelocitySolver {
         return entry.converged;
       }
     }
+    problem_.SetStatuses(a_zero);
+    problem_.Reset(y, v0);
     bool converged = false;
-    if (!affine_ || !SolveAffine(system, y, a_zero, v0, v, &converged)) {
-      problem_.Reset(y, a_zero);
+    if (!linear_ || !SolveLinear(v0, v)) {
       const SemismoothNewtonResult result = newton_.Solve(problem_, v0);
       *v = result.solution;
       converged = result.converged();
+    } else {
+      converged = true;
     }
-    Remember(system, y, a_zero, *v, converged);
-    return converged;
-  }
-
- private:
-  // The affine path; returns false if Newton must decide (singular M, test failed).
-  bool SolveAffine(const LoweredSystem& system, const Vector& y, const std::vector<bool>& a_zero,
-                   const Vector& v0, Vector* v, bool* converged) {
-    const int n = system.num_algebraic();
-    problem_.SetRoles(a_zero);
-    system.EvaluateVelocityLevel(y, v0, problem_.roles(), Derivatives::kNone, &evaluation_);
-    const Vector& r = evaluation_.equations;
-    if (r.size() != n || !r.allFinite()) return false;
-    // Row scales 1 / (1 + |E(0)|), E(0) = E(v0) - M v0 (VelocitySystem).
-    const DerivativeMatrix& m = evaluation_.equations_v;
-    linear_.noalias() = -r;
-    m.MultiplyAdd(v0, linear_);  // -E(0)
-    scale_ = (1.0 + linear_.array().abs()).inverse().matrix();
-    if (!scale_.allFinite()) scale_.setOnes();
-    const double tolerance = newton_.options().tolerance;
-    if (scale_.cwiseProduct(r).lpNorm<Eigen::Infinity>() <= tolerance) {
-      *v = v0;
-      *converged = true;
-      return true;
-    }
-    if (solver_ == nullptr || solver_size_ != n) {
-      solver_ = MakeLinearSolver(newton_.options().linear_solver, n, m.NonZeros());
-      solver_size_ = n;
-    }
-    jacobian_.Reset(n, solver_->wants_sparse());
-    jacobian_.AddDerivative(0, 0, m);
-    jacobian_.Finalize();
-    if (solver_->Factorize(jacobian_) != FactorizationStatus::kSuccess) return false;
-    step_ = -r;
-    solver_->Solve(step_);
-    if (!step_.allFinite()) return false;
-    linear_ = r;
-    m.MultiplyAdd(step_, linear_);  // E(v1) = E(v0) + M (v1 - v0)
-    if (!(scale_.cwiseProduct(linear_).lpNorm<Eigen::Infinity>() <= tolerance)) return false;
-    *v = v0 + step_;
-    *converged = true;
-    return true;
-  }
-
-  void Remember(const LoweredSystem& system, const Vector& y, const std::vector<bool>& a_zero,
-                const Vector& v, bool converged) {
     Entry& entry = entries_[next_];
     next_ = (next_ + 1) % kEntries;
     entry.y = y;
     entry.a_zero = a_zero;
     entry.inputs = system.inputs();
     entry.parameters = system.parameters();
-    entry.v = v;
+    entry.v = *v;
     entry.converged = converged;
     entry.valid = true;
+    return converged;
+  }
+
+ private:
+  // A linear problem of fixed statuses: Newton's first step (the same factorization and
+  // solve) without the rest of its machinery, accepted if the model's residual after it meets
+  // Newton's test; otherwise (singular matrix, test failed) Newton decides.
+  bool SolveLinear(const Vector& v0, Vector* v) {
+    const int n = problem_.num_unknowns();
+    const double tolerance = newton_.options().tolerance;
+    problem_.ResidualScale(v0, &scale_);
+    problem_.Evaluate(v0, true, &residual_, &a_, &b_);
+    if (!residual_.allFinite()) return false;
+    if (scale_.cwiseProduct(residual_).lpNorm<Eigen::Infinity>() <= tolerance) {
+      *v = v0;  // Newton stops at the initial point (no minimum iterations)
+      return true;
+    }
+    if (solver_ == nullptr || solver_size_ != n) {
+      solver_ = MakeLinearSolver(newton_.options().linear_solver, n,
+                                 problem_.EstimatedJacobianNonzeros());
+      solver_size_ = n;
+    }
+    jacobian_.Reset(n, solver_->wants_sparse());
+    problem_.AssembleJacobian(a_, b_, &jacobian_);  // no pairs: the weights are unused
+    jacobian_.Finalize();
+    if (solver_->Factorize(jacobian_) != FactorizationStatus::kSuccess) return false;
+    step_ = -residual_;
+    solver_->Solve(step_);
+    trial_ = v0 + step_;
+    if (!problem_.Evaluate(trial_, true, &residual_, &a_, &b_)) return false;
+    if (!(scale_.cwiseProduct(residual_).lpNorm<Eigen::Infinity>() <= tolerance)) return false;
+    *v = trial_;
+    return true;
   }
 
   struct Entry {
@@ -617,18 +627,25 @@ class VelocitySolver {
   static constexpr int kEntries = 4;
   VelocitySystem problem_;
   SemismoothNewton newton_;
-  bool affine_;
+  const bool linear_;
   Entry entries_[kEntries];
   int next_ = 0;
-  // The affine path's workspace.
-  VelocityLevelEvaluation evaluation_;
-  Vector scale_, step_, linear_;
+  // SolveLinear's workspace.
+  Vector scale_, residual_, a_, b_, step_, trial_;
   SystemMatrix jacobian_;
   std::unique_ptr<LinearSolver> solver_;
   int solver_size_ = -1;
 };
 
 }  // namespace internal
+
+bool LoweredSystem::VelocityLevelIsLinear() const {
+  if (clock_rate_block_ >= 0) return false;  // time-freezing multiplies F by a rate P(z)
+  for (const auto& block : blocks_) {
+    if (!block->AffineInAlgebraic()) return false;
+  }
+  return true;
+}
 
 bool LoweredSystem::SolveVelocityLevel(const Vector& y, const std::vector<bool>& a_zero,
                                        const Vector& v0, Vector* v) const {
@@ -637,9 +654,7 @@ bool LoweredSystem::SolveVelocityLevel(const Vector& y, const std::vector<bool>&
     return true;
   }
   if (!velocity_solver_) {
-    bool affine = clock_rate_block_ < 0;  // time-freezing multiplies F by a rate P(z)
-    for (const auto& block : blocks_) affine &= block->AffineInAlgebraic();
-    velocity_solver_ = std::make_shared<internal::VelocitySolver>(*this, affine);
+    velocity_solver_ = std::make_shared<internal::VelocitySolver>(*this, VelocityLevelIsLinear());
   }
   return velocity_solver_->Solve(*this, y, a_zero, v0, v);
 }
@@ -720,8 +735,11 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
     decision.a_zero[static_cast<std::size_t>(k)] = jump_zero != continuous_a;
   };
 
+  const bool linear = VelocityLevelIsLinear();
   if (static_cast<int>(enumerated.size()) > kMaxEnumeratedCandidates) {
-    VelocitySystem system(*this, y, roles);
+    VelocitySystem system(*this, linear);
+    system.SetRoles(roles);
+    system.Reset(y, guess);
     const SemismoothNewtonResult result = newton.Solve(system, guess);
     if (!result.converged()) {
       decision.message = "velocity-level complementarity problem: " + result.message;
@@ -770,7 +788,9 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
       admitted &= block->AdmitsRoles(std::vector<PairRole>(first, first + block->num_pairs()));
     }
     if (!admitted) continue;
-    VelocitySystem system(*this, y, trial);
+    VelocitySystem system(*this, linear);
+    system.SetRoles(trial);
+    system.Reset(y, guess);
     const SemismoothNewtonResult result = newton.Solve(system, guess);
     if (!result.converged()) continue;
     // The free side of every candidate must be nonnegative.
