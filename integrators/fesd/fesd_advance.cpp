@@ -305,7 +305,17 @@ Violation FesdRun::EndViolation(const internal::CollocationStages& stages, const
                                 const Vector& scales, int element, Vector* v) const {
   Violation violation;
   Vector solved;
-  if (np_ == 0 || !system_.SolveVelocityLevel(y, a_zero_, *v, &solved)) return violation;
+  if (np_ == 0) return violation;
+  // y is the last stage's state (Radau IIA: c_s = 1): solved from that stage's evaluation
+  // (a linear velocity level needs no evaluation of its own).
+  const int last = s_ - 1;
+  const bool at_stage = y.size() == stages.stage_state(last).size() &&
+                        (y.array() == stages.stage_state(last).array()).all();
+  if (!(at_stage ? system_.SolveVelocityLevel(y, a_zero_, *v, stages.stage_algebraic(last),
+                                              stages.stage(last), &solved)
+                 : system_.SolveVelocityLevel(y, a_zero_, *v, &solved))) {
+    return violation;
+  }
   *v = solved;
   IndicatorEvaluation end;
   system_.EvaluateEventIndicators(y, solved, a_zero_, Derivatives::kNone, &end);

@@ -126,7 +126,8 @@ Vector FesdRun::ConsistentFreeSides(const Vector& y, const PointEvaluation& stag
   }
   if (!jump) return free;
   Vector v;
-  if (!system_.SolveVelocityLevel(y, a_zero_, z, &v)) {
+  // From the stage's evaluation: a linear velocity level needs no evaluation of its own.
+  if (!system_.SolveVelocityLevel(y, a_zero_, z, z, stage, &v)) {
     free.setConstant(-std::numeric_limits<double>::infinity());  // no consistent value
     return free;
   }

@@ -59,7 +59,14 @@ void SystemMatrix::AddBlock(int row0, int col0, const ConstMatrixRef& block, dou
   MOREAU_ASSERT(row0 >= 0 && col0 >= 0 && row0 + block.rows() <= n_ && col0 + block.cols() <= n_,
                 "block outside the system matrix");
   if (!sparse_) {
-    dense_.block(row0, col0, block.rows(), block.cols()) += scale * block;
+    // Plain loops: the blocks are small, where Eigen's block expressions cost more in set-up
+    // than in arithmetic.
+    const Eigen::Index rows = block.rows();
+    for (Eigen::Index j = 0; j < block.cols(); ++j) {
+      double* target = dense_.data() + (col0 + j) * n_ + row0;
+      const double* source = block.data() + j * block.outerStride();
+      for (Eigen::Index i = 0; i < rows; ++i) target[i] += scale * source[i];
+    }
     return;
   }
   for (Eigen::Index j = 0; j < block.cols(); ++j) {
@@ -98,8 +105,13 @@ void SystemMatrix::AddWeightedRows(int row0, int col0, const ConstVectorRef& row
   if (!m.is_sparse()) {
     MOREAU_ASSERT(row0 + m.rows() <= n_ && col0 + m.cols() <= n_, "block outside the matrix");
     if (!sparse_) {
-      dense_.block(row0, col0, m.rows(), m.cols()).noalias() +=
-          row_weights.asDiagonal() * m.dense();
+      const Matrix& block = m.dense();
+      const Eigen::Index rows = block.rows();
+      for (Eigen::Index j = 0; j < block.cols(); ++j) {
+        double* target = dense_.data() + (col0 + j) * n_ + row0;
+        const double* source = block.data() + j * rows;
+        for (Eigen::Index i = 0; i < rows; ++i) target[i] += row_weights[i] * source[i];
+      }
     } else {
       AddBlock(row0, col0, row_weights.asDiagonal() * m.dense());
     }
@@ -266,10 +278,15 @@ class DenseLuSolver final : public LinearSolver {
   // P A = L U in place (L unit lower, U upper), right-looking, column by column; pivot_[k] is
   // the row swapped with row k at step k. A zero pivot leaves its column unscaled (the matrix
   // is reported singular by the pivot ratio).
+  // The multipliers of a column are often mostly zero (the Jacobians of collocation and
+  // complementarity systems are block sparse): the update then runs over the nonzero ones
+  // only. Skipping zero multipliers and zero entries of U changes no result (x - 0 u = x).
   void FactorizeSmall(const Matrix& a) {
     small_lu_ = a;
     pivot_.resize(static_cast<std::size_t>(n_));
+    rows_.resize(static_cast<std::size_t>(n_));
     double* lu = small_lu_.data();
+    int* rows = rows_.data();
     const int n = n_;
     for (int k = 0; k < n; ++k) {
       double* column_k = lu + static_cast<std::ptrdiff_t>(k) * n;
@@ -287,12 +304,18 @@ class DenseLuSolver final : public LinearSolver {
       }
       const double pivot = column_k[k];
       if (pivot == 0.0) continue;
-      for (int i = k + 1; i < n; ++i) column_k[i] /= pivot;
+      int count = 0;
+      for (int i = k + 1; i < n; ++i) {
+        if (column_k[i] == 0.0) continue;
+        column_k[i] /= pivot;
+        rows[count++] = i;
+      }
+      if (count == 0) continue;
       for (int j = k + 1; j < n; ++j) {
         double* column_j = lu + static_cast<std::ptrdiff_t>(j) * n;
         const double u = column_j[k];
         if (u == 0.0) continue;
-        for (int i = k + 1; i < n; ++i) column_j[i] -= column_k[i] * u;
+        for (int r = 0; r < count; ++r) column_j[rows[r]] -= column_k[rows[r]] * u;
       }
     }
   }
@@ -343,7 +366,7 @@ class DenseLuSolver final : public LinearSolver {
   int n_ = 0;
   bool small_ = true;
   Matrix small_lu_;
-  std::vector<int> pivot_;
+  std::vector<int> pivot_, rows_;
   Eigen::PartialPivLU<Matrix> lu_;
   double rcond_ = 0.0;
 };

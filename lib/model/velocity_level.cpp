@@ -348,12 +348,32 @@ static void AssembleVelocityLevelDense(const LoweredSystem& system, const PointE
   }
 }
 
+// The velocity-level rows from the evaluation e of the system at (y, v) (velocity roles set,
+// derivatives kStates, or kAll with Derivatives::kAll) and the curvature terms (with
+// derivatives with respect to y).
+static void AssembleVelocityRows(const LoweredSystem& system, const PointEvaluation& e,
+                                 const CurvatureTerms& curvature, const ConstVectorRef& v,
+                                 const std::vector<PairRole>& roles, Derivatives derivatives,
+                                 VelocityLevelEvaluation* out) {
+  if (!system.sparse()) {
+    AssembleVelocityLevelDense(system, e, curvature, v, roles, derivatives, out);
+    return;
+  }
+  // Rates of continuous variables sit in v's continuous slots; jump variables are values.
+  const int nz = system.num_algebraic();
+  Vector mask(nz);
+  for (int i = 0; i < nz; ++i)
+    mask[i] = system.continuous_algebraic()[static_cast<std::size_t>(i)] ? 1.0 : 0.0;
+  const Vector rates = mask.cwiseProduct(v);
+  AssembleVelocityLevel<SparseMatrix>(system, e, curvature, mask, rates, roles, derivatives, out);
+}
+
 void LoweredSystem::EvaluateVelocityLevel(const ConstVectorRef& y, const ConstVectorRef& v,
                                           const std::vector<PairRole>& roles,
                                           Derivatives derivatives,
                                           VelocityLevelEvaluation* out) const {
   MOREAU_ASSERT(static_cast<int>(roles.size()) == num_pairs_, "wrong number of pair roles");
-  const int ny = num_states_, nz = num_algebraic_, ng = num_equations_;
+  const int ny = num_states_, ng = num_equations_;
   const int nu = scene_.num_inputs(), np = scene_.num_parameters();
   const bool with_y = derivatives != Derivatives::kNone;
   const bool all = derivatives == Derivatives::kAll;
@@ -378,16 +398,7 @@ void LoweredSystem::EvaluateVelocityLevel(const ConstVectorRef& y, const ConstVe
       m->Finalize();
     }
   }
-  if (!sparse_) {
-    AssembleVelocityLevelDense(*this, e, curvature, v, roles, derivatives, out);
-    return;
-  }
-  // Rates of continuous variables sit in v's continuous slots; jump variables are values.
-  Vector mask(nz);
-  for (int i = 0; i < nz; ++i)
-    mask[i] = continuous_algebraic_[static_cast<std::size_t>(i)] ? 1.0 : 0.0;
-  const Vector rates = mask.cwiseProduct(v);
-  AssembleVelocityLevel<SparseMatrix>(*this, e, curvature, mask, rates, roles, derivatives, out);
+  AssembleVelocityRows(*this, e, curvature, v, roles, derivatives, out);
 }
 
 void LoweredSystem::EvaluateEventIndicators(const ConstVectorRef& y, const ConstVectorRef& v,
@@ -436,8 +447,10 @@ class VelocitySystem final : public MixedComplementaritySystem {
   }
   void SetRoles(const std::vector<PairRole>& roles) { roles_ = roles; }
   // The state and the row scales; v0 is the point Newton starts from (the linear model's
-  // expansion point).
-  void Reset(const Vector& y, const Vector& v0) {
+  // expansion point). `point` (linear systems, may be null): the system's evaluation at
+  // (y, v0) with derivatives, which then is the velocity-level evaluation at v0 (the blocks of
+  // a linear system do not look at the velocity roles).
+  void Reset(const Vector& y, const Vector& v0, const PointEvaluation* point = nullptr) {
     y_ = y;
     complementary_ = 0;
     for (PairRole role : roles_) complementary_ += role == PairRole::kComplementary ? 1 : 0;
@@ -445,8 +458,13 @@ class VelocitySystem final : public MixedComplementaritySystem {
     // free velocities grad c . f + c_t) set the size of their terms. Stiff dynamics (|f| ~
     // 1e5) make an absolute tolerance of 1e-12 unreachable in double precision; relative to
     // the data it is (hard-case suite: stiff set).
-    if (linear_) {
+    if (linear_ && point != nullptr) {
+      AssembleVelocityRows(system_, *point, no_curvature_, v0, roles_, Derivatives::kNone,
+                           &evaluation_);
+    } else if (linear_) {
       system_.EvaluateVelocityLevel(y_, v0, roles_, Derivatives::kNone, &evaluation_);
+    }
+    if (linear_) {
       v0_ = v0;
       step_ = -v0;  // the values at v = 0
       Model(step_, &zero_r_, &zero_a_, &zero_b_);
@@ -519,6 +537,7 @@ class VelocitySystem final : public MixedComplementaritySystem {
   Vector v0_, zero_r_, zero_a_, zero_b_;
   mutable Vector step_;
   Vector scale_;
+  CurvatureTerms no_curvature_;  // (rows without derivatives with respect to y)
 };
 
 // Dense LU for dense storage; with sparse storage the automatic choice (KLU above
@@ -548,8 +567,9 @@ class VelocitySolver {
   VelocitySolver(const LoweredSystem& system, bool linear)
       : problem_(system, linear), newton_(VelocityNewtonOptions(system.sparse())), linear_(linear) {}
 
+  // point: the system's evaluation at (y, v0) with derivatives, or null.
   bool Solve(const LoweredSystem& system, const Vector& y, const std::vector<bool>& a_zero,
-             const Vector& v0, Vector* v) {
+             const Vector& v0, const PointEvaluation* point, Vector* v) {
     for (const Entry& entry : entries_) {
       if (entry.Matches(system, y, a_zero)) {
         *v = entry.v;
@@ -557,7 +577,7 @@ class VelocitySolver {
       }
     }
     problem_.SetStatuses(a_zero);
-    problem_.Reset(y, v0);
+    problem_.Reset(y, v0, point);
     bool converged = false;
     if (!linear_ || !SolveLinear(v0, v)) {
       const SemismoothNewtonResult result = newton_.Solve(problem_, v0);
@@ -656,7 +676,23 @@ bool LoweredSystem::SolveVelocityLevel(const Vector& y, const std::vector<bool>&
   if (!velocity_solver_) {
     velocity_solver_ = std::make_shared<internal::VelocitySolver>(*this, VelocityLevelIsLinear());
   }
-  return velocity_solver_->Solve(*this, y, a_zero, v0, v);
+  return velocity_solver_->Solve(*this, y, a_zero, v0, nullptr, v);
+}
+
+bool LoweredSystem::SolveVelocityLevel(const Vector& y, const std::vector<bool>& a_zero,
+                                       const Vector& v0, const Vector& z,
+                                       const PointEvaluation& point, Vector* v) const {
+  if (num_algebraic_ == 0) {
+    v->resize(0);
+    return true;
+  }
+  MOREAU_ASSERT(point.F_z.rows() == num_states_ && point.F_z.cols() == num_algebraic_,
+                "SolveVelocityLevel: the point evaluation has no derivatives");
+  if (!velocity_solver_) {
+    velocity_solver_ = std::make_shared<internal::VelocitySolver>(*this, VelocityLevelIsLinear());
+  }
+  if (!VelocityLevelIsLinear()) return velocity_solver_->Solve(*this, y, a_zero, v0, nullptr, v);
+  return velocity_solver_->Solve(*this, y, a_zero, z, &point, v);
 }
 
 StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_tolerance) const {

@@ -29,7 +29,14 @@ class DerivativeMatrix {
 
   // --- accumulation ------------------------------------------------------------------------
   /// M(row, col) += value.
-  void Add(int row, int col, double value);
+  void Add(int row, int col, double value) {
+    CheckEntry(row, col);
+    if (sparse_) {
+      entries_.push_back({row, col, value});
+    } else {
+      dense_(row, col) += value;
+    }
+  }
   /// M(row0 + i, col0 + j) += scale * block(i, j) for every entry of the block.
   void AddBlock(int row0, int col0, const ConstMatrixRef& block, double scale = 1.0);
   /// M(row0 + i, col0 + j) += scale * block(i, j) for the stored entries of a sparse block
@@ -79,6 +86,7 @@ class DerivativeMatrix {
   };
 
  private:
+  void CheckEntry(int row, int col) const;  // aborts unless 0 <= row < rows, 0 <= col < cols
   int rows_ = 0, cols_ = 0;
   bool sparse_ = false;
   bool finalized_ = true;

@@ -285,6 +285,13 @@ class LoweredSystem {
   /// false if Newton does not converge.
   bool SolveVelocityLevel(const Vector& y, const std::vector<bool>& a_zero, const Vector& v0,
                           Vector* v) const;
+  /// The same, given `point`: this system's Evaluate at (y, z) with derivatives (kStates or
+  /// kAll), e.g. a collocation stage. Where the velocity level is linear (every effect affine
+  /// in the algebraic unknowns, no time-freezing) that evaluation is the velocity-level
+  /// evaluation at z, the solve starts there and evaluates nothing more; otherwise `point` and
+  /// z are not used.
+  bool SolveVelocityLevel(const Vector& y, const std::vector<bool>& a_zero, const Vector& v0,
+                          const Vector& z, const PointEvaluation& point, Vector* v) const;
   /// Decides the statuses that continue from state y (the slow solution): pairs whose
   /// continuous side is not zero keep their jump side at zero; candidate pairs (continuous
   /// side within candidate_tolerance of zero) are resolved by the velocity-level
