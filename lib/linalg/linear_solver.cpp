@@ -4,6 +4,8 @@
 
 #include <Eigen/LU>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <utility>
 #include <vector>
 
@@ -222,6 +224,21 @@ namespace {
 // Eigen's blocked factorization.
 constexpr int kSmallDenseLu = 64;
 
+// True if no entry is infinite or NaN (those have every exponent bit set). An integer
+// reduction without early exit: it vectorizes, where Eigen's allFinite tests entry by entry
+// (a fifth of the cost of a small factorization).
+bool AllFinite(const Matrix& a) {
+  constexpr std::uint64_t kExponent = 0x7ff0000000000000ULL;
+  const double* x = a.data();
+  std::uint64_t bad = 0;
+  for (Eigen::Index i = 0; i < a.size(); ++i) {
+    std::uint64_t bits = 0;
+    std::memcpy(&bits, x + i, sizeof bits);
+    bad |= static_cast<std::uint64_t>((bits & kExponent) == kExponent);
+  }
+  return bad == 0;
+}
+
 class DenseLuSolver final : public LinearSolver {
  public:
   LinearSolverKind kind() const override { return LinearSolverKind::kDenseLu; }
@@ -229,7 +246,7 @@ class DenseLuSolver final : public LinearSolver {
   FactorizationStatus Factorize(const SystemMatrix& a) override {
     MOREAU_ASSERT(!a.sparse(), "dense LU needs dense storage");
     ++num_factorizations_;
-    if (!a.dense().allFinite()) return FactorizationStatus::kNonFinite;
+    if (!AllFinite(a.dense())) return FactorizationStatus::kNonFinite;
     n_ = a.size();
     if (n_ == 0) {
       rcond_ = 1.0;
@@ -311,11 +328,16 @@ class DenseLuSolver final : public LinearSolver {
         rows[count++] = i;
       }
       if (count == 0) continue;
+      const bool all_rows = count == n - k - 1;  // contiguous: the loop vectorizes
       for (int j = k + 1; j < n; ++j) {
         double* column_j = lu + static_cast<std::ptrdiff_t>(j) * n;
         const double u = column_j[k];
         if (u == 0.0) continue;
-        for (int r = 0; r < count; ++r) column_j[rows[r]] -= column_k[rows[r]] * u;
+        if (all_rows) {
+          for (int i = k + 1; i < n; ++i) column_j[i] -= column_k[i] * u;
+        } else {
+          for (int r = 0; r < count; ++r) column_j[rows[r]] -= column_k[rows[r]] * u;
+        }
       }
     }
   }
