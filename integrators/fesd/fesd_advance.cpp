@@ -317,7 +317,7 @@ Violation FesdRun::EndViolation(const internal::CollocationStages& stages, const
     return violation;
   }
   *v = solved;
-  IndicatorEvaluation end;
+  IndicatorEvaluation& end = indicators_;
   system_.EvaluateEventIndicators(y, solved, a_zero_, Derivatives::kNone, &end);
   for (int k = 0; k < np_ && !violation.found; ++k) {
     if (end.values[k] < -options_.event_tolerance * scales[k]) {

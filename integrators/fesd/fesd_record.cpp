@@ -131,7 +131,7 @@ Vector FesdRun::ConsistentFreeSides(const Vector& y, const PointEvaluation& stag
     free.setConstant(-std::numeric_limits<double>::infinity());  // no consistent value
     return free;
   }
-  IndicatorEvaluation indicators;
+  IndicatorEvaluation& indicators = indicators_;
   system_.EvaluateEventIndicators(y, v, a_zero_, Derivatives::kNone, &indicators);
   for (int k = 0; k < np_; ++k) {
     if (FreeSideIsJump(k)) free[k] = indicators.values[k];
@@ -145,7 +145,8 @@ void FesdRun::Certificates(const internal::CollocationStages& stages, const Vect
                            const ConstVectorRef& w_e, const Vector& a0, const Vector& b0,
                            FesdElement* element) const {
   double cross = 0.0, stage_residual = 0.0;
-  std::vector<Vector> free(static_cast<std::size_t>(s_));
+  std::vector<Vector>& free = free_sides_;
+  free.resize(static_cast<std::size_t>(s_));
   for (int i = 0; i < s_; ++i) {
     const Vector yi = y0 + w_e.segment(stages.state_offset(i), ny_);
     free[static_cast<std::size_t>(i)] =

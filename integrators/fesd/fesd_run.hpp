@@ -347,6 +347,10 @@ class FesdRun {
   bool dense_output_ = false;             // output times replace element ends
   std::vector<double> output_times_;      // sorted, in (t0, tf]
   std::size_t next_output_ = 0;
+  // Workspaces of the per-element checks and certificates (const members, no allocation per
+  // element): event indicators and the consistent free sides of each stage.
+  mutable IndicatorEvaluation indicators_;
+  mutable std::vector<Vector> free_sides_;
 };
 
 }  // namespace moreau::internal
