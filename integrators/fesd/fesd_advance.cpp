@@ -21,7 +21,7 @@ bool FesdRun::Advance(double step_end, int* remaining) {
   const Vector y_start = y_;
   // Indicator scales, and the pairs that start at zero (just switched): their indicators
   // are divided by tau^2 so that h -> 0 is not a root (zero-length elements are excluded).
-  IndicatorEvaluation start;
+  IndicatorEvaluation& start = indicators_;
   system_.EvaluateEventIndicators(y_start, v_, a_zero_, Derivatives::kNone, &start);
   Vector scales(np_);
   std::vector<int> powers(static_cast<std::size_t>(np_), 0);
