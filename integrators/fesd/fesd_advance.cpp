@@ -39,12 +39,12 @@ bool FesdRun::Advance(double step_end, int* remaining) {
   Vector v_end = v_;
   Violation violation;
   std::string trial_failure;  // why the trial pass suspected a switch, if not by signs
+  GroupSetup trial_setup;  // one element of fixed length (its vectors reused across elements)
+  trial_setup.a_zero = a_zero_;
+  trial_setup.h_fixed = h_trial;
   for (int e = 0; e < *remaining; ++e) {
-    GroupSetup setup;
-    setup.y_start = y;
-    setup.a_zero = a_zero_;
-    setup.h_fixed = h_trial;
-    group_.Configure(setup);
+    trial_setup.y_start = y;
+    group_.Configure(trial_setup);
     const Vector* previous = trial_w.empty() ? last_w_ptr() : &trial_w.back();
     const Vector guess = group_.element(0).InitialGuess(
         y, h_trial, previous, previous != nullptr ? h_trial : 0.0, z_guess_);
