@@ -805,6 +805,11 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
   };
   std::vector<Valid> valid;
   const double sign_tolerance = candidate_tolerance;
+  // One problem and evaluation workspace for all trials (SetRoles and Reset set every part
+  // of the problem; the evaluations size and fill their outputs).
+  VelocitySystem system(*this, linear);
+  VelocityLevelEvaluation e;
+  PointEvaluation point;
   for (unsigned mask = 0; mask < (1u << candidates.size()); ++mask) {
     std::vector<PairRole> trial = roles;
     int leaving = 0;
@@ -824,13 +829,11 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
       admitted &= block->AdmitsRoles(std::vector<PairRole>(first, first + block->num_pairs()));
     }
     if (!admitted) continue;
-    VelocitySystem system(*this, linear);
     system.SetRoles(trial);
     system.Reset(y, guess);
     const SemismoothNewtonResult result = newton.Solve(system, guess);
     if (!result.converged()) continue;
     // The free side of every candidate must be nonnegative.
-    VelocityLevelEvaluation e;
     std::vector<PairRole> check = trial;
     for (int k : candidates) check[static_cast<std::size_t>(k)] = PairRole::kComplementary;
     EvaluateVelocityLevel(y, result.solution, check, Derivatives::kNone, &e);
@@ -843,7 +846,6 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
       ok &= free >= -sign_tolerance;
     }
     if (!ok) continue;
-    PointEvaluation point;
     EvaluatePoint(y, result.solution, Derivatives::kNone, &trial, &point);
     valid.push_back({trial, result.solution, point.F.head(nx), leaving});
   }
@@ -881,7 +883,6 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
         valid[best].roles[static_cast<std::size_t>(k)] == PairRole::kAZero;
   }
   if (!monotone.empty()) {
-    VelocityLevelEvaluation e;
     EvaluateVelocityLevel(y, decision.v, valid[best].roles, Derivatives::kNone, &e);
     const std::vector<int> row = complementary_rows(valid[best].roles);
     for (int k : monotone) decide_complementary(k, e, row[static_cast<std::size_t>(k)]);
