@@ -262,6 +262,18 @@ static void AssembleVelocityLevelDense(const LoweredSystem& system, const PointE
   const Target b_rows = prepare(complementary, &out->b, &out->b_v, &out->b_y, &out->b_u, &out->b_p);
 
   const Matrix& F_z = e.F_z.dense();
+  // product(j) = sum_l row(l) m(l, j), summed in order from l = 0 as Eigen's lazy product sums a
+  // strided row (the same result); plain loops, whose set-up costs less than the
+  // expression's on these small blocks.
+  auto row_product = [](const auto& row, const Matrix& m, auto&& product) {
+    const Eigen::Index n = m.rows();
+    for (Eigen::Index j = 0; j < m.cols(); ++j) {
+      const double* column = m.data() + j * n;
+      double sum = n > 0 ? row[0] * column[0] : 0.0;
+      for (Eigen::Index l = 1; l < n; ++l) sum += row[l] * column[l];
+      product[j] = sum;
+    }
+  };
   // Rate of X along the flow, X_y F + X_z v_c (v_c: the continuous slots of v), from row r of
   // x_y, x_z; curvature rows c_* (null: none) complete d/d(y, u, p).
   auto rate_row = [&](const Target& t, int i, const DerivativeMatrix& x_y,
@@ -271,7 +283,7 @@ static void AssembleVelocityLevelDense(const LoweredSystem& system, const PointE
     const auto z_row = x_z.dense().row(r);
     double value = gradient.dot(e.F);
     auto dv = t.dv->row(i);
-    dv.noalias() = gradient.lazyProduct(F_z);
+    row_product(gradient, F_z, dv);
     for (int j = 0; j < nz; ++j) {
       if (!continuous[static_cast<std::size_t>(j)]) continue;
       value += z_row[j] * v[j];
@@ -279,12 +291,12 @@ static void AssembleVelocityLevelDense(const LoweredSystem& system, const PointE
     }
     (*t.values)[i] = value;
     if (with_y) {
-      t.dy->row(i).noalias() = gradient.lazyProduct(e.F_y.dense());
+      row_product(gradient, e.F_y.dense(), t.dy->row(i));
       if (c_y != nullptr) t.dy->row(i) += c_y->dense().row(r);
     }
     if (all) {
-      t.du->row(i).noalias() = gradient.lazyProduct(e.F_u.dense());
-      t.dp->row(i).noalias() = gradient.lazyProduct(e.F_p.dense());
+      row_product(gradient, e.F_u.dense(), t.du->row(i));
+      row_product(gradient, e.F_p.dense(), t.dp->row(i));
       if (c_u != nullptr) t.du->row(i) += c_u->dense().row(r);
       if (c_p != nullptr) t.dp->row(i) += c_p->dense().row(r);
     }
