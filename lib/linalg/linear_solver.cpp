@@ -224,19 +224,21 @@ namespace {
 // Eigen's blocked factorization.
 constexpr int kSmallDenseLu = 64;
 
-// True if no entry is infinite or NaN (those have every exponent bit set). An integer
-// reduction without early exit: it vectorizes, where Eigen's allFinite tests entry by entry
-// (a fifth of the cost of a small factorization).
+// True if no entry is infinite or NaN (those have every exponent bit set: adding one to the
+// lowest exponent bit then carries into the sign bit, for them only). An integer reduction
+// of and, add and or without early exit: it vectorizes, where Eigen's allFinite tests entry
+// by entry (a fifth of the cost of a small factorization).
 bool AllFinite(const Matrix& a) {
   constexpr std::uint64_t kExponent = 0x7ff0000000000000ULL;
+  constexpr std::uint64_t kLowestExponentBit = std::uint64_t{1} << 52;
   const double* x = a.data();
   std::uint64_t bad = 0;
   for (Eigen::Index i = 0; i < a.size(); ++i) {
     std::uint64_t bits = 0;
     std::memcpy(&bits, x + i, sizeof bits);
-    bad |= static_cast<std::uint64_t>((bits & kExponent) == kExponent);
+    bad |= (bits & kExponent) + kLowestExponentBit;
   }
-  return bad == 0;
+  return (bad >> 63) == 0;
 }
 
 class DenseLuSolver final : public LinearSolver {
