@@ -3,10 +3,14 @@
 //
 //   build/release/bench/fesd_bench
 //   build/release/bench/fesd_bench --benchmark_filter=Overhead --benchmark_repetitions=5
+//   build/release/bench/fesd_bench --benchmark_filter=ElementRatio   (issue 15, item 5)
 #include <benchmark/benchmark.h>
+
+#include <time.h>
 
 #include <algorithm>
 #include <chrono>
+#include <stdexcept>
 #include <vector>
 
 #include "moreau/integrators/fesd.hpp"
@@ -65,7 +69,8 @@ BENCHMARK(BM_FesdScene)
     ->Unit(benchmark::kMillisecond);
 
 // Smooth Radau IIA elements of the same size (two states plus the clock, h = 0.05) on the
-// Hopf scene, for the time per element beside FESD's.
+// Hopf scene (a nonlinear field: three Newton iterations per element), for the time per
+// element beside FESD's; BM_FesdElementRatio compares with the scenes' own smooth parts.
 void BM_RadauElement(benchmark::State& state) {
   const moreau::Scene scene = moreau::MakeScene("hopf");
   moreau::RadauOptions options;
@@ -84,6 +89,87 @@ void BM_RadauElement(benchmark::State& state) {
       static_cast<double>(iterations) / static_cast<double>(steps);
 }
 BENCHMARK(BM_RadauElement)->Arg(2)->Arg(3)->ArgName("stages")->Unit(benchmark::kMillisecond);
+
+// CPU time of this thread (the machine is shared: wall time counts other processes' work).
+double ThreadCpuSeconds() {
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
+
+// The smooth part of a reference scene: its dynamics without effects (S3: the rotation x' =
+// (x2, -x1) without the floor), or for a switching system the vector field of the region
+// that contains x0 (F1: x' = A2 x, the field inside the unit circle). Same states, horizon and
+// initial state, so that its Radau IIA elements have the size of the scene's FESD elements
+// (n_y states including the clock, s stages) and the same vector fields.
+moreau::Scene SmoothPart(const moreau::Scene& scene) {
+  moreau::Scene smooth = scene;
+  smooth.name = scene.name + "-smooth";
+  smooth.effects.clear();
+  for (const moreau::Effect& effect : scene.effects) {
+    const auto* switching = std::get_if<moreau::SwitchingSurfaces>(&effect);
+    if (switching == nullptr) continue;
+    if (!scene.dynamics.empty()) throw std::invalid_argument("SmoothPart: dynamics and modes");
+    moreau::Vector c;
+    switching->surfaces.Evaluate(scene.initial_state, scene.InputValues(scene.initial_time),
+                                 scene.initial_time, scene.ParameterValues(), &c);
+    int mode = 0;  // bit j set: c_j > 0 (lower_switching.cpp)
+    for (int j = 0; j < c.size(); ++j) mode |= c[j] > 0.0 ? 1 << j : 0;
+    smooth.dynamics = switching->modes[static_cast<std::size_t>(mode)];
+  }
+  return smooth;
+}
+
+// FESD element cost against smooth Radau IIA elements of the same size (issue 15, item 5):
+// per iteration one FESD run of the scene (h = 0.1, N_fe = 2: elements of 0.05, switches
+// located, certificates computed) and one Radau IIA run of its smooth part (SmoothPart, fixed
+// steps of 0.05, the same stages), interleaved so that both see the same machine load, each
+// timed in CPU time and divided by its elements (whole runs: set-up included on both sides).
+// Counters: medians over the iterations of the microseconds per element and of the ratio.
+// Acceptance: ratio at most 3 on F1 and S3.
+//   build/release/bench/fesd_bench --benchmark_filter=ElementRatio
+const char* const kRatioScenes[] = {"F1", "S3"};
+
+void BM_FesdElementRatio(benchmark::State& state) {
+  const moreau::Scene scene = moreau::MakeScene(kRatioScenes[state.range(0)]);
+  const moreau::Scene smooth = SmoothPart(scene);
+  moreau::FesdOptions fesd;
+  fesd.stages = static_cast<int>(state.range(1));
+  fesd.step_size = 0.1;
+  fesd.finite_elements = 2;
+  fesd.record_trajectory = false;
+  moreau::RadauOptions radau;
+  radau.stages = fesd.stages;
+  radau.step_size = fesd.step_size / fesd.finite_elements;
+  radau.record_trajectory = false;
+  std::vector<double> fesd_us, radau_us, ratios;
+  for (auto _ : state) {
+    const double t0 = ThreadCpuSeconds();
+    const moreau::FesdResult a = moreau::SimulateFesd(scene, fesd);
+    const double t1 = ThreadCpuSeconds();
+    const moreau::RadauResult b = moreau::SimulateRadau(smooth, radau);
+    const double t2 = ThreadCpuSeconds();
+    if (a.status != moreau::FesdStatus::kSuccess || b.stats.num_steps == 0) {
+      state.SkipWithError("a run failed");
+      break;
+    }
+    const double per_fesd = 1e6 * (t1 - t0) / static_cast<double>(a.stats.num_elements);
+    const double per_radau = 1e6 * (t2 - t1) / static_cast<double>(b.stats.num_steps);
+    fesd_us.push_back(per_fesd);
+    radau_us.push_back(per_radau);
+    ratios.push_back(per_fesd / per_radau);
+  }
+  if (ratios.empty()) return;
+  state.SetLabel(kRatioScenes[state.range(0)]);
+  state.counters["fesd_us_per_element"] = Median(fesd_us);
+  state.counters["radau_us_per_element"] = Median(radau_us);
+  state.counters["ratio"] = Median(ratios);
+  state.counters["ratio_of_medians"] = Median(fesd_us) / Median(radau_us);
+}
+BENCHMARK(BM_FesdElementRatio)
+    ->ArgsProduct({{0, 1}, {2, 3}})
+    ->ArgNames({"scene", "stages"})
+    ->Unit(benchmark::kMillisecond);
 
 // FESD against smooth Radau IIA on a scene without effects, interleaved in one run (so that
 // both see the same machine load); the counter is the median of the per-iteration time ratios.

@@ -12,7 +12,9 @@ CollocationStages::CollocationStages(LoweredSystem* system, int stages)
       nz_(system->num_algebraic()),
       ng_(system->num_equations()),
       np_(system->num_pairs()),
-      stages_(static_cast<std::size_t>(stages)) {}
+      stages_(static_cast<std::size_t>(stages)),
+      stage_y_(static_cast<std::size_t>(stages)),
+      stage_z_(static_cast<std::size_t>(stages)) {}
 
 void CollocationStages::Resize() {
   nz_ = system_->num_algebraic();
@@ -40,9 +42,10 @@ double CollocationStages::EstimatedStartNonzeros() const {
 void CollocationStages::Evaluate(const ConstVectorRef& y0, const ConstVectorRef& w,
                                  Derivatives derivatives) {
   for (int i = 0; i < s_; ++i) {
-    point_y_ = y0 + w.segment(state_offset(i), ny_);
-    point_z_ = w.segment(algebraic_offset(i), nz_);
-    system_->Evaluate(point_y_, point_z_, derivatives, &stages_[static_cast<std::size_t>(i)]);
+    const auto k = static_cast<std::size_t>(i);
+    stage_y_[k] = y0 + w.segment(state_offset(i), ny_);
+    stage_z_[k] = w.segment(algebraic_offset(i), nz_);
+    system_->Evaluate(stage_y_[k], stage_z_[k], derivatives, &stages_[k]);
   }
 }
 

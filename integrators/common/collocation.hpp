@@ -48,6 +48,9 @@ class CollocationStages {
   // Evaluates all stages at Y_i = y0 + Z_i, z_i taken from w.
   void Evaluate(const ConstVectorRef& y0, const ConstVectorRef& w, Derivatives derivatives);
   const PointEvaluation& stage(int i) const { return stages_[static_cast<std::size_t>(i)]; }
+  // The point (Y_i, z_i) of stage i at the last Evaluate.
+  const Vector& stage_state(int i) const { return stage_y_[static_cast<std::size_t>(i)]; }
+  const Vector& stage_algebraic(int i) const { return stage_z_[static_cast<std::size_t>(i)]; }
 
   // Residual of the collocation and algebraic rows (equation_rows()) and the pair sides
   // (pair_rows() each), for element length h, at the last Evaluate.
@@ -87,7 +90,7 @@ class CollocationStages {
   const RadauTableau& tableau_;
   int s_, ny_, nz_, ng_, np_;
   std::vector<PointEvaluation> stages_;
-  Vector point_y_, point_z_;
+  std::vector<Vector> stage_y_, stage_z_;
   // Extrapolation weights for the last step-length ratio (column i: stage i of the new step).
   mutable double cached_ratio_ = -1.0;
   mutable Matrix extrapolation_;

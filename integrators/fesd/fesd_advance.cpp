@@ -30,7 +30,7 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
   const Vector y_start = y_;
   // Indicator scales, and the pairs that start at zero (just switched): their indicators
   // are divided by tau^2 so that h -> 0 is not a root (zero-length elements are excluded).
-  IndicatorEvaluation start;
+  IndicatorEvaluation& start = indicators_;
   system_.EvaluateEventIndicators(y_start, v_, a_zero_, Derivatives::kNone, &start);
   Vector scales(np_);
   std::vector<int> powers(static_cast<std::size_t>(np_), 0);
@@ -48,12 +48,12 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
   Vector v_end = v_;
   Violation violation;
   std::string trial_failure;  // why the trial pass suspected a switch, if not by signs
+  GroupSetup trial_setup;  // one element of fixed length (its vectors reused across elements)
+  trial_setup.a_zero = a_zero_;
+  trial_setup.h_fixed = h_trial;
   for (int e = 0; e < *remaining; ++e) {
-    GroupSetup setup;
-    setup.y_start = y;
-    setup.a_zero = a_zero_;
-    setup.h_fixed = h_trial;
-    group_.Configure(setup);
+    trial_setup.y_start = y;
+    group_.Configure(trial_setup);
     const Vector* previous = trial_w.empty() ? last_w_ptr() : &trial_w.back();
     const Vector guess = group_.element(0).InitialGuess(
         y, h_trial, previous, previous != nullptr ? h_trial : 0.0, z_guess_);
@@ -386,9 +386,19 @@ Violation FesdRun::EndViolation(const internal::CollocationStages& stages, const
                                 const Vector& scales, int element, Vector* v) const {
   Violation violation;
   Vector solved;
-  if (np_ == 0 || !system_.SolveVelocityLevel(y, a_zero_, *v, &solved)) return violation;
+  if (np_ == 0) return violation;
+  // y is the last stage's state (Radau IIA: c_s = 1): solved from that stage's evaluation
+  // (a linear velocity level needs no evaluation of its own).
+  const int last = s_ - 1;
+  const bool at_stage = y.size() == stages.stage_state(last).size() &&
+                        (y.array() == stages.stage_state(last).array()).all();
+  if (!(at_stage ? system_.SolveVelocityLevel(y, a_zero_, *v, stages.stage_algebraic(last),
+                                              stages.stage(last), &solved)
+                 : system_.SolveVelocityLevel(y, a_zero_, *v, &solved))) {
+    return violation;
+  }
   *v = solved;
-  IndicatorEvaluation end;
+  IndicatorEvaluation& end = indicators_;
   system_.EvaluateEventIndicators(y, solved, a_zero_, Derivatives::kNone, &end);
   for (int k = 0; k < np_ && !violation.found; ++k) {
     if (end.values[k] < -options_.event_tolerance * scales[k]) {

@@ -125,24 +125,32 @@ void FesdRun::Commit(const SolveRecord& record) {
 // sides consistent with the stage state (velocity level), see FreeSideIsJump.
 Vector FesdRun::ConsistentFreeSides(const Vector& y, const PointEvaluation& stage,
                                     const Vector& z) const {
-  Vector free(np_);
+  Vector free;
+  ConsistentFreeSides(y, stage, z, &free);
+  return free;
+}
+
+void FesdRun::ConsistentFreeSides(const Vector& y, const PointEvaluation& stage, const Vector& z,
+                                  Vector* free_out) const {
+  Vector& free = *free_out;
+  free.resize(np_);
   bool jump = false;
   for (int k = 0; k < np_; ++k) {
     free[k] = a_zero_[static_cast<std::size_t>(k)] ? stage.B[k] : stage.A[k];
     jump |= FreeSideIsJump(k);
   }
-  if (!jump) return free;
-  Vector v;
-  if (!system_.SolveVelocityLevel(y, a_zero_, z, &v)) {
+  if (!jump) return;
+  Vector& v = stage_v_;
+  // From the stage's evaluation: a linear velocity level needs no evaluation of its own.
+  if (!system_.SolveVelocityLevel(y, a_zero_, z, z, stage, &v)) {
     free.setConstant(-std::numeric_limits<double>::infinity());  // no consistent value
-    return free;
+    return;
   }
-  IndicatorEvaluation indicators;
+  IndicatorEvaluation& indicators = indicators_;
   system_.EvaluateEventIndicators(y, v, a_zero_, Derivatives::kNone, &indicators);
   for (int k = 0; k < np_; ++k) {
     if (FreeSideIsJump(k)) free[k] = indicators.values[k];
   }
-  return free;
 }
 
 // Certificates of an element (see FesdElement): the enforced side of every pair at the
@@ -151,11 +159,12 @@ void FesdRun::Certificates(const internal::CollocationStages& stages, const Vect
                            const ConstVectorRef& w_e, const Vector& a0, const Vector& b0,
                            FesdElement* element) const {
   double cross = 0.0, stage_residual = 0.0;
-  std::vector<Vector> free(static_cast<std::size_t>(s_));
+  std::vector<Vector>& free = free_sides_;
+  free.resize(static_cast<std::size_t>(s_));
   for (int i = 0; i < s_; ++i) {
-    const Vector yi = y0 + w_e.segment(stages.state_offset(i), ny_);
-    free[static_cast<std::size_t>(i)] =
-        ConsistentFreeSides(yi, stages.stage(i), stages.Algebraic(w_e, i));
+    stage_y_ = y0 + w_e.segment(stages.state_offset(i), ny_);
+    ConsistentFreeSides(stage_y_, stages.stage(i), stages.Algebraic(w_e, i),
+                        &free[static_cast<std::size_t>(i)]);
   }
   for (int k = 0; k < np_; ++k) {
     const bool a_zero = a_zero_[static_cast<std::size_t>(k)];

@@ -240,6 +240,8 @@ class FesdRun {
   // Free side of every pair at a stage state: continuous sides from the stage values, jump
   // sides consistent with the stage state (velocity level), see FreeSideIsJump.
   Vector ConsistentFreeSides(const Vector& y, const PointEvaluation& stage, const Vector& z) const;
+  void ConsistentFreeSides(const Vector& y, const PointEvaluation& stage, const Vector& z,
+                           Vector* free) const;  // the same into *free (no allocation)
 
   // Certificates of an element (see FesdElement): the enforced side of every pair at the
   // stages and at the start boundary (its continuous side) against the consistent free sides.
@@ -367,6 +369,11 @@ class FesdRun {
   bool dense_output_ = false;             // output times replace element ends
   std::vector<double> output_times_;      // sorted, in (t0, tf]
   std::size_t next_output_ = 0;
+  // Workspaces of the per-element checks and certificates (const members, no allocation per
+  // element): event indicators and the consistent free sides of each stage.
+  mutable IndicatorEvaluation indicators_;
+  mutable std::vector<Vector> free_sides_;
+  mutable Vector stage_y_, stage_v_;  // a stage state and its consistent velocity level
 };
 
 }  // namespace moreau::internal

@@ -48,7 +48,7 @@ bool FesdRun::Decide(double t, const std::vector<bool>* previous) {
 // on a step boundary, or at the final time) is decided there.
 bool FesdRun::DecideAtBoundary() {
   if (np_ == 0) return false;
-  IndicatorEvaluation end;
+  IndicatorEvaluation& end = indicators_;
   system_.EvaluateEventIndicators(y_, v_, a_zero_, Derivatives::kNone, &end);
   Vector scaled(np_);
   for (int k = 0; k < np_; ++k) scaled[k] = end.values[k] / std::max(1.0, std::fabs(end.values[k]));

@@ -114,6 +114,11 @@ void TypedFunction::WeightedHessian(const ConstVectorRef& x, const ConstVectorRe
             np = static_cast<int>(p.size());
   const int columns = wrt.Columns(nx, nu, np);
   hess->setZero(columns, columns);
+  if (hessian_support_.nx != nx || hessian_support_.nu != nu || hessian_support_.np != np) {
+    const SparsityPattern pattern = DetectSparsity(this, x, u, t, p);
+    hessian_support_ = {nx, nu, np, !pattern.point_dependent && pattern.hess_first.empty()};
+  }
+  if (hessian_support_.empty) return;  // every output is affine: the Hessian is zero
   constexpr int kChunk = Dual1::kCapacity;
   // Outer level seeds rows [row0, row0 + rows), inner level columns [col0, col0 + cols).
   for (int row0 = 0; row0 < columns; row0 += kChunk) {

@@ -18,14 +18,9 @@ void DerivativeMatrix::SetZero(int rows, int cols, bool sparse) {
   }
 }
 
-void DerivativeMatrix::Add(int row, int col, double value) {
+void DerivativeMatrix::CheckEntry(int row, int col) const {
   MOREAU_ASSERT(row >= 0 && row < rows_ && col >= 0 && col < cols_,
                 "entry outside the derivative matrix");
-  if (sparse_) {
-    entries_.push_back({row, col, value});
-  } else {
-    dense_(row, col) += value;
-  }
 }
 
 void DerivativeMatrix::AddBlock(int row0, int col0, const ConstMatrixRef& block, double scale) {
@@ -33,7 +28,14 @@ void DerivativeMatrix::AddBlock(int row0, int col0, const ConstMatrixRef& block,
       row0 >= 0 && col0 >= 0 && row0 + block.rows() <= rows_ && col0 + block.cols() <= cols_,
       "block outside the derivative matrix");
   if (!sparse_) {
-    dense_.block(row0, col0, block.rows(), block.cols()) += scale * block;
+    // Plain loops: the blocks are small, where Eigen's block expressions cost more in set-up
+    // than in arithmetic.
+    const Eigen::Index rows = block.rows();
+    for (Eigen::Index j = 0; j < block.cols(); ++j) {
+      double* target = dense_.data() + (col0 + j) * dense_.rows() + row0;
+      const double* source = block.data() + j * block.outerStride();
+      for (Eigen::Index i = 0; i < rows; ++i) target[i] += scale * source[i];
+    }
     return;
   }
   for (Eigen::Index j = 0; j < block.cols(); ++j) {
@@ -128,6 +130,11 @@ void DerivativeMatrix::Finalize() {
 
 const Matrix& DerivativeMatrix::dense() const {
   MOREAU_ASSERT(!sparse_, "dense() of a sparse derivative matrix");
+  return dense_;
+}
+
+Matrix& DerivativeMatrix::MutableDense() {
+  MOREAU_ASSERT(!sparse_, "MutableDense() of a sparse derivative matrix");
   return dense_;
 }
 

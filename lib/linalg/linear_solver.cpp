@@ -5,6 +5,10 @@
 
 #include <Eigen/LU>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <utility>
+#include <vector>
 
 #include "moreau/core/error.hpp"
 
@@ -61,7 +65,14 @@ void SystemMatrix::AddBlock(int row0, int col0, const ConstMatrixRef& block, dou
   MOREAU_ASSERT(row0 >= 0 && col0 >= 0 && row0 + block.rows() <= n_ && col0 + block.cols() <= n_,
                 "block outside the system matrix");
   if (!sparse_) {
-    dense_.block(row0, col0, block.rows(), block.cols()) += scale * block;
+    // Plain loops: the blocks are small, where Eigen's block expressions cost more in set-up
+    // than in arithmetic.
+    const Eigen::Index rows = block.rows();
+    for (Eigen::Index j = 0; j < block.cols(); ++j) {
+      double* target = dense_.data() + (col0 + j) * n_ + row0;
+      const double* source = block.data() + j * block.outerStride();
+      for (Eigen::Index i = 0; i < rows; ++i) target[i] += scale * source[i];
+    }
     return;
   }
   for (Eigen::Index j = 0; j < block.cols(); ++j) {
@@ -100,8 +111,13 @@ void SystemMatrix::AddWeightedRows(int row0, int col0, const ConstVectorRef& row
   if (!m.is_sparse()) {
     MOREAU_ASSERT(row0 + m.rows() <= n_ && col0 + m.cols() <= n_, "block outside the matrix");
     if (!sparse_) {
-      dense_.block(row0, col0, m.rows(), m.cols()).noalias() +=
-          row_weights.asDiagonal() * m.dense();
+      const Matrix& block = m.dense();
+      const Eigen::Index rows = block.rows();
+      for (Eigen::Index j = 0; j < block.cols(); ++j) {
+        double* target = dense_.data() + (col0 + j) * n_ + row0;
+        const double* source = block.data() + j * rows;
+        for (Eigen::Index i = 0; i < rows; ++i) target[i] += row_weights[i] * source[i];
+      }
     } else {
       AddBlock(row0, col0, row_weights.asDiagonal() * m.dense());
     }
@@ -208,6 +224,30 @@ void LinearSolver::SolveMatrix(MatrixRef rhs) const {
 namespace {
 
 // ---- dense LU ------------------------------------------------------------------------------
+// Up to this size the LU with partial pivoting is computed by the plain loops below; Eigen's
+// PartialPivLU dispatches every column through dynamic-size block expressions, whose set-up
+// costs several times the arithmetic of the small systems that integrators solve most often
+// (FESD elements of 10 to 60 unknowns, velocity-level problems of a few). Larger systems use
+// Eigen's blocked factorization.
+constexpr int kSmallDenseLu = 64;
+
+// True if no entry is infinite or NaN (those have every exponent bit set: adding one to the
+// lowest exponent bit then carries into the sign bit, for them only). An integer reduction
+// of and, add and or without early exit: it vectorizes, where Eigen's allFinite tests entry
+// by entry (a fifth of the cost of a small factorization).
+bool AllFinite(const Matrix& a) {
+  constexpr std::uint64_t kExponent = 0x7ff0000000000000ULL;
+  constexpr std::uint64_t kLowestExponentBit = std::uint64_t{1} << 52;
+  const double* x = a.data();
+  std::uint64_t bad = 0;
+  for (Eigen::Index i = 0; i < a.size(); ++i) {
+    std::uint64_t bits = 0;
+    std::memcpy(&bits, x + i, sizeof bits);
+    bad |= (bits & kExponent) + kLowestExponentBit;
+  }
+  return (bad >> 63) == 0;
+}
+
 class DenseLuSolver final : public LinearSolver {
  public:
   LinearSolverKind kind() const override { return LinearSolverKind::kDenseLu; }
@@ -215,28 +255,149 @@ class DenseLuSolver final : public LinearSolver {
   FactorizationStatus Factorize(const SystemMatrix& a) override {
     MOREAU_ASSERT(!a.sparse(), "dense LU needs dense storage");
     ++num_factorizations_;
-    if (!a.dense().allFinite()) return FactorizationStatus::kNonFinite;
-    lu_.compute(a.dense());
+    if (!AllFinite(a.dense())) return FactorizationStatus::kNonFinite;
+    n_ = a.size();
+    if (n_ == 0) {
+      rcond_ = 1.0;
+      return FactorizationStatus::kSuccess;
+    }
+    small_ = n_ <= kSmallDenseLu;
+    if (small_) {
+      FactorizeSmall(a.dense());
+    } else {
+      lu_.compute(a.dense());
+    }
     // Singularity from the pivots of U (O(n)): min |u_ii| / max |u_ii|. This is a lower bound
     // on nothing in general, but with partial pivoting a tiny ratio is how rank deficiency shows,
     // and it costs nothing next to the L1 condition estimator (which dominated the cost of the
     // small factorizations of collocation steps).
-    if (a.size() == 0) {
-      rcond_ = 1.0;
-      return FactorizationStatus::kSuccess;
-    }
-    const auto pivots = lu_.matrixLU().diagonal().cwiseAbs();
+    const auto pivots = (small_ ? small_lu_ : lu_.matrixLU()).diagonal().cwiseAbs();
     const double largest = pivots.maxCoeff();
     rcond_ = largest > 0.0 ? pivots.minCoeff() / largest : 0.0;
     if (!(rcond_ >= kSingularRcond)) return FactorizationStatus::kSingular;
     return FactorizationStatus::kSuccess;
   }
-  void Solve(VectorRef rhs) const override { rhs = lu_.solve(rhs); }
-  void SolveMatrix(MatrixRef rhs) const override { rhs = lu_.solve(rhs); }
-  void SolveTransposed(VectorRef rhs) const override { rhs = lu_.transpose().solve(rhs); }
+  void Solve(VectorRef rhs) const override {
+    if (small_) {
+      SolveSmall(rhs);
+    } else {
+      rhs = lu_.solve(rhs);
+    }
+  }
+  void SolveMatrix(MatrixRef rhs) const override {
+    if (small_) {
+      for (Eigen::Index j = 0; j < rhs.cols(); ++j) SolveSmall(rhs.col(j));
+    } else {
+      rhs = lu_.solve(rhs);
+    }
+  }
+  void SolveTransposed(VectorRef rhs) const override {
+    if (small_) {
+      SolveTransposedSmall(rhs);
+    } else {
+      rhs = lu_.transpose().solve(rhs);
+    }
+  }
   double reciprocal_condition() const override { return rcond_; }
 
  private:
+  // P A = L U in place (L unit lower, U upper), right-looking, column by column; pivot_[k] is
+  // the row swapped with row k at step k. A zero pivot leaves its column unscaled (the matrix
+  // is reported singular by the pivot ratio).
+  // The multipliers of a column are often mostly zero (the Jacobians of collocation and
+  // complementarity systems are block sparse): the update then runs over the nonzero ones
+  // only. Skipping zero multipliers and zero entries of U changes no result (x - 0 u = x).
+  void FactorizeSmall(const Matrix& a) {
+    small_lu_ = a;
+    pivot_.resize(static_cast<std::size_t>(n_));
+    rows_.resize(static_cast<std::size_t>(n_));
+    double* lu = small_lu_.data();
+    int* rows = rows_.data();
+    const int n = n_;
+    for (int k = 0; k < n; ++k) {
+      double* column_k = lu + static_cast<std::ptrdiff_t>(k) * n;
+      int p = k;
+      double biggest = std::fabs(column_k[k]);
+      for (int i = k + 1; i < n; ++i) {
+        if (std::fabs(column_k[i]) > biggest) {
+          biggest = std::fabs(column_k[i]);
+          p = i;
+        }
+      }
+      pivot_[static_cast<std::size_t>(k)] = p;
+      if (p != k) {
+        for (int j = 0; j < n; ++j) std::swap(lu[k + j * n], lu[p + j * n]);
+      }
+      const double pivot = column_k[k];
+      if (pivot == 0.0) continue;
+      int count = 0;
+      for (int i = k + 1; i < n; ++i) {
+        if (column_k[i] == 0.0) continue;
+        column_k[i] /= pivot;
+        rows[count++] = i;
+      }
+      if (count == 0) continue;
+      const bool all_rows = count == n - k - 1;  // contiguous: the loop vectorizes
+      for (int j = k + 1; j < n; ++j) {
+        double* column_j = lu + static_cast<std::ptrdiff_t>(j) * n;
+        const double u = column_j[k];
+        if (u == 0.0) continue;
+        if (all_rows) {
+          for (int i = k + 1; i < n; ++i) column_j[i] -= column_k[i] * u;
+        } else {
+          for (int r = 0; r < count; ++r) column_j[rows[r]] -= column_k[rows[r]] * u;
+        }
+      }
+    }
+  }
+  // A x = b: b permuted, L y = P b forward, U x = y backward.
+  void SolveSmall(VectorRef x) const {
+    const int n = n_;
+    const double* lu = small_lu_.data();
+    for (int k = 0; k < n; ++k) {
+      const int p = pivot_[static_cast<std::size_t>(k)];
+      if (p != k) std::swap(x[k], x[p]);
+    }
+    for (int k = 0; k < n; ++k) {
+      const double xk = x[k];
+      if (xk == 0.0) continue;
+      const double* column = lu + static_cast<std::ptrdiff_t>(k) * n;
+      for (int i = k + 1; i < n; ++i) x[i] -= column[i] * xk;
+    }
+    for (int k = n - 1; k >= 0; --k) {
+      const double* column = lu + static_cast<std::ptrdiff_t>(k) * n;
+      x[k] /= column[k];
+      const double xk = x[k];
+      if (xk == 0.0) continue;
+      for (int i = 0; i < k; ++i) x[i] -= column[i] * xk;
+    }
+  }
+  // A^T x = b with A = P^T L U: U^T y = b forward, L^T z = y backward, x = P^T z.
+  void SolveTransposedSmall(VectorRef x) const {
+    const int n = n_;
+    const double* lu = small_lu_.data();
+    for (int k = 0; k < n; ++k) {
+      const double* column = lu + static_cast<std::ptrdiff_t>(k) * n;
+      double sum = x[k];
+      for (int i = 0; i < k; ++i) sum -= column[i] * x[i];
+      x[k] = sum / column[k];
+    }
+    for (int k = n - 1; k >= 0; --k) {
+      const double* column = lu + static_cast<std::ptrdiff_t>(k) * n;
+      double sum = x[k];
+      for (int i = k + 1; i < n; ++i) sum -= column[i] * x[i];
+      x[k] = sum;
+    }
+    for (int k = n - 1; k >= 0; --k) {
+      const int p = pivot_[static_cast<std::size_t>(k)];
+      if (p != k) std::swap(x[k], x[p]);
+    }
+  }
+
+  int n_ = 0;
+  bool small_ = true;
+  Matrix small_lu_;
+  std::vector<int> pivot_, rows_;
   Eigen::PartialPivLU<Matrix> lu_;
   double rcond_ = 0.0;
 };

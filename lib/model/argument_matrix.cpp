@@ -199,6 +199,13 @@ void ArgumentMatrix::AddStateGradients(int col0, const Matrix* projection, doubl
     }
     return;
   }
+  if (!is_sparse_ && projection == nullptr) {
+    // The same, dense: entry by entry (no transposed temporaries on every evaluation).
+    for (int k = 0; k < rows_; ++k) {
+      for (int i = 0; i < nx_; ++i) target->Add(i, col0 + k, weight * dense_(k, i));
+    }
+    return;
+  }
   const Matrix jx =
       is_sparse_ ? Matrix(Matrix(columns_).leftCols(nx_)) : Matrix(dense_.leftCols(nx_));
   if (projection == nullptr) {

@@ -160,6 +160,8 @@ class MovingSetBlock final : public LoweredBlock {
   // With x' = f + P grad c lambda the rates of the constraints are q + J P J^T lambda:
   // symmetric positive semidefinite in lambda (P = E E^T), one velocity for all solutions.
   bool MonotoneVelocityLevel() const override { return true; }
+  // x' += P grad c(x, t) lambda, (c(x, t), lambda): affine in lambda.
+  bool AffineInAlgebraic() const override { return true; }
 
   // lambda is a jump variable (it jumps at contact); there are no equations.
   std::vector<bool> ContinuousAlgebraic() const override {

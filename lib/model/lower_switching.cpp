@@ -20,7 +20,20 @@ class SwitchingBlockBase : public LoweredBlock {
       : effect_(effect),
         num_states_(scene.num_states()),
         num_surfaces_(static_cast<int>(effect.surface_names.size())),
-        num_modes_(1 << num_surfaces_) {}
+        num_modes_(1 << num_surfaces_) {
+    // The surfaces and the mode fields stacked into one function: one forward-mode pass for
+    // their Jacobians instead of 1 + 2^n_c (each pass seeds the inputs and sets up its
+    // workspace, which on small scenes costs as much as the arithmetic). Functions with a
+    // hand-written sparse Jacobian are not stackable; they keep separate passes.
+    bool typed = effect.surfaces.typed() != nullptr;
+    for (const SmoothFunction& mode : effect.modes) typed = typed && mode.typed() != nullptr;
+    if (typed) {
+      std::vector<SmoothFunction> parts{effect.surfaces};
+      parts.insert(parts.end(), effect.modes.begin(), effect.modes.end());
+      stacked_ = MakeStackedFunction(effect.name + ".surfaces_and_modes", parts);
+      has_stacked_ = true;
+    }
+  }
 
   // The mode fields are physical-time dynamics (time-freezing scales them).
   bool ScaledByClockRate() const override { return true; }
@@ -42,6 +55,52 @@ class SwitchingBlockBase : public LoweredBlock {
       f_jacobian_[i].Jacobian(context, effect_.modes[i], y, derivatives, &f_[i]);
     }
   }
+  // EvaluateSurfaces and EvaluateModes together; with dense derivatives by one pass over the
+  // stacked function (the same values and derivatives, entry for entry). Read the
+  // derivatives with AddSurfaceRow and AddModeRows.
+  void EvaluateSurfacesAndModes(const BlockContext& context, const ConstVectorRef& y,
+                                Derivatives derivatives) {
+    use_stacked_ = has_stacked_ && !context.sparse && derivatives != Derivatives::kNone;
+    if (!use_stacked_) {
+      EvaluateSurfaces(context, y, derivatives);
+      EvaluateModes(context, y, derivatives);
+      return;
+    }
+    x_ = y.head(num_states_);
+    stacked_jacobian_.Jacobian(context, stacked_, y, derivatives, &stacked_values_);
+    c_ = stacked_values_.head(num_surfaces_);
+    f_.resize(static_cast<std::size_t>(num_modes_));
+    int row = num_surfaces_;
+    for (int k = 0; k < num_modes_; ++k) {
+      const auto i = static_cast<std::size_t>(k);
+      const int outputs = effect_.modes[i].num_outputs();
+      f_[i] = stacked_values_.segment(row, outputs);
+      row += outputs;
+    }
+  }
+  // Surface j's derivative row, times weight, added to row `row` (after the last evaluation).
+  void AddSurfaceRow(int j, double weight, int row, DerivativeMatrix* dy, DerivativeMatrix* du,
+                     DerivativeMatrix* dp) const {
+    if (use_stacked_) {
+      stacked_jacobian_.AddRow(j, weight, row, dy, du, dp);
+    } else {
+      c_jacobian_.AddRow(j, weight, row, dy, du, dp);
+    }
+  }
+  // Mode k's derivative rows, times weight, added from row row0.
+  void AddModeRows(int k, double weight, int row0, DerivativeMatrix* dy, DerivativeMatrix* du,
+                   DerivativeMatrix* dp) const {
+    const auto i = static_cast<std::size_t>(k);
+    const int outputs = effect_.modes[i].num_outputs();
+    if (!use_stacked_) {
+      f_jacobian_[i].AddRows(0, outputs, weight, row0, dy, du, dp);
+      return;
+    }
+    int first = num_surfaces_;
+    for (int m = 0; m < k; ++m) first += effect_.modes[static_cast<std::size_t>(m)].num_outputs();
+    stacked_jacobian_.AddRows(first, outputs, weight, row0, dy, du, dp);
+  }
+
   // True if some switching function vanishes to round-off at the last evaluated point.
   bool OnSurface() const {
     for (Eigen::Index j = 0; j < c_.size(); ++j) {
@@ -65,6 +124,11 @@ class SwitchingBlockBase : public LoweredBlock {
   ArgumentMatrix c_jacobian_, directions_;
   std::vector<Vector> f_;
   std::vector<ArgumentMatrix> f_jacobian_;
+  SmoothFunction stacked_;  // (c, f_0, ..., f_{m-1}) if every part is typed
+  bool has_stacked_ = false;
+  bool use_stacked_ = false;  // the last EvaluateSurfacesAndModes used stacked_
+  ArgumentMatrix stacked_jacobian_;
+  Vector stacked_values_;
 };
 
 // Stewart: regions R_k = {g_k(x) = min_i g_i(x)} with g = -S c (S_kj = sign of surface j in
@@ -103,8 +167,7 @@ class StewartBlock final : public SwitchingBlockBase {
     const int z0 = layout.z_offset;  // theta at z0, lambda at z0 + m, mu at z0 + 2m
     const int g0 = layout.g_offset;
     const int k0 = layout.pair_offset;
-    EvaluateSurfaces(context, y, derivatives);
-    EvaluateModes(context, y, derivatives);
+    EvaluateSurfacesAndModes(context, y, derivatives);
     const auto theta = z.segment(z0, m);
     const auto lambda = z.segment(z0 + m, m);
     const double mu = z[z0 + 2 * m];
@@ -125,10 +188,10 @@ class StewartBlock final : public SwitchingBlockBase {
 
     for (int k = 0; k < m; ++k) {
       const auto i = static_cast<std::size_t>(k);
-      f_jacobian_[i].AddRows(0, nx, theta[k], 0, &out->F_y, &out->F_u, &out->F_p);
+      AddModeRows(k, theta[k], 0, &out->F_y, &out->F_u, &out->F_p);
       out->F_z.AddBlock(0, z0 + k, f_[i]);
       for (int j = 0; j < num_surfaces_; ++j) {
-        c_jacobian_.AddRow(j, -Sign(k, j), g0 + k, &out->G_y, &out->G_u, &out->G_p);
+        AddSurfaceRow(j, -Sign(k, j), g0 + k, &out->G_y, &out->G_u, &out->G_p);
       }
       out->G_z.Add(g0 + k, z0 + m + k, -1.0);
       out->G_z.Add(g0 + k, z0 + 2 * m, -1.0);
@@ -218,6 +281,9 @@ class StewartBlock final : public SwitchingBlockBase {
     z.segment(z0 + m, m) = g.array() - g_min;
     z[z0 + 2 * m] = g_min;
   }
+
+  // x' += sum theta_k f_k(x), g(x) - lambda - mu e, e^T theta - 1, (theta, lambda).
+  bool AffineInAlgebraic() const override { return true; }
 
   // Some theta must be free: they sum to one.
   bool AdmitsRoles(const std::vector<PairRole>& roles) const override {
@@ -321,6 +387,9 @@ class HeavisideBlock final : public SwitchingBlockBase {
       out->B_z.Add(k0 + 2 * j + 1, z0 + 2 * nc + j, 1.0);
     }
   }
+
+  // The weights w_k(alpha) are multi-affine: affine in alpha for one surface only.
+  bool AffineInAlgebraic() const override { return num_surfaces_ == 1; }
 
   // alpha is a jump variable; lambda_n and lambda_p are continuous.
   std::vector<bool> ContinuousAlgebraic() const override {

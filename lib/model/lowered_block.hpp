@@ -216,6 +216,13 @@ class LoweredBlock {
   // of enumerating their assignments.
   virtual bool MonotoneVelocityLevel() const { return false; }
 
+  // True if the block's contributions to F, G, A and B are affine in z with coefficients that
+  // depend on y only, and do not depend on the velocity-level roles (BlockContext). If every
+  // block says so (and no clock rate multiplies F), the velocity-level rows are affine in v and
+  // a velocity-level problem of fixed statuses is solved by one linear solve
+  // (SolveVelocityLevel). False is always safe.
+  virtual bool AffineInAlgebraic() const { return false; }
+
   // Events implied by a change of the block's pair statuses between two times:
   // a_zero[k] is true when pair k has a_k = 0 (its first side vanishes), false when b_k = 0.
   virtual std::vector<Event> StatusEvents(double t, const std::vector<bool>& before,

@@ -75,6 +75,7 @@ LoweredSystem& LoweredSystem::operator=(const LoweredSystem& other) {
   if (this != &other) {
     scene_ = other.scene_;
     options_ = other.options_;
+    velocity_solver_.reset();  // its solutions belong to the old system
     Build();
     inputs_ = other.inputs_;
     parameters_ = other.parameters_;

@@ -215,23 +215,183 @@ static void AssembleVelocityLevel(const LoweredSystem& system, const PointEvalua
   select(b_rows, &out->b, &out->b_v, &out->b_y, &out->b_u, &out->b_p);
 }
 
+// Dense storage: every output row is computed on its own from one row of the point's blocks
+// and written in place (coefficient-wise products, no temporaries). The systems that are
+// stored dense are small (n_y + n_z <= kSparseStorageThreshold), where whole-matrix products
+// through selection matrices cost many times the rows themselves (they dominated FESD's
+// element cost on F1). The rows are those of the sparse path below, source by source.
+static void AssembleVelocityLevelDense(const LoweredSystem& system, const PointEvaluation& e,
+                                       const CurvatureTerms& curvature, const ConstVectorRef& v,
+                                       const std::vector<PairRole>& roles,
+                                       Derivatives derivatives, VelocityLevelEvaluation* out) {
+  const bool with_y = derivatives != Derivatives::kNone;
+  const bool all = derivatives == Derivatives::kAll;
+  const int ny = system.num_states(), nz = system.num_algebraic();
+  const int ng = system.num_equations(), np = system.num_pairs();
+  const auto& pairs = system.pairs();
+  const auto& differentiated = system.differentiated_equations();
+  const auto& continuous = system.continuous_algebraic();
+  int complementary = 0;
+  for (PairRole role : roles) complementary += role == PairRole::kComplementary ? 1 : 0;
+
+  // One output (equations, or the a or b sides of complementary pairs).
+  struct Target {
+    Vector* values;
+    Matrix *dv, *dy, *du, *dp;
+  };
+  auto prepare = [&](int rows, Vector* values, DerivativeMatrix* dv, DerivativeMatrix* dy,
+                     DerivativeMatrix* du, DerivativeMatrix* dp) {
+    values->resize(rows);
+    dv->SetZero(rows, nz, false);
+    Target t{values, &dv->MutableDense(), nullptr, nullptr, nullptr};
+    if (with_y) {
+      dy->SetZero(rows, ny, false);
+      t.dy = &dy->MutableDense();
+    }
+    if (all) {
+      du->SetZero(rows, system.num_inputs(), false);
+      dp->SetZero(rows, system.num_parameters(), false);
+      t.du = &du->MutableDense();
+      t.dp = &dp->MutableDense();
+    }
+    return t;
+  };
+  const Target equations = prepare(ng + np - complementary, &out->equations, &out->equations_v,
+                                   &out->equations_y, &out->equations_u, &out->equations_p);
+  const Target a_rows = prepare(complementary, &out->a, &out->a_v, &out->a_y, &out->a_u, &out->a_p);
+  const Target b_rows = prepare(complementary, &out->b, &out->b_v, &out->b_y, &out->b_u, &out->b_p);
+
+  const Matrix& F_z = e.F_z.dense();
+  // product(j) = sum_l row(l) m(l, j), summed in order from l = 0 as Eigen's lazy product sums a
+  // strided row (the same result); plain loops, whose set-up costs less than the
+  // expression's on these small blocks.
+  auto row_product = [](const auto& row, const Matrix& m, auto&& product) {
+    const Eigen::Index n = m.rows();
+    for (Eigen::Index j = 0; j < m.cols(); ++j) {
+      const double* column = m.data() + j * n;
+      double sum = n > 0 ? row[0] * column[0] : 0.0;
+      for (Eigen::Index l = 1; l < n; ++l) sum += row[l] * column[l];
+      product[j] = sum;
+    }
+  };
+  // Rate of X along the flow, X_y F + X_z v_c (v_c: the continuous slots of v), from row r of
+  // x_y, x_z; curvature rows c_* (null: none) complete d/d(y, u, p).
+  auto rate_row = [&](const Target& t, int i, const DerivativeMatrix& x_y,
+                      const DerivativeMatrix& x_z, int r, const DerivativeMatrix* c_y,
+                      const DerivativeMatrix* c_u, const DerivativeMatrix* c_p) {
+    const auto gradient = x_y.dense().row(r);
+    const auto z_row = x_z.dense().row(r);
+    double value = gradient.dot(e.F);
+    auto dv = t.dv->row(i);
+    row_product(gradient, F_z, dv);
+    for (int j = 0; j < nz; ++j) {
+      if (!continuous[static_cast<std::size_t>(j)]) continue;
+      value += z_row[j] * v[j];
+      dv[j] += z_row[j];
+    }
+    (*t.values)[i] = value;
+    if (with_y) {
+      row_product(gradient, e.F_y.dense(), t.dy->row(i));
+      if (c_y != nullptr) t.dy->row(i) += c_y->dense().row(r);
+    }
+    if (all) {
+      row_product(gradient, e.F_u.dense(), t.du->row(i));
+      row_product(gradient, e.F_p.dense(), t.dp->row(i));
+      if (c_u != nullptr) t.du->row(i) += c_u->dense().row(r);
+      if (c_p != nullptr) t.dp->row(i) += c_p->dense().row(r);
+    }
+  };
+  // A value X with its derivatives, row r.
+  auto value_row = [&](const Target& t, int i, const Vector& x, const DerivativeMatrix& x_z,
+                       const DerivativeMatrix& x_y, const DerivativeMatrix& x_u,
+                       const DerivativeMatrix& x_p, int r) {
+    (*t.values)[i] = x[r];
+    t.dv->row(i) = x_z.dense().row(r);
+    if (with_y) t.dy->row(i) = x_y.dense().row(r);
+    if (all) {
+      t.du->row(i) = x_u.dense().row(r);
+      t.dp->row(i) = x_p.dense().row(r);
+    }
+  };
+
+  // G rows: differentiated along the flow, or on values.
+  for (int r = 0; r < ng; ++r) {
+    if (differentiated[static_cast<std::size_t>(r)]) {
+      rate_row(equations, r, e.G_y, e.G_z, r, with_y ? &curvature.equation_y : nullptr,
+               all ? &curvature.equation_u : nullptr, all ? &curvature.equation_p : nullptr);
+    } else {
+      value_row(equations, r, e.G, e.G_z, e.G_y, e.G_u, e.G_p, r);
+    }
+  }
+  int row = ng, pair_row = 0;
+  for (int k = 0; k < np; ++k) {
+    const ContinuousSide side = pairs[static_cast<std::size_t>(k)].continuous;
+    const bool continuous_a = side != ContinuousSide::kB;
+    // The rate of the continuous side (a for kA and kBoth, b for kB).
+    auto continuous_rate = [&](const Target& t, int i) {
+      rate_row(t, i, continuous_a ? e.A_y : e.B_y, continuous_a ? e.A_z : e.B_z, k,
+               with_y ? &curvature.pair_y : nullptr, all ? &curvature.pair_u : nullptr,
+               all ? &curvature.pair_p : nullptr);
+    };
+    // The jump side's value (kBoth pairs: both sides continuous, b's rate).
+    auto jump = [&](const Target& t, int i) {
+      if (side == ContinuousSide::kBoth) {
+        rate_row(t, i, e.B_y, e.B_z, k, nullptr, nullptr, nullptr);
+      } else if (continuous_a) {
+        value_row(t, i, e.B, e.B_z, e.B_y, e.B_u, e.B_p, k);
+      } else {
+        value_row(t, i, e.A, e.A_z, e.A_y, e.A_u, e.A_p, k);
+      }
+    };
+    const PairRole role = roles[static_cast<std::size_t>(k)];
+    if (role == PairRole::kComplementary) {
+      jump(a_rows, pair_row);
+      continuous_rate(b_rows, pair_row);
+      ++pair_row;
+      continue;
+    }
+    // The kept side: its rate if continuous, its value if a jump variable.
+    const bool keeps_a = role == PairRole::kAZero;
+    if (keeps_a == continuous_a) {
+      continuous_rate(equations, row++);
+    } else {
+      jump(equations, row++);
+    }
+  }
+}
+
+// The velocity-level rows from the evaluation e of the system at (y, v) (velocity roles set,
+// derivatives kStates, or kAll with Derivatives::kAll) and the curvature terms (with
+// derivatives with respect to y).
+static void AssembleVelocityRows(const LoweredSystem& system, const PointEvaluation& e,
+                                 const CurvatureTerms& curvature, const ConstVectorRef& v,
+                                 const std::vector<PairRole>& roles, Derivatives derivatives,
+                                 VelocityLevelEvaluation* out) {
+  if (!system.sparse()) {
+    AssembleVelocityLevelDense(system, e, curvature, v, roles, derivatives, out);
+    return;
+  }
+  // Rates of continuous variables sit in v's continuous slots; jump variables are values.
+  const int nz = system.num_algebraic();
+  Vector mask(nz);
+  for (int i = 0; i < nz; ++i)
+    mask[i] = system.continuous_algebraic()[static_cast<std::size_t>(i)] ? 1.0 : 0.0;
+  const Vector rates = mask.cwiseProduct(v);
+  AssembleVelocityLevel<SparseMatrix>(system, e, curvature, mask, rates, roles, derivatives, out);
+}
+
 void LoweredSystem::EvaluateVelocityLevel(const ConstVectorRef& y, const ConstVectorRef& v,
                                           const std::vector<PairRole>& roles,
                                           Derivatives derivatives,
                                           VelocityLevelEvaluation* out) const {
   MOREAU_ASSERT(static_cast<int>(roles.size()) == num_pairs_, "wrong number of pair roles");
-  const int ny = num_states_, nz = num_algebraic_, ng = num_equations_;
+  const int ny = num_states_, ng = num_equations_;
   const int nu = scene_.num_inputs(), np = scene_.num_parameters();
   const bool with_y = derivatives != Derivatives::kNone;
   const bool all = derivatives == Derivatives::kAll;
   PointEvaluation& e = velocity_point_;
   EvaluatePoint(y, v, all ? Derivatives::kAll : Derivatives::kStates, &roles, &e);
 
-  // Rates of continuous variables sit in v's continuous slots; jump variables are values.
-  Vector mask(nz);
-  for (int i = 0; i < nz; ++i)
-    mask[i] = continuous_algebraic_[static_cast<std::size_t>(i)] ? 1.0 : 0.0;
-  const Vector rates = mask.cwiseProduct(v);
   CurvatureTerms& curvature = curvature_;
   if (with_y) {
     curvature.pair_y.SetZero(num_pairs_, ny, sparse_);
@@ -250,11 +410,7 @@ void LoweredSystem::EvaluateVelocityLevel(const ConstVectorRef& y, const ConstVe
       m->Finalize();
     }
   }
-  if (sparse_) {
-    AssembleVelocityLevel<SparseMatrix>(*this, e, curvature, mask, rates, roles, derivatives, out);
-  } else {
-    AssembleVelocityLevel<Matrix>(*this, e, curvature, mask, rates, roles, derivatives, out);
-  }
+  AssembleVelocityRows(*this, e, curvature, v, roles, derivatives, out);
 }
 
 void LoweredSystem::EvaluateEventIndicators(const ConstVectorRef& y, const ConstVectorRef& v,
@@ -282,37 +438,79 @@ void LoweredSystem::EvaluateEventIndicators(const ConstVectorRef& y, const Const
 namespace {
 
 // Velocity-level problem as a mixed complementarity system in v (roles fixed).
+//
+// With `linear` (systems affine in the algebraic unknowns, LoweredBlock::AffineInAlgebraic:
+// Stewart, one-surface Heaviside, moving sets; no time-freezing) the rows are exactly
+// E(v) = M(y) v + q(y), and so are the pair sides a(v), b(v). The lowered system is then
+// evaluated once, at the solve's initial point v0, and every value Newton asks for is
+// E(v0) + M (v - v0), the values at v = 0 for the row scales included. Newton takes the same
+// steps as on the evaluated rows (up to rounding) for the cost of one evaluation: a solve of
+// fixed statuses is one factorization and one step, and a status decision's trial assignment
+// without a solution no longer evaluates the system at each of its ~20 failing iterations.
 class VelocitySystem final : public MixedComplementaritySystem {
  public:
-  VelocitySystem(const LoweredSystem& system, const Vector& y, std::vector<PairRole> roles)
-      : system_(system), y_(y), roles_(std::move(roles)) {
+  VelocitySystem(const LoweredSystem& system, bool linear) : system_(system), linear_(linear) {}
+  // Fixed statuses (every pair decided).
+  void SetStatuses(const std::vector<bool>& a_zero) {
+    roles_.resize(a_zero.size());
+    for (std::size_t k = 0; k < a_zero.size(); ++k) {
+      roles_[k] = a_zero[k] ? PairRole::kAZero : PairRole::kBZero;
+    }
+  }
+  void SetRoles(const std::vector<PairRole>& roles) { roles_ = roles; }
+  // The state and the row scales; v0 is the point Newton starts from (the linear model's
+  // expansion point). `point` (linear systems, may be null): the system's evaluation at
+  // (y, v0) with derivatives, which then is the velocity-level evaluation at v0 (the blocks of
+  // a linear system do not look at the velocity roles).
+  void Reset(const Vector& y, const Vector& v0, const PointEvaluation* point = nullptr) {
+    y_ = y;
+    complementary_ = 0;
     for (PairRole role : roles_) complementary_ += role == PairRole::kComplementary ? 1 : 0;
     // Row scales from the data: the rows are affine in v, and their values at v = 0 (the
     // free velocities grad c . f + c_t) set the size of their terms. Stiff dynamics (|f| ~
     // 1e5) make an absolute tolerance of 1e-12 unreachable in double precision; relative to
     // the data it is (hard-case suite: stiff set).
-    system_.EvaluateVelocityLevel(y_, Vector::Zero(num_unknowns()), roles_, Derivatives::kNone,
-                                  &values_);
-    scale_.resize(num_unknowns());
-    for (int i = 0; i < num_equations(); ++i) {
-      scale_[i] = 1.0 / (1.0 + std::fabs(values_.equations[i]));
+    if (linear_ && point != nullptr) {
+      AssembleVelocityRows(system_, *point, no_curvature_, v0, roles_, Derivatives::kNone,
+                           &evaluation_);
+    } else if (linear_) {
+      system_.EvaluateVelocityLevel(y_, v0, roles_, Derivatives::kNone, &evaluation_);
     }
+    if (linear_) {
+      v0_ = v0;
+      step_ = -v0;  // the values at v = 0
+      Model(step_, &zero_r_, &zero_a_, &zero_b_);
+    } else {
+      system_.EvaluateVelocityLevel(y_, Vector::Zero(num_unknowns()), roles_, Derivatives::kNone,
+                                    &values_);
+    }
+    const Vector& r0 = linear_ ? zero_r_ : values_.equations;
+    const Vector& a0 = linear_ ? zero_a_ : values_.a;
+    const Vector& b0 = linear_ ? zero_b_ : values_.b;
+    scale_.resize(num_unknowns());
+    for (int i = 0; i < num_equations(); ++i) scale_[i] = 1.0 / (1.0 + std::fabs(r0[i]));
     for (int k = 0; k < complementary_; ++k) {
-      const double size = std::max(std::fabs(values_.a[k]), std::fabs(values_.b[k]));
+      const double size = std::max(std::fabs(a0[k]), std::fabs(b0[k]));
       scale_[num_equations() + k] = 1.0 / (1.0 + size);
     }
     if (!scale_.allFinite()) scale_.setOnes();  // a non-finite model is reported by Evaluate
   }
+
   void ResidualScale(const Vector& /*v*/, Vector* scale) override { *scale = scale_; }
   int num_unknowns() const override { return system_.num_algebraic(); }
   int num_equations() const override { return system_.num_algebraic() - complementary_; }
   int num_pairs() const override { return complementary_; }
   bool Evaluate(const Vector& v, bool with_jacobian, Vector* r, Vector* a, Vector* b) override {
-    VelocityLevelEvaluation& target = with_jacobian ? evaluation_ : values_;
-    system_.EvaluateVelocityLevel(y_, v, roles_, Derivatives::kNone, &target);
-    *r = target.equations;
-    *a = target.a;
-    *b = target.b;
+    if (linear_) {
+      step_ = v - v0_;
+      Model(step_, r, a, b);
+    } else {
+      VelocityLevelEvaluation& target = with_jacobian ? evaluation_ : values_;
+      system_.EvaluateVelocityLevel(y_, v, roles_, Derivatives::kNone, &target);
+      *r = target.equations;
+      *a = target.a;
+      *b = target.b;
+    }
     return r->allFinite() && a->allFinite() && b->allFinite();
   }
   void AssembleJacobian(const Vector& da, const Vector& db, SystemMatrix* jacobian) override {
@@ -323,16 +521,35 @@ class VelocitySystem final : public MixedComplementaritySystem {
     }
   }
   double EstimatedJacobianNonzeros() const override {
-    return values_.equations_v.NonZeros() + values_.a_v.NonZeros() + values_.b_v.NonZeros();
+    const VelocityLevelEvaluation& e = linear_ ? evaluation_ : values_;
+    return e.equations_v.NonZeros() + e.a_v.NonZeros() + e.b_v.NonZeros();
   }
 
  private:
+  // The linear model's values at v0 + d.
+  void Model(const Vector& d, Vector* r, Vector* a, Vector* b) const {
+    *r = evaluation_.equations;
+    *a = evaluation_.a;
+    *b = evaluation_.b;
+    evaluation_.equations_v.MultiplyAdd(d, *r);
+    if (complementary_ > 0) {
+      evaluation_.a_v.MultiplyAdd(d, *a);
+      evaluation_.b_v.MultiplyAdd(d, *b);
+    }
+  }
+
   const LoweredSystem& system_;
+  const bool linear_;
   Vector y_;
   std::vector<PairRole> roles_;
   int complementary_ = 0;
+  // Nonlinear: the last with-Jacobian evaluation and values-only evaluations; linear: the
+  // evaluation at v0.
   VelocityLevelEvaluation evaluation_, values_;
+  Vector v0_, zero_r_, zero_a_, zero_b_;
+  mutable Vector step_;
   Vector scale_;
+  CurvatureTerms no_curvature_;  // (rows without derivatives with respect to y)
 };
 
 // Dense LU for dense storage; with sparse storage the automatic choice (KLU above
@@ -347,17 +564,147 @@ SemismoothNewtonOptions VelocityNewtonOptions(bool sparse) {
 
 }  // namespace
 
+namespace internal {
+
+// SolveVelocityLevel's workspace: the system and its Newton solver are kept across solves (no
+// allocation in steady state), and the last few solves are remembered: a solve at the same
+// state, statuses, inputs and parameters returns the same solution instead of solving again.
+// FESD asks for such repeats on every element (the last stage of a Radau IIA element is its
+// end state: the end-of-element check and the stage certificates solve at the same point).
+// The solution for fixed statuses is unique where the problem is regular, so only the
+// starting guess is ignored, and a converged solve from another guess would differ by
+// round-off within the Newton tolerance.
+class VelocitySolver {
+ public:
+  VelocitySolver(const LoweredSystem& system, bool linear)
+      : problem_(system, linear), newton_(VelocityNewtonOptions(system.sparse())), linear_(linear) {}
+
+  // point: the system's evaluation at (y, v0) with derivatives, or null.
+  bool Solve(const LoweredSystem& system, const Vector& y, const std::vector<bool>& a_zero,
+             const Vector& v0, const PointEvaluation* point, Vector* v) {
+    for (const Entry& entry : entries_) {
+      if (entry.Matches(system, y, a_zero)) {
+        *v = entry.v;
+        return entry.converged;
+      }
+    }
+    problem_.SetStatuses(a_zero);
+    problem_.Reset(y, v0, point);
+    bool converged = false;
+    if (!linear_ || !SolveLinear(v0, v)) {
+      const SemismoothNewtonResult result = newton_.Solve(problem_, v0);
+      *v = result.solution;
+      converged = result.converged();
+    } else {
+      converged = true;
+    }
+    Entry& entry = entries_[next_];
+    next_ = (next_ + 1) % kEntries;
+    entry.y = y;
+    entry.a_zero = a_zero;
+    entry.inputs = system.inputs();
+    entry.parameters = system.parameters();
+    entry.v = *v;
+    entry.converged = converged;
+    entry.valid = true;
+    return converged;
+  }
+
+ private:
+  // A linear problem of fixed statuses: Newton's first step (the same factorization and
+  // solve) without the rest of its machinery, accepted if the model's residual after it meets
+  // Newton's test; otherwise (singular matrix, test failed) Newton decides.
+  bool SolveLinear(const Vector& v0, Vector* v) {
+    const int n = problem_.num_unknowns();
+    const double tolerance = newton_.options().tolerance;
+    problem_.ResidualScale(v0, &scale_);
+    problem_.Evaluate(v0, true, &residual_, &a_, &b_);
+    if (!residual_.allFinite()) return false;
+    if (scale_.cwiseProduct(residual_).lpNorm<Eigen::Infinity>() <= tolerance) {
+      *v = v0;  // Newton stops at the initial point (no minimum iterations)
+      return true;
+    }
+    if (solver_ == nullptr || solver_size_ != n) {
+      solver_ = MakeLinearSolver(newton_.options().linear_solver, n,
+                                 problem_.EstimatedJacobianNonzeros());
+      solver_size_ = n;
+    }
+    jacobian_.Reset(n, solver_->wants_sparse());
+    problem_.AssembleJacobian(a_, b_, &jacobian_);  // no pairs: the weights are unused
+    jacobian_.Finalize();
+    if (solver_->Factorize(jacobian_) != FactorizationStatus::kSuccess) return false;
+    step_ = -residual_;
+    solver_->Solve(step_);
+    trial_ = v0 + step_;
+    if (!problem_.Evaluate(trial_, true, &residual_, &a_, &b_)) return false;
+    if (!(scale_.cwiseProduct(residual_).lpNorm<Eigen::Infinity>() <= tolerance)) return false;
+    *v = trial_;
+    return true;
+  }
+
+  struct Entry {
+    bool valid = false;
+    Vector y, inputs, parameters, v;
+    std::vector<bool> a_zero;
+    bool converged = false;
+    static bool Same(const Vector& a, const Vector& b) {
+      return a.size() == b.size() && (a.array() == b.array()).all();
+    }
+    bool Matches(const LoweredSystem& system, const Vector& at, const std::vector<bool>& z) const {
+      return valid && a_zero == z && Same(y, at) && Same(inputs, system.inputs()) &&
+             Same(parameters, system.parameters());
+    }
+  };
+  // Interior element ends of a group are checked before its certificates are computed.
+  static constexpr int kEntries = 4;
+  VelocitySystem problem_;
+  SemismoothNewton newton_;
+  const bool linear_;
+  Entry entries_[kEntries];
+  int next_ = 0;
+  // SolveLinear's workspace.
+  Vector scale_, residual_, a_, b_, step_, trial_;
+  SystemMatrix jacobian_;
+  std::unique_ptr<LinearSolver> solver_;
+  int solver_size_ = -1;
+};
+
+}  // namespace internal
+
+bool LoweredSystem::VelocityLevelIsLinear() const {
+  if (clock_rate_block_ >= 0) return false;  // time-freezing multiplies F by a rate P(z)
+  for (const auto& block : blocks_) {
+    if (!block->AffineInAlgebraic()) return false;
+  }
+  return true;
+}
+
 bool LoweredSystem::SolveVelocityLevel(const Vector& y, const std::vector<bool>& a_zero,
                                        const Vector& v0, Vector* v) const {
   if (num_algebraic_ == 0) {
     v->resize(0);
     return true;
   }
-  VelocitySystem system(*this, y, RolesFor(a_zero));
-  SemismoothNewton newton(VelocityNewtonOptions(sparse_));
-  const SemismoothNewtonResult result = newton.Solve(system, v0);
-  *v = result.solution;
-  return result.converged();
+  if (!velocity_solver_) {
+    velocity_solver_ = std::make_shared<internal::VelocitySolver>(*this, VelocityLevelIsLinear());
+  }
+  return velocity_solver_->Solve(*this, y, a_zero, v0, nullptr, v);
+}
+
+bool LoweredSystem::SolveVelocityLevel(const Vector& y, const std::vector<bool>& a_zero,
+                                       const Vector& v0, const Vector& z,
+                                       const PointEvaluation& point, Vector* v) const {
+  if (num_algebraic_ == 0) {
+    v->resize(0);
+    return true;
+  }
+  MOREAU_ASSERT(point.F_z.rows() == num_states_ && point.F_z.cols() == num_algebraic_,
+                "SolveVelocityLevel: the point evaluation has no derivatives");
+  if (!velocity_solver_) {
+    velocity_solver_ = std::make_shared<internal::VelocitySolver>(*this, VelocityLevelIsLinear());
+  }
+  if (!VelocityLevelIsLinear()) return velocity_solver_->Solve(*this, y, a_zero, v0, nullptr, v);
+  return velocity_solver_->Solve(*this, y, a_zero, z, &point, v);
 }
 
 StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_tolerance) const {
@@ -437,8 +784,11 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
     decision.a_zero[static_cast<std::size_t>(k)] = jump_zero != continuous_a;
   };
 
+  const bool linear = VelocityLevelIsLinear();
   if (static_cast<int>(enumerated.size()) > kMaxEnumeratedCandidates) {
-    VelocitySystem system(*this, y, roles);
+    VelocitySystem system(*this, linear);
+    system.SetRoles(roles);
+    system.Reset(y, guess);
     const SemismoothNewtonResult result = newton.Solve(system, guess);
     if (!result.converged()) {
       decision.message = "velocity-level complementarity problem: " + result.message;
@@ -468,6 +818,11 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
   };
   std::vector<Valid> valid;
   const double sign_tolerance = candidate_tolerance;
+  // One problem and evaluation workspace for all trials (SetRoles and Reset set every part
+  // of the problem; the evaluations size and fill their outputs).
+  VelocitySystem system(*this, linear);
+  VelocityLevelEvaluation e;
+  PointEvaluation point;
   for (unsigned mask = 0; mask < (1u << candidates.size()); ++mask) {
     std::vector<PairRole> trial = roles;
     int leaving = 0;
@@ -487,11 +842,11 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
       admitted &= block->AdmitsRoles(std::vector<PairRole>(first, first + block->num_pairs()));
     }
     if (!admitted) continue;
-    VelocitySystem system(*this, y, trial);
+    system.SetRoles(trial);
+    system.Reset(y, guess);
     const SemismoothNewtonResult result = newton.Solve(system, guess);
     if (!result.converged()) continue;
     // The free side of every candidate must be nonnegative.
-    VelocityLevelEvaluation e;
     std::vector<PairRole> check = trial;
     for (int k : candidates) check[static_cast<std::size_t>(k)] = PairRole::kComplementary;
     EvaluateVelocityLevel(y, result.solution, check, Derivatives::kNone, &e);
@@ -504,7 +859,6 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
       ok &= free >= -sign_tolerance;
     }
     if (!ok) continue;
-    PointEvaluation point;
     EvaluatePoint(y, result.solution, Derivatives::kNone, &trial, &point);
     valid.push_back({trial, result.solution, point.F.head(nx), leaving});
   }
@@ -542,7 +896,6 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
         valid[best].roles[static_cast<std::size_t>(k)] == PairRole::kAZero;
   }
   if (!monotone.empty()) {
-    VelocityLevelEvaluation e;
     EvaluateVelocityLevel(y, decision.v, valid[best].roles, Derivatives::kNone, &e);
     const std::vector<int> row = complementary_rows(valid[best].roles);
     for (int k : monotone) decide_complementary(k, e, row[static_cast<std::size_t>(k)]);

@@ -43,18 +43,18 @@ class Dual {
   /// A number with `size` derivative directions, all zero.
   Dual(const T& value, int size) : value_(value), size_(size) {
     MOREAU_ASSERT(size >= 0 && size <= kCapacity, "dual size out of range");
-    for (int i = 0; i < size_; ++i) d_[i] = T(0.0);
+    for (int i = 0; i < kCapacity; ++i) {
+      if (i < size_) d_[i] = T(0.0);  // (loop form: see the copy constructor)
+    }
   }
   /// Copies carry the value and the size() active directions only: a constant copies in
   /// O(1), not kCapacity derivatives (for Dual<Dual<double>> the difference is ~2.4 kB per
   /// copy, which dominates evaluations where most values are constants).
-  Dual(const Dual& other) : value_(other.value_), size_(other.size_) {
-    for (int i = 0; i < size_; ++i) d_[i] = other.d_[i];
-  }
+  Dual(const Dual& other) : value_(other.value_), size_(other.size_) { CopyDirections(other); }
   Dual& operator=(const Dual& other) {
     value_ = other.value_;
     size_ = other.size_;
-    for (int i = 0; i < size_; ++i) d_[i] = other.d_[i];
+    CopyDirections(other);
     return *this;
   }
   ~Dual() = default;
@@ -76,7 +76,21 @@ class Dual {
   Dual& operator*=(const Dual& other) { return *this = *this * other; }
   Dual& operator/=(const Dual& other) { return *this = *this / other; }
 
+  /// A number with `size` derivative directions left unset: the caller writes all of them
+  /// (the chain rules below; zeroing them first doubled their stores).
+  struct Unset {};
+  Dual(const T& value, int size, Unset) : value_(value), size_(size) {}
+
  private:
+  // The first size_ directions of other. A loop over the capacity with a test, not up to
+  // size_: GCC turns the latter into a memcpy or `rep movs` of a few doubles, whose start-up
+  // cost dominated Jacobian evaluations of small functions (issue 15, FESD element cost).
+  void CopyDirections(const Dual& other) {
+    for (int i = 0; i < kCapacity; ++i) {
+      if (i < size_) d_[i] = other.d_[i];
+    }
+  }
+
   T value_;
   int size_;
   std::array<T, kCapacity> d_;
@@ -101,7 +115,7 @@ namespace internal {
 template <class T>
 Dual<T> Combine(const T& value, const Dual<T>& a, const T& da, const Dual<T>& b, const T& db) {
   const int n = a.size() > b.size() ? a.size() : b.size();
-  Dual<T> result(value, n);
+  Dual<T> result(value, n, typename Dual<T>::Unset{});  // every direction written below
   if (a.size() == n && b.size() == n) {
     for (int i = 0; i < n; ++i) result.d(i) = da * a.d(i) + db * b.d(i);
   } else if (a.size() == n) {
@@ -116,7 +130,7 @@ Dual<T> Combine(const T& value, const Dual<T>& a, const T& da, const Dual<T>& b,
 // Result with value `value` and derivatives da * a.d (chain rule for unary functions).
 template <class T>
 Dual<T> Chain(const T& value, const Dual<T>& a, const T& da) {
-  Dual<T> result(value, a.size());
+  Dual<T> result(value, a.size(), typename Dual<T>::Unset{});  // every direction written
   for (int i = 0; i < a.size(); ++i) result.d(i) = da * a.d(i);
   return result;
 }

@@ -311,6 +311,15 @@ class TypedFunction : public SmoothFunction::Concept {
                   const ConstVectorRef& p, Wrt wrt, Seed&& seed);
   Space<Dual1> space1_;
   Space<Dual2> space2_;
+  // Whether every output has a zero Hessian (all of them affine in the arguments), from the
+  // traced pattern for the argument sizes of the last WeightedHessian call; such a Hessian
+  // needs no Dual2 evaluation (a moving set's linear constraint, as S3's floor). Patterns
+  // that depend on the point (the trace inspected a value) are never taken as empty.
+  struct HessianSupport {
+    int nx = -1, nu = -1, np = -1;
+    bool empty = false;
+  };
+  HessianSupport hessian_support_;
   // Detected patterns, colourings and workspaces; made at the first sparse call and not copied
   // (a copy detects again at its own first sparse call).
   std::unique_ptr<SparseDerivatives> sparse_;

@@ -29,7 +29,14 @@ class DerivativeMatrix {
 
   // --- accumulation ------------------------------------------------------------------------
   /// M(row, col) += value.
-  void Add(int row, int col, double value);
+  void Add(int row, int col, double value) {
+    CheckEntry(row, col);
+    if (sparse_) {
+      entries_.push_back({row, col, value});
+    } else {
+      dense_(row, col) += value;
+    }
+  }
   /// M(row0 + i, col0 + j) += scale * block(i, j) for every entry of the block.
   void AddBlock(int row0, int col0, const ConstMatrixRef& block, double scale = 1.0);
   /// M(row0 + i, col0 + j) += scale * block(i, j) for the stored entries of a sparse block
@@ -50,6 +57,9 @@ class DerivativeMatrix {
 
   // --- reading (after Finalize) ------------------------------------------------------------
   const Matrix& dense() const;         ///< dense storage only
+  /// Dense storage only: the matrix to write in place (sizes from SetZero; writing keeps it
+  /// finished). For producers that compute whole rows at once (velocity level).
+  Matrix& MutableDense();
   const SparseMatrix& sparse() const;  ///< sparse storage only
   Matrix ToDense() const;
   /// f(m) with m the dense Matrix or the SparseMatrix: code written once for both storages.
@@ -76,6 +86,7 @@ class DerivativeMatrix {
   };
 
  private:
+  void CheckEntry(int row, int col) const;  // aborts unless 0 <= row < rows, 0 <= col < cols
   int rows_ = 0, cols_ = 0;
   bool sparse_ = false;
   bool finalized_ = true;

@@ -184,6 +184,7 @@ inline bool PairStatusIsAZero(double a, double b) { return a <= b; }
 namespace internal {
 class LoweredBlock;
 class ArgumentMatrix;
+class VelocitySolver;
 }  // namespace internal
 
 /// A scene lowered to a DCS (see file comment).
@@ -342,6 +343,13 @@ class LoweredSystem {
   /// false if Newton does not converge.
   bool SolveVelocityLevel(const Vector& y, const std::vector<bool>& a_zero, const Vector& v0,
                           Vector* v) const;
+  /// The same, given `point`: this system's Evaluate at (y, z) with derivatives (kStates or
+  /// kAll), e.g. a collocation stage. Where the velocity level is linear (every effect affine
+  /// in the algebraic unknowns, no time-freezing) that evaluation is the velocity-level
+  /// evaluation at z, the solve starts there and evaluates nothing more; otherwise `point` and
+  /// z are not used.
+  bool SolveVelocityLevel(const Vector& y, const std::vector<bool>& a_zero, const Vector& v0,
+                          const Vector& z, const PointEvaluation& point, Vector* v) const;
   /// Decides the statuses that continue from state y (the slow solution): pairs whose
   /// continuous side is not zero keep their jump side at zero; candidate pairs (continuous
   /// side within candidate_tolerance of zero) are resolved by the velocity-level
@@ -367,6 +375,9 @@ class LoweredSystem {
   void Layout();
   // The block that declares pair `declared`.
   int DeclaredBlock(int declared) const;
+  // True if every block is affine in the algebraic unknowns and no clock rate multiplies F:
+  // the velocity-level rows are then affine in v (velocity_level.cpp).
+  bool VelocityLevelIsLinear() const;
   // Evaluate; with `velocity_roles` (EvaluateVelocityLevel, z = v) blocks see the roles and v
   // in their context (BlockContext::velocity_roles).
   void EvaluatePoint(const ConstVectorRef& y, const ConstVectorRef& z, Derivatives derivatives,
@@ -404,6 +415,8 @@ class LoweredSystem {
   mutable PointEvaluation velocity_point_;  // EvaluateVelocityLevel's workspace
   mutable CurvatureTerms curvature_;
   mutable std::unique_ptr<internal::ArgumentMatrix> dynamics_jacobian_holder_;
+  // SolveVelocityLevel's solver and its last solutions (velocity_level.cpp); not copied.
+  mutable std::shared_ptr<internal::VelocitySolver> velocity_solver_;
 };
 
 }  // namespace moreau
