@@ -277,7 +277,7 @@ TEST(CliTest, OcpSolvesWritesItsFilesAndNamesBadInput) {
   ExpectUsageError("ocp wave_rider --tol -1", "tolerance must be positive");
   ExpectUsageError("ocp wave_rider --integrator rk4", "unknown OCP integrator 'rk4'");
   ExpectUsageError("ocp turbo_car --integrator timestepping", "does not support a free final time");
-  ExpectUsageError("ocp doorway --homotopy 0.1", "--homotopy: expected MU:EPS[:NAME=VALUE...]");
+  ExpectUsageError("ocp doorway --homotopy 0.1", "--homotopy: expected MU:EPS[:SIGMA][:NAME=VALUE...]");
   ExpectUsageError("ocp doorway --homotopy 0:0:radius", "--homotopy: expected MU:EPS");
   ExpectUsageError("ocp doorway --homotopy 0:0:width=1", "homotopy parameter 'width'");
   const std::filesystem::path directory =

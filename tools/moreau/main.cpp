@@ -338,13 +338,20 @@ int main(int argc, char** argv) {
       "comparisons)");
   ocp->add_flag("--single-shooting", single_shooting,
                 "single shooting (default: multiple shooting)");
+  std::string ocp_transcription;
+  auto* ocp_transcription_option = ocp->add_option(
+      "--transcription", ocp_transcription,
+      "multiple_shooting (default), single_shooting or collocation (FESD equations as NLP "
+      "constraints; homotopy levels need a complementarity relaxation SIGMA > 0)");
   auto* ocp_hessian_option = ocp->add_option(
       "--hessian", ocp_hessian,
-      "second-order information: limited_memory (default), block_bfgs or block_sr1");
+      "second-order information: limited_memory (default), block_bfgs, block_sr1 or "
+      "second_order (collocation only)");
   auto* ocp_homotopy_option = ocp->add_option(
       "--homotopy", ocp_homotopy,
-      "levels before the exact problem, MU:EPS[:NAME=VALUE...],... (smoothing mu, terminal "
-      "relaxation eps, scene parameters of the level), or none (default: the problem's)");
+      "levels before the exact problem, MU:EPS[:SIGMA][:NAME=VALUE...],... (smoothing mu, "
+      "terminal relaxation eps, complementarity relaxation sigma of the collocation "
+      "transcription, scene parameters of the level), or none (default: the problem's)");
   auto* ocp_tol_option = ocp->add_option("--tol", ocp_tol, "IPOPT tolerance (tol)");
   auto* ocp_level_tol_option =
       ocp->add_option("--level-tol", ocp_level_tol, "IPOPT tolerance of the homotopy levels");
@@ -407,6 +414,10 @@ int main(int argc, char** argv) {
       if (single_shooting) {
         overrides.push_back(
             [](OcpOptions* o) { o->transcription = moreau::OcpTranscription::kSingleShooting; });
+      }
+      if (ocp_transcription_option->count() > 0) {
+        const auto transcription = moreau::ParseOcpTranscription(ocp_transcription);
+        overrides.push_back([=](OcpOptions* o) { o->transcription = transcription; });
       }
       if (ocp_hessian_option->count() > 0) {
         const auto hessian = moreau::ParseOcpHessian(ocp_hessian);

@@ -70,6 +70,7 @@ Json HomotopyJson(const std::vector<OcpHomotopyLevel>& homotopy) {
     for (const auto& [name, value] : level.parameters) parameters[name] = value;
     levels.push_back({{"smoothing", level.smoothing},
                       {"relaxation", level.relaxation},
+                      {"complementarity", level.complementarity},
                       {"parameters", parameters}});
   }
   return levels;
@@ -216,7 +217,8 @@ std::string Format(const std::vector<std::string>& names, const Vector& values) 
 std::vector<OcpHomotopyLevel> ParseHomotopy(const std::string& text) {
   std::vector<OcpHomotopyLevel> levels;
   if (text == "none") return levels;
-  const std::string usage = "--homotopy: expected MU:EPS[:NAME=VALUE...][,...] or none, got '";
+  const std::string usage =
+      "--homotopy: expected MU:EPS[:SIGMA][:NAME=VALUE...][,...] or none, got '";
   auto number = [](const std::string& field, double* value) {
     try {
       std::size_t used = 0;
@@ -236,7 +238,12 @@ std::vector<OcpHomotopyLevel> ParseHomotopy(const std::string& text) {
     OcpHomotopyLevel level;
     bool ok = fields.size() >= 2 && number(fields[0], &level.smoothing) &&
               number(fields[1], &level.relaxation);
-    for (std::size_t i = 2; ok && i < fields.size(); ++i) {
+    std::size_t first_parameter = 2;
+    if (ok && fields.size() >= 3 && fields[2].find('=') == std::string::npos) {
+      ok = number(fields[2], &level.complementarity);
+      first_parameter = 3;
+    }
+    for (std::size_t i = first_parameter; ok && i < fields.size(); ++i) {
       const auto equals = fields[i].find('=');
       double value = 0.0;
       ok =
@@ -283,9 +290,10 @@ int RunOcpCommand(const OcpCommandSettings& settings) {
         reported_level = progress.level;
         if (progress.level + 1 < progress.levels) {
           std::fprintf(stderr,
-                       "[moreau ocp] homotopy level %d/%d: smoothing %g, terminal relaxation %g\n",
+                       "[moreau ocp] homotopy level %d/%d: smoothing %g, terminal relaxation %g, "
+                       "complementarity relaxation %g\n",
                        progress.level + 1, progress.levels, progress.parameters.smoothing,
-                       progress.parameters.relaxation);
+                       progress.parameters.relaxation, progress.parameters.complementarity);
         } else {
           std::fprintf(stderr, "[moreau ocp] level %d/%d: the exact problem\n", progress.level + 1,
                        progress.levels);
@@ -337,8 +345,10 @@ int RunOcpCommand(const OcpCommandSettings& settings) {
       parameters += ", " + name + " " + std::to_string(value);
     }
     std::printf(
-        "homotopy     level %zu (smoothing %g, relaxation %g%s): %s, %d iterations, %.3g s\n",
-        i + 1, level.parameters.smoothing, level.parameters.relaxation, parameters.c_str(),
+        "homotopy     level %zu (smoothing %g, relaxation %g, complementarity %g%s): %s, %d "
+        "iterations, %.3g s\n",
+        i + 1, level.parameters.smoothing, level.parameters.relaxation,
+        level.parameters.complementarity, parameters.c_str(),
         ToString(level.status).c_str(), level.iterations, level.seconds);
   }
   std::printf(
