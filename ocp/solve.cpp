@@ -566,12 +566,14 @@ OcpResult SolveByCollocation(const OcpProblem& problem, const OcpOptions& option
     const OcpHomotopyLevel& parameters = options.homotopy[static_cast<std::size_t>(level)];
     nlp.SetRelaxedLevel(parameters);
     RunLevel(&nlp, options, parameters, level, num_levels, false, &z, &multipliers, &result);
+    result.levels.back().intervals = problem.intervals;
   }
   nlp.SetExactLevel(z);
   // The exact level's bounds differ (multipliers fixed to zero on inactive pieces): the bound
   // multipliers carry over, IPOPT's push keeps the point where it is.
   RunLevel(&nlp, options, OcpHomotopyLevel{}, num_levels - 1, num_levels, true, &z, &multipliers,
            &result);
+  result.levels.back().intervals = problem.intervals;
   result.multipliers = multipliers;
   nlp.Describe(z, &result);
   result.stats.cpu_seconds =

@@ -359,6 +359,15 @@ int main(int argc, char** argv) {
       ocp->add_option("--max-iterations", ocp_max_iterations, "IPOPT iteration limit per level");
   auto* ocp_print_level_option =
       ocp->add_option("--print-level", ocp_print_level, "IPOPT output level 0..12 (0: silent)");
+  double ocp_equilibration = 0.0;
+  auto* ocp_equilibration_option = ocp->add_option(
+      "--step-equilibration", ocp_equilibration,
+      "collocation transcription: weight of the element-length penalty on relaxed levels");
+  std::string ocp_mesh;
+  auto* ocp_mesh_option = ocp->add_option(
+      "--mesh-continuation", ocp_mesh,
+      "shooting: interval counts N1,N2,... solved first, coarsest first, each prolongated to "
+      "the next (none: no continuation; default: the problem's)");
   ocp->add_flag("--no-verify", no_verify, "skip the IDA re-simulation of the optimal controls");
   bool ocp_no_regularization = false;
   ocp->add_flag("--no-constraint-regularization", ocp_no_regularization,
@@ -438,6 +447,14 @@ int main(int argc, char** argv) {
       }
       if (ocp_print_level_option->count() > 0) {
         overrides.push_back([=](OcpOptions* o) { o->print_level = ocp_print_level; });
+      }
+      if (ocp_equilibration_option->count() > 0) {
+        overrides.push_back(
+            [=](OcpOptions* o) { o->step_equilibration_weight = ocp_equilibration; });
+      }
+      if (ocp_mesh_option->count() > 0) {
+        const std::vector<int> counts = tool::ParseIntervalCounts(ocp_mesh);
+        overrides.push_back([=](OcpOptions* o) { o->mesh_continuation = counts; });
       }
       if (no_verify) overrides.push_back([](OcpOptions* o) { o->verify = false; });
       if (ocp_no_regularization) {

@@ -98,7 +98,9 @@ Json SummaryJson(const OcpProblem& problem, const OcpOptions& options, const Ocp
     for (const auto& [name, value] : level.parameters.parameters) parameters[name] = value;
     levels.push_back({{"smoothing", level.parameters.smoothing},
                       {"relaxation", level.parameters.relaxation},
+                      {"complementarity", level.parameters.complementarity},
                       {"parameters", parameters},
+                      {"intervals", level.intervals},
                       {"status", ToString(level.status)},
                       {"message", level.message},
                       {"iterations", level.iterations},
@@ -257,6 +259,29 @@ std::vector<OcpHomotopyLevel> ParseHomotopy(const std::string& text) {
   return levels;
 }
 
+std::vector<int> ParseIntervalCounts(const std::string& text) {
+  std::vector<int> counts;
+  if (text == "none") return counts;
+  std::stringstream stream(text);
+  std::string item;
+  while (std::getline(stream, item, ',')) {
+    int count = 0;
+    std::size_t used = 0;
+    try {
+      count = std::stoi(item, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    RequireArgument(used == item.size() && used > 0 && count >= 1,
+                    "--mesh-continuation: expected interval counts N1,N2,... (>= 1) or none, got '",
+                    text, "'");
+    counts.push_back(count);
+  }
+  RequireArgument(!counts.empty(), "--mesh-continuation: expected N1,N2,... or none, got '", text,
+                  "'");
+  return counts;
+}
+
 void ListOcpProblems() {
   for (const OcpDefinition& definition : OcpCatalog()) {
     std::printf("  %-17s %s\n", definition.name.c_str(), definition.summary.c_str());
@@ -341,14 +366,18 @@ int RunOcpCommand(const OcpCommandSettings& settings) {
   for (std::size_t i = 0; i + 1 < result.levels.size(); ++i) {
     const OcpLevelResult& level = result.levels[i];
     std::string parameters;
+    // Mesh continuation: the coarser meshes' levels come first.
+    const std::string mesh = level.intervals != 0 && level.intervals != problem.intervals
+                                 ? ", mesh N = " + std::to_string(level.intervals)
+                                 : "";
     for (const auto& [name, value] : level.parameters.parameters) {
       parameters += ", " + name + " " + std::to_string(value);
     }
     std::printf(
-        "homotopy     level %zu (smoothing %g, relaxation %g, complementarity %g%s): %s, %d "
+        "homotopy     level %zu (smoothing %g, relaxation %g, complementarity %g%s%s): %s, %d "
         "iterations, %.3g s\n",
         i + 1, level.parameters.smoothing, level.parameters.relaxation,
-        level.parameters.complementarity, parameters.c_str(),
+        level.parameters.complementarity, parameters.c_str(), mesh.c_str(),
         ToString(level.status).c_str(), level.iterations, level.seconds);
   }
   std::printf(
