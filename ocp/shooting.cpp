@@ -893,6 +893,9 @@ class ShootingNlp::Impl {
 ShootingNlp::ShootingNlp(const OcpProblem& problem, const OcpOptions& options) {
   ValidateOcp(problem);
   options.Validate();
+  RequireArgument(options.transcription != OcpTranscription::kCollocation, problem.name,
+                  ": the shooting NLP needs multiple or single shooting, got the collocation "
+                  "transcription");
   if (options.integrator == OcpIntegrator::kTimeStepping) {
     RequireArgument(!problem.speed.enabled, problem.name,
                     ": the time-stepping discretization does not support a free final time "

@@ -224,7 +224,7 @@ TEST(Ocp, DoorwayPlanPushesTheSliderThrough) {
   const OcpProblem problem = MakeOcpProblem("doorway");
   Vector coarse, fine;
   for (int elements : {3, 10}) {
-    OcpOptions options = MakeOcpOptions("doorway");
+    OcpOptions options;  // FESD shooting's forward simulation of the plan
     options.finite_elements = elements;
     ShootingNlp nlp(problem, options);
     OcpResult described;
@@ -414,6 +414,7 @@ INSTANTIATE_TEST_SUITE_P(
 TEST(Ocp, SparseDerivativesGrowLinearlyInTheIntervals) {
   for (const char* name : {"wave_rider", "turbo_car", "doorway"}) {
     OcpOptions options = MakeOcpOptions(name);
+    options.transcription = OcpTranscription::kMultipleShooting;  // the doorway's is collocation
     options.hessian = OcpHessian::kBlockBfgs;
     std::vector<double> jacobian, hessian;
     for (int n : {100, 200, 400}) {

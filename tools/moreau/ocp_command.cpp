@@ -157,6 +157,15 @@ Json SummaryJson(const OcpProblem& problem, const OcpOptions& options, const Ocp
     summary["verification"]["terminal_error"] = result.resimulated_terminal_error;
     summary["verification"]["state_difference"] = result.resimulated_state_difference;
   }
+  summary["fesd_verification"] = {{"done", result.fesd_verified},
+                                  {"message", result.fesd_verification_message}};
+  if (result.fesd_verified) {
+    summary["fesd_verification"]["integrator"] = "fesd (s = 3, 3 elements, steps of a tenth of a control interval)";
+    summary["fesd_verification"]["final_state"] =
+        Named(states, result.fesd_resimulated_final_state);
+    summary["fesd_verification"]["terminal_error"] = result.fesd_resimulated_terminal_error;
+    summary["fesd_verification"]["state_difference"] = result.fesd_resimulated_state_difference;
+  }
   return summary;
 }
 
@@ -362,6 +371,14 @@ int RunOcpCommand(const OcpCommandSettings& settings) {
   } else {
     std::printf("re-simulated no%s%s\n", result.verification_message.empty() ? "" : ": ",
                 result.verification_message.c_str());
+  }
+  if (result.fesd_verified) {
+    std::printf(
+        "re-simulated FESD (steps H/10): terminal-constraint error %.3g, "
+        "|x_fesd(T) - x(T)| %.3g\n",
+        result.fesd_resimulated_terminal_error, result.fesd_resimulated_state_difference);
+  } else if (!result.fesd_verification_message.empty()) {
+    std::printf("re-simulated no: %s\n", result.fesd_verification_message.c_str());
   }
   for (std::size_t i = 0; i + 1 < result.levels.size(); ++i) {
     const OcpLevelResult& level = result.levels[i];

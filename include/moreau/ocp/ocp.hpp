@@ -319,6 +319,13 @@ struct OcpResult {
   Vector resimulated_final_state;
   double resimulated_terminal_error = 0.0;
   double resimulated_state_difference = 0.0;
+  /// The same by FESD with switch detection (s = 3, 3 elements, steps a tenth of a control
+  /// interval), a second reference where IDA's is unreliable (docs/ocp.md, "Verification").
+  bool fesd_verified = false;
+  std::string fesd_verification_message;
+  Vector fesd_resimulated_final_state;
+  double fesd_resimulated_terminal_error = 0.0;
+  double fesd_resimulated_state_difference = 0.0;
   OcpStats stats;
 };
 
