@@ -13,8 +13,8 @@
 // Prints one CSV row (with --header, the column names first). Opt-in; never part of the tests.
 #include <sys/resource.h>
 
-#include <cstdio>
 #include <algorithm>
+#include <cstdio>
 #include <cstdlib>
 #include <random>
 #include <string>
@@ -99,14 +99,13 @@ int main(int argc, char** argv) {
     for (int count : options.mesh_continuation) {
       if (count < intervals) mesh += (mesh.empty() ? "" : " ") + std::to_string(count);
     }
-    std::printf("%s,%d,%ld,%zu,%s,%s,%d,%.3f,%.12g,%.12g,%d,%d,%ld,%ld,%.0f,%ld,%.3g,%.3f,%s\n",
-                name.c_str(), intervals, seed, options.homotopy.size(),
-                ToString(options.hessian).c_str(), ToString(result.status).c_str(),
-                result.stats.iterations, result.stats.cpu_seconds, result.objective,
-                result.final_time, nlp.num_variables(), nlp.num_constraints(),
-                result.stats.jacobian_nonzeros, result.stats.hessian_nonzeros, dense,
-                usage.ru_maxrss, result.verified ? result.resimulated_terminal_error : -1.0,
-                user_seconds, mesh.c_str());
+    std::printf(
+        "%s,%d,%ld,%zu,%s,%s,%d,%.3f,%.12g,%.12g,%d,%d,%ld,%ld,%.0f,%ld,%.3g,%.3f,%s\n",
+        name.c_str(), intervals, seed, options.homotopy.size(), ToString(options.hessian).c_str(),
+        ToString(result.status).c_str(), result.stats.iterations, result.stats.cpu_seconds,
+        result.objective, result.final_time, nlp.num_variables(), nlp.num_constraints(),
+        result.stats.jacobian_nonzeros, result.stats.hessian_nonzeros, dense, usage.ru_maxrss,
+        result.verified ? result.resimulated_terminal_error : -1.0, user_seconds, mesh.c_str());
   } catch (const std::invalid_argument& error) {
     std::fprintf(stderr, "ocp_scaling: %s\n", error.what());
     return 2;

@@ -93,9 +93,7 @@ class CollocationNlp::Impl {
   int IntervalSize() const { return nd_ + elements_ * ElementSize(); }
   int ControlOffset(int k) const { return nf_ + k * IntervalSize(); }
   int LengthIndex(int k, int e) const { return ControlOffset(k) + nd_ + e * ElementSize(); }
-  int StateOffset(int k, int e, int i) const {
-    return LengthIndex(k, e) + 1 + i * StageSize();
-  }
+  int StateOffset(int k, int e, int i) const { return LengthIndex(k, e) + 1 + i * StageSize(); }
   int LambdaOffset(int k, int e, int i) const { return StateOffset(k, e, i) + n_; }
   // Rows: per interval and element the collocation rows (s n), the stage feasibility rows
   // (s n_c) and the complementarity rows (n_c); per interval the length row and N_fe - 1
@@ -129,8 +127,8 @@ class CollocationNlp::Impl {
     std::vector<int> columns;
     int start = 0, start_count = 0, previous = -1, lengths = 0, decisions = 0, stages = 0;
   };
-  ElementColumns MakeColumns(int k, int e, bool with_start, bool with_previous,
-                             bool with_decisions, bool with_lambda) const {
+  ElementColumns MakeColumns(int k, int e, bool with_start, bool with_previous, bool with_decisions,
+                             bool with_lambda) const {
     ElementColumns out;
     auto& c = out.columns;
     out.start = 0;
@@ -236,8 +234,9 @@ class CollocationNlp::Impl {
     block.rows = rows;
     block.columns = columns;
     block.offset = blocks_.empty() ? 0
-                                   : blocks_.back().offset + static_cast<long>(blocks_.back().rows) *
-                                                                 static_cast<long>(blocks_.back().columns.size());
+                                   : blocks_.back().offset +
+                                         static_cast<long>(blocks_.back().rows) *
+                                             static_cast<long>(blocks_.back().columns.size());
     blocks_.push_back(std::move(block));
     return static_cast<int>(blocks_.size()) - 1;
   }
@@ -260,10 +259,10 @@ class CollocationNlp::Impl {
     for (int k = 0; k < intervals_; ++k) {
       for (int e = 0; e < elements_; ++e) {
         const int index = k * elements_ + e;
-        collocation_block_.push_back(AddBlock(CollocationRow(k, e), stages_ * n_,
-                                              collocation_columns_[index].columns));
-        feasibility_block_.push_back(AddBlock(FeasibilityRow(k, e), stages_ * nc_,
-                                              feasibility_columns_[index].columns));
+        collocation_block_.push_back(
+            AddBlock(CollocationRow(k, e), stages_ * n_, collocation_columns_[index].columns));
+        feasibility_block_.push_back(
+            AddBlock(FeasibilityRow(k, e), stages_ * nc_, feasibility_columns_[index].columns));
         complementarity_block_.push_back(
             AddBlock(ComplementarityRow(k, e), nc_, complementarity_columns_[index].columns));
         check_block_.push_back(
@@ -379,7 +378,8 @@ class CollocationNlp::Impl {
             ++count;
             // c_m = 0 at every stage and at the element's start (the previous element's
             // last stage; at t0 the initial state, which must then lie on the boundary).
-            for (int i = 0; i < stages_; ++i) constraint_upper_[FeasibilityRow(k, e) + i * nc_ + m] = 0.0;
+            for (int i = 0; i < stages_; ++i)
+              constraint_upper_[FeasibilityRow(k, e) + i * nc_ + m] = 0.0;
             // Between the nodes of an active piece c deviates from 0 by the interpolation
             // error, either way: no sign condition at the check points.
             if (e > 0) {
@@ -404,7 +404,8 @@ class CollocationNlp::Impl {
         // the active set have equal lengths.
         if (e > 0) {
           bool change = false;
-          for (int m = 0; m < nc_; ++m) change |= active[Piece(k, e, m)] != active[Piece(k, e - 1, m)];
+          for (int m = 0; m < nc_; ++m)
+            change |= active[Piece(k, e, m)] != active[Piece(k, e - 1, m)];
           if (!change) {
             constraint_lower_[EquilibrationRow(k, e)] = 0.0;
             constraint_upper_[EquilibrationRow(k, e)] = 0.0;
@@ -423,14 +424,14 @@ class CollocationNlp::Impl {
   struct Point {
     Vector x;
     double t = 0.0;
-    Vector c;                 // n_c
-    Matrix c_x;               // n_c x n
-    Vector c_t;               // n_c
-    Vector v;                 // n
-    Matrix v_x;               // n x n
-    Vector v_t;               // n
-    Matrix v_u;               // n x n_d
-    Matrix v_lambda;          // n x n_c
+    Vector c;         // n_c
+    Matrix c_x;       // n_c x n
+    Vector c_t;       // n_c
+    Vector v;         // n
+    Matrix v_x;       // n x n
+    Vector v_t;       // n
+    Matrix v_u;       // n x n_d
+    Matrix v_lambda;  // n x n_c
     // With OcpHessian::kSecondOrder: per constraint m its Hessian over (x, t).
     std::vector<Matrix> c_hessians;
   };
@@ -707,8 +708,8 @@ class CollocationNlp::Impl {
             } else {
               rows.middleCols(layout.start, n_) -= Matrix::Identity(n_, n_);
             }
-            Vector d_h = Vector::Zero(n_);       // d/dh_e
-            Vector d_earlier = Vector::Zero(n_); // d/dh_m, m < e (through the stage times)
+            Vector d_h = Vector::Zero(n_);        // d/dh_e
+            Vector d_earlier = Vector::Zero(n_);  // d/dh_m, m < e (through the stage times)
             for (int j = 0; j < stages_; ++j) {
               const Point& p = Stage(k, e, j);
               const double w = h * a(i, j);
@@ -738,8 +739,7 @@ class CollocationNlp::Impl {
         }
         // Complementarity block: d (c_sum .* lambda_sum).
         {
-          const ElementColumns& layout =
-              complementarity_columns_[static_cast<std::size_t>(index)];
+          const ElementColumns& layout = complementarity_columns_[static_cast<std::size_t>(index)];
           auto block =
               BlockValues(complementarity_block_[static_cast<std::size_t>(index)], &values);
           // The start point: state columns and time (earlier lengths).
@@ -778,21 +778,22 @@ class CollocationNlp::Impl {
             const double start_weight = 1.0 - w.sum();
             if (StartIsInitial(k, e)) {
               for (int f = 0; f < nf_; ++f) {
-                rows.col(f) += start_weight *
-                               p.c_x.col(problem_.free_initial_states[static_cast<std::size_t>(f)].state);
+                rows.col(f) +=
+                    start_weight *
+                    p.c_x.col(problem_.free_initial_states[static_cast<std::size_t>(f)].state);
               }
             } else {
               rows.middleCols(layout.start, n_) += start_weight * p.c_x;
             }
-            for (int j = 0; j < stages_; ++j) rows.middleCols(layout.stages + j * n_, n_) += w[j] * p.c_x;
+            for (int j = 0; j < stages_; ++j)
+              rows.middleCols(layout.stages + j * n_, n_) += w[j] * p.c_x;
             for (int m = 0; m < e; ++m) rows.col(layout.lengths + m) += p.c_t;
             rows.col(layout.lengths + e) += check_theta_[static_cast<std::size_t>(q)] * p.c_t;
           }
         }
         if (e > 0) {
           auto block = BlockValues(
-              equilibration_block_[static_cast<std::size_t>(k * (elements_ - 1) + e - 1)],
-              &values);
+              equilibration_block_[static_cast<std::size_t>(k * (elements_ - 1) + e - 1)], &values);
           block(0, 0) = -1.0;
           block(0, 1) = 1.0;
         }
@@ -811,7 +812,8 @@ class CollocationNlp::Impl {
     double f = 0.0;
     if (augmented_.cost_state >= 0) {
       f += z[StateOffset(last, elements_ - 1, stages_ - 1) + augmented_.cost_state];
-      if (derivatives) df[StateOffset(last, elements_ - 1, stages_ - 1) + augmented_.cost_state] += 1.0;
+      if (derivatives)
+        df[StateOffset(last, elements_ - 1, stages_ - 1) + augmented_.cost_state] += 1.0;
     }
     if (!problem_.terminal_cost.empty()) {
       NodeFunction(problem_.terminal_cost, z, intervals_, last, &value,
@@ -867,7 +869,6 @@ class CollocationNlp::Impl {
     }
     return worst;
   }
-
 
   // --- Hessian (OcpHessian::kSecondOrder) ----------------------------------------------------
   // Dense blocks over a set of columns, scattered into the union of their lower triangles.
@@ -947,14 +948,17 @@ class CollocationNlp::Impl {
               .emplace_back(layout.start + f, 1.0);
         }
       } else {
-        for (int a = 0; a < n_; ++a) map[static_cast<std::size_t>(a)].emplace_back(layout.start + a, 1.0);
+        for (int a = 0; a < n_; ++a)
+          map[static_cast<std::size_t>(a)].emplace_back(layout.start + a, 1.0);
       }
-      for (int m = 0; m < e; ++m) map[static_cast<std::size_t>(n_)].emplace_back(layout.lengths + m, 1.0);
+      for (int m = 0; m < e; ++m)
+        map[static_cast<std::size_t>(n_)].emplace_back(layout.lengths + m, 1.0);
       return map;
     }
     const int column = layout.stages + i * StageSize();
     for (int a = 0; a < n_; ++a) map[static_cast<std::size_t>(a)].emplace_back(column + a, 1.0);
-    for (int m = 0; m < e; ++m) map[static_cast<std::size_t>(n_)].emplace_back(layout.lengths + m, 1.0);
+    for (int m = 0; m < e; ++m)
+      map[static_cast<std::size_t>(n_)].emplace_back(layout.lengths + m, 1.0);
     map[static_cast<std::size_t>(n_)].emplace_back(layout.lengths + e, tableau_.c[i]);
     if (with_u_lambda) {
       for (int j = 0; j < nd_; ++j) {
@@ -1002,8 +1006,7 @@ class CollocationNlp::Impl {
     return total;
   }
 
-  bool Hessian(const Vector& z, double objective_factor, const Vector& lambda,
-               Vector* values) {
+  bool Hessian(const Vector& z, double objective_factor, const Vector& lambda, Vector* values) {
     EvaluatePoints(z, true);
     values->setZero(static_cast<Eigen::Index>(hessian_structure_.size()));
     const Matrix& a = tableau_.a;
@@ -1049,7 +1052,8 @@ class CollocationNlp::Impl {
             }
             for (int r = 0; r < n_ + 1 + nd_; ++r) {
               for (int c = 0; c < n_ + 1 + nd_; ++c) {
-                q(r, c) = hessian(from[static_cast<std::size_t>(r)], from[static_cast<std::size_t>(c)]);
+                q(r, c) =
+                    hessian(from[static_cast<std::size_t>(r)], from[static_cast<std::size_t>(c)]);
               }
             }
           }
@@ -1098,7 +1102,8 @@ class CollocationNlp::Impl {
           Vector grad_b = Vector::Zero(size);
           for (int i = 0; i < stages_; ++i) grad_b[layout.stages + i * StageSize() + n_ + m] = 1.0;
           if (e > 0) grad_b[layout.previous + m] = 1.0;
-          local += nu[m] * (grad_a.col(m) * grad_b.transpose() + grad_b * grad_a.col(m).transpose());
+          local +=
+              nu[m] * (grad_a.col(m) * grad_b.transpose() + grad_b * grad_a.col(m).transpose());
         }
         // Check points: mu_q^T c(X(theta_q), t_q), X(theta) linear in the start and the stages.
         for (int q = 0; q < NumCheckPoints(); ++q) {
@@ -1112,7 +1117,8 @@ class CollocationNlp::Impl {
               map[static_cast<std::size_t>(c)].emplace_back(column, coefficient * (1.0 - w.sum()));
             }
             for (int j = 0; j < stages_; ++j) {
-              map[static_cast<std::size_t>(c)].emplace_back(layout.stages + j * StageSize() + c, w[j]);
+              map[static_cast<std::size_t>(c)].emplace_back(layout.stages + j * StageSize() + c,
+                                                            w[j]);
             }
           }
           map[static_cast<std::size_t>(n_)] = start_map[static_cast<std::size_t>(n_)];
@@ -1123,9 +1129,9 @@ class CollocationNlp::Impl {
         // (d) The step-equilibration penalty.
         if (!exact_ && options_.step_equilibration_weight > 0.0) {
           const double nominal = interval_length_ / elements_;
-          local(layout.lengths + e, layout.lengths + e) +=
-              objective_factor * 2.0 * options_.step_equilibration_weight / (nominal * nominal) /
-              intervals_;
+          local(layout.lengths + e, layout.lengths + e) += objective_factor * 2.0 *
+                                                           options_.step_equilibration_weight /
+                                                           (nominal * nominal) / intervals_;
         }
         Scatter(element_hessian_[static_cast<std::size_t>(index)], local, values);
       }
@@ -1134,8 +1140,9 @@ class CollocationNlp::Impl {
     const int last = intervals_ - 1;
     for (int k = 0; k <= intervals_; ++k) {
       const int kd = std::min(k, last);
-      const Vector x = k == 0 ? InitialState(z)
-                              : Vector(z.segment(StateOffset(k - 1, elements_ - 1, stages_ - 1), n_));
+      const Vector x = k == 0
+                           ? InitialState(z)
+                           : Vector(z.segment(StateOffset(k - 1, elements_ - 1, stages_ - 1), n_));
       const Vector u = Inputs(z, kd);
       const double t = tau_[static_cast<std::size_t>(k)];
       Matrix total = Matrix::Zero(n_ + nu_, n_ + nu_);
@@ -1150,7 +1157,8 @@ class CollocationNlp::Impl {
       if (k == intervals_) {
         add(problem_.terminal_cost, Vector::Constant(1, objective_factor));
         if (num_terminal_equalities_ > 0) {
-          add(problem_.terminal_equalities, lambda.segment(TerminalRow(), num_terminal_equalities_));
+          add(problem_.terminal_equalities,
+              lambda.segment(TerminalRow(), num_terminal_equalities_));
         }
         if (num_terminal_inequalities_ > 0) {
           add(problem_.terminal_inequalities,
@@ -1163,12 +1171,14 @@ class CollocationNlp::Impl {
       std::vector<int> position(static_cast<std::size_t>(n_ + nu_), -1);
       if (k == 0) {
         for (int f = 0; f < nf_; ++f) {
-          position[static_cast<std::size_t>(problem_.free_initial_states[static_cast<std::size_t>(f)].state)] = f;
+          position[static_cast<std::size_t>(
+              problem_.free_initial_states[static_cast<std::size_t>(f)].state)] = f;
         }
       } else {
         for (int i = 0; i < n_; ++i) position[static_cast<std::size_t>(i)] = i;
       }
-      for (int j = 0; j < nd_; ++j) position[static_cast<std::size_t>(n_ + augmented_.decisions[j])] = node + j;
+      for (int j = 0; j < nd_; ++j)
+        position[static_cast<std::size_t>(n_ + augmented_.decisions[j])] = node + j;
       Matrix local = Matrix::Zero(static_cast<Eigen::Index>(block.columns.size()),
                                   static_cast<Eigen::Index>(block.columns.size()));
       for (int r = 0; r < n_ + nu_; ++r) {
@@ -1284,7 +1294,8 @@ class CollocationNlp::Impl {
     result->events.clear();
     EvaluatePoints(z, false);
     std::vector<bool> previous(static_cast<std::size_t>(nc_), false);
-    for (int m = 0; m < nc_; ++m) previous[static_cast<std::size_t>(m)] = initial_point_.c[m] <= 0.0;
+    for (int m = 0; m < nc_; ++m)
+      previous[static_cast<std::size_t>(m)] = initial_point_.c[m] <= 0.0;
     const std::vector<bool> active = exact_ ? pieces_ : Pieces(z);
     for (int k = 0; k < intervals_; ++k) {
       for (int e = 0; e < elements_; ++e) {
@@ -1302,7 +1313,8 @@ class CollocationNlp::Impl {
           previous[static_cast<std::size_t>(m)] = now;
         }
         const Point& end = Stage(k, e, stages_ - 1);
-        result->trajectory.Append(end.t, end.x.head(nx), z.segment(LambdaOffset(k, e, stages_ - 1), nc_),
+        result->trajectory.Append(end.t, end.x.head(nx),
+                                  z.segment(LambdaOffset(k, e, stages_ - 1), nc_),
                                   z[LengthIndex(k, e)]);
       }
       result->node_states.push_back(Stage(k, elements_ - 1, stages_ - 1).x.head(nx));
@@ -1344,8 +1356,8 @@ class CollocationNlp::Impl {
   std::vector<bool> pieces_;
   Vector variable_lower_, variable_upper_, constraint_lower_, constraint_upper_;
   Vector base_variable_upper_, base_constraint_lower_, base_constraint_upper_;
-  std::vector<ElementColumns> collocation_columns_, feasibility_columns_,
-      complementarity_columns_, check_columns_, hessian_columns_;
+  std::vector<ElementColumns> collocation_columns_, feasibility_columns_, complementarity_columns_,
+      check_columns_, hessian_columns_;
   std::vector<HessianBlock> element_hessian_, node_hessian_;
   std::vector<Block> blocks_;
   std::vector<std::pair<int, int>> structure_, hessian_structure_;
@@ -1364,7 +1376,9 @@ CollocationNlp::CollocationNlp(const OcpProblem& problem, const OcpOptions& opti
   impl_ = std::make_unique<Impl>(problem, options);
 }
 CollocationNlp::~CollocationNlp() = default;
-int CollocationNlp::num_variables() const { return static_cast<int>(impl_->variable_lower_.size()); }
+int CollocationNlp::num_variables() const {
+  return static_cast<int>(impl_->variable_lower_.size());
+}
 int CollocationNlp::num_constraints() const {
   return static_cast<int>(impl_->constraint_lower_.size());
 }

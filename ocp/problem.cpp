@@ -21,8 +21,8 @@ std::string ToString(OcpTranscription transcription) {
 }
 
 OcpTranscription ParseOcpTranscription(const std::string& name) {
-  for (OcpTranscription t : {OcpTranscription::kMultipleShooting,
-                             OcpTranscription::kSingleShooting, OcpTranscription::kCollocation}) {
+  for (OcpTranscription t : {OcpTranscription::kMultipleShooting, OcpTranscription::kSingleShooting,
+                             OcpTranscription::kCollocation}) {
     if (ToString(t) == name) return t;
   }
   ThrowInvalidArgument("unknown transcription '", name,
@@ -101,10 +101,10 @@ void OcpOptions::Validate() const {
   RequireArgument(!warm_start_multipliers.empty() ? warm_start.size() > 0 : true,
                   "warm-start multipliers need a warm start (the primal point)");
   for (std::size_t i = 0; i < mesh_continuation.size(); ++i) {
-    RequireArgument(mesh_continuation[i] >= 1 &&
-                        (i == 0 || mesh_continuation[i] > mesh_continuation[i - 1]),
-                    "mesh continuation: interval counts must be >= 1 and increasing, got ",
-                    mesh_continuation[i], " at position ", i + 1);
+    RequireArgument(
+        mesh_continuation[i] >= 1 && (i == 0 || mesh_continuation[i] > mesh_continuation[i - 1]),
+        "mesh continuation: interval counts must be >= 1 and increasing, got ",
+        mesh_continuation[i], " at position ", i + 1);
   }
   RequireArgument(std::isfinite(step_equilibration_weight) && step_equilibration_weight >= 0.0,
                   "step equilibration weight must be >= 0, got ", step_equilibration_weight);

@@ -12,10 +12,10 @@
 
 #include "collocation.hpp"
 #include "internal.hpp"
-#include "nlp.hpp"
 #include "moreau/core/error.hpp"
 #include "moreau/integrators/fesd.hpp"
 #include "moreau/model/projection.hpp"
+#include "nlp.hpp"
 
 namespace moreau {
 namespace {
@@ -386,8 +386,7 @@ void Verify(const OcpProblem& problem, OcpResult* result) {
       result->fesd_verification_message = "FESD re-simulation failed: " + run.message;
     }
   } catch (const std::exception& error) {
-    result->fesd_verification_message =
-        std::string("FESD re-simulation refused: ") + error.what();
+    result->fesd_verification_message = std::string("FESD re-simulation refused: ") + error.what();
   }
   result->stats.verification_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -401,8 +400,8 @@ namespace {
 // the iterate where it is. On return z and multipliers hold IPOPT's last iterate (also when it
 // stopped early), and the level's result is appended to result->levels.
 OcpLevelResult RunLevel(ocp_internal::Nlp* nlp, const OcpOptions& options,
-                        const OcpHomotopyLevel& parameters, int level, int num_levels,
-                        bool exact, Vector* z, OcpMultipliers* multipliers, OcpResult* result) {
+                        const OcpHomotopyLevel& parameters, int level, int num_levels, bool exact,
+                        Vector* z, OcpMultipliers* multipliers, OcpResult* result) {
   const auto level_start = std::chrono::steady_clock::now();
   Ipopt::SmartPtr<Ipopt::IpoptApplication> app = IpoptApplicationFactory();
   const double tolerance = exact ? options.tolerance : options.level_tolerance;

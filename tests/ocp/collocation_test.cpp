@@ -56,8 +56,7 @@ TEST(OcpCollocation, ExactFirstDerivativesMatchCentralDifferences) {
     double objective = 0.0;
     Vector constraints, gradient, values;
     std::string message;
-    ASSERT_TRUE(nlp.Evaluate(z, &objective, &constraints, &gradient, &values, &message))
-        << message;
+    ASSERT_TRUE(nlp.Evaluate(z, &objective, &constraints, &gradient, &values, &message)) << message;
     const Matrix jacobian = DenseJacobian(nlp, values);
     std::uniform_int_distribution<Eigen::Index> column(0, z.size() - 1);
     for (int draw = 0; draw < kColumnsPerPoint; ++draw) {

@@ -160,7 +160,8 @@ Json SummaryJson(const OcpProblem& problem, const OcpOptions& options, const Ocp
   summary["fesd_verification"] = {{"done", result.fesd_verified},
                                   {"message", result.fesd_verification_message}};
   if (result.fesd_verified) {
-    summary["fesd_verification"]["integrator"] = "fesd (s = 3, 3 elements, steps of a tenth of a control interval)";
+    summary["fesd_verification"]["integrator"] =
+        "fesd (s = 3, 3 elements, steps of a tenth of a control interval)";
     summary["fesd_verification"]["final_state"] =
         Named(states, result.fesd_resimulated_final_state);
     summary["fesd_verification"]["terminal_error"] = result.fesd_resimulated_terminal_error;
