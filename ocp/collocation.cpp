@@ -864,7 +864,7 @@ class CollocationNlp::Impl {
     double worst = 0.0;
     for (int k = 0; k < intervals_; ++k) {
       for (int e = 0; e < elements_; ++e) {
-        worst = std::max(worst, g.segment(ComplementarityRow(k, e), nc_).maxCoeff());
+        worst = std::max(worst, g.segment(ComplementarityRow(k, e), nc_).cwiseAbs().maxCoeff());
       }
     }
     return worst;

@@ -55,7 +55,8 @@ class CollocationNlp final : public Nlp {
   // The exact level with the pieces read from z (a solution of a relaxed level). Returns the
   // number of (element, constraint) pieces with the constraint active.
   int SetExactLevel(const Vector& z);
-  // Largest complementarity product sum over elements and constraints at z.
+  // Largest |cross-complementarity product| (c summed over an element's points times Lambda
+  // summed over them) over elements and constraints at z.
   double ComplementarityResidual(const Vector& z);
   // Variables from a FESD simulation of the problem's initial controls (dense output at the
   // stage times of equal elements; multipliers from the velocity level).

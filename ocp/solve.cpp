@@ -613,6 +613,7 @@ OcpResult SolveByCollocation(const OcpProblem& problem, const OcpOptions& option
   result.levels.back().intervals = problem.intervals;
   result.multipliers = multipliers;
   nlp.Describe(z, &result);
+  result.complementarity_residual = nlp.ComplementarityResidual(z);
   result.stats.cpu_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return result;

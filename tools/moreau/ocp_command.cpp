@@ -150,6 +150,9 @@ Json SummaryJson(const OcpProblem& problem, const OcpOptions& options, const Ocp
         {"cpu_seconds", result.stats.cpu_seconds},
         {"verification_seconds", result.stats.verification_seconds}}},
   };
+  if (result.complementarity_residual >= 0.0) {
+    summary["complementarity_residual"] = result.complementarity_residual;
+  }
   summary["verification"] = {{"done", result.verified}, {"message", result.verification_message}};
   if (result.verified) {
     summary["verification"]["integrator"] = "ida (rtol 1e-12)";
@@ -365,6 +368,10 @@ int RunOcpCommand(const OcpCommandSettings& settings) {
   std::printf("x0           %s\n", Format(states, result.initial_state).c_str());
   std::printf("x(T)         %s\n", Format(states, result.final_state).c_str());
   std::printf("switches     %zu\n", result.events.size());
+  if (result.complementarity_residual >= 0.0) {
+    std::printf("complementarity residual %.3g (largest cross-complementarity product)\n",
+                result.complementarity_residual);
+  }
   if (result.verified) {
     std::printf(
         "re-simulated IDA rtol 1e-12: terminal-constraint error %.3g, |x_ida(T) - x(T)| %.3g\n",

@@ -307,6 +307,10 @@ struct OcpResult {
   Vector final_state;                    ///< x(T) of the discretized optimum
   double running_cost = 0.0;             ///< int L dt at the optimum (0 without L)
   double terminal_equality_error = 0.0;  ///< max |g| at the discretized optimum
+  /// Collocation transcription: the largest |cross-complementarity product| of the returned
+  /// point over elements and constraints (0 up to the constraint tolerance on a solved exact
+  /// level); -1 for the shooting transcriptions, where the integrator enforces it.
+  double complementarity_residual = -1.0;
   Trajectory trajectory;                 ///< FESD at the optimum, physical time
   std::vector<Event> events;             ///< switches of that trajectory
   std::vector<RelaySignal> relays;       ///< relay memories of that trajectory
