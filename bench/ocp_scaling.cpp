@@ -5,13 +5,15 @@
 // process, so that the peak belongs to that N; scripts/bench-ocp-scaling runs the grid.
 //
 //   ocp_scaling PROBLEM N [--hessian H] [--homotopy none] [--no-constraint-regularization]
-//               [--max-iterations K] [--random-start SEED] [--header]
+//               [--max-iterations K] [--random-start SEED] [--mesh-continuation N1,N2,...]
+//               [--header]
 //
 // --random-start: controls uniform in their bounds per interval from std::mt19937(SEED), as in
 // tests/ocp/ocp_test.cpp (WaveRiderFromRandomStarts). --homotopy none: the exact problem only.
 // Prints one CSV row (with --header, the column names first). Opt-in; never part of the tests.
 #include <sys/resource.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <random>
@@ -46,6 +48,15 @@ int main(int argc, char** argv) {
         options.regularize_constraints = false;
       } else if (arg == "--random-start" && i + 1 < argc) {
         seed = std::atol(argv[++i]);
+      } else if (arg == "--mesh-continuation" && i + 1 < argc) {
+        // Comma-separated interval counts (OcpOptions::mesh_continuation).
+        options.mesh_continuation.clear();
+        const std::string list = argv[++i];
+        for (std::size_t p = 0; p <= list.size();) {
+          const std::size_t q = std::min(list.find(',', p), list.size());
+          options.mesh_continuation.push_back(std::atoi(list.substr(p, q - p).c_str()));
+          p = q + 1;
+        }
       } else if (arg == "--header") {
         header = true;
       } else {
@@ -78,15 +89,23 @@ int main(int argc, char** argv) {
           "problem,N,seed,homotopy_levels,hessian,status,ipopt_iterations,cpu_seconds,objective,"
           "final_time,"
           "variables,constraints,jacobian_nonzeros,hessian_nonzeros,dense_jacobian_entries,"
-          "max_rss_kb,resimulated_terminal_error\n");
+          "max_rss_kb,resimulated_terminal_error,user_seconds,mesh_continuation\n");
     }
-    std::printf("%s,%d,%ld,%zu,%s,%s,%d,%.3f,%.12g,%.12g,%d,%d,%ld,%ld,%.0f,%ld,%.3g\n",
-                name.c_str(), intervals, seed, options.homotopy.size(),
-                ToString(options.hessian).c_str(), ToString(result.status).c_str(),
-                result.stats.iterations, result.stats.cpu_seconds, result.objective,
-                result.final_time, nlp.num_variables(), nlp.num_constraints(),
-                result.stats.jacobian_nonzeros, result.stats.hessian_nonzeros, dense,
-                usage.ru_maxrss, result.verified ? result.resimulated_terminal_error : -1.0);
+    // CPU time of the process in user mode (the solve and its verification): wall-clock time
+    // (cpu_seconds, steady_clock) is unreliable on a shared machine.
+    const double user_seconds = static_cast<double>(usage.ru_utime.tv_sec) +
+                                1e-6 * static_cast<double>(usage.ru_utime.tv_usec);
+    std::string mesh;
+    for (int count : options.mesh_continuation) {
+      if (count < intervals) mesh += (mesh.empty() ? "" : " ") + std::to_string(count);
+    }
+    std::printf(
+        "%s,%d,%ld,%zu,%s,%s,%d,%.3f,%.12g,%.12g,%d,%d,%ld,%ld,%.0f,%ld,%.3g,%.3f,%s\n",
+        name.c_str(), intervals, seed, options.homotopy.size(), ToString(options.hessian).c_str(),
+        ToString(result.status).c_str(), result.stats.iterations, result.stats.cpu_seconds,
+        result.objective, result.final_time, nlp.num_variables(), nlp.num_constraints(),
+        result.stats.jacobian_nonzeros, result.stats.hessian_nonzeros, dense, usage.ru_maxrss,
+        result.verified ? result.resimulated_terminal_error : -1.0, user_seconds, mesh.c_str());
   } catch (const std::invalid_argument& error) {
     std::fprintf(stderr, "ocp_scaling: %s\n", error.what());
     return 2;

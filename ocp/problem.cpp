@@ -9,15 +9,24 @@
 namespace moreau {
 
 std::string ToString(OcpTranscription transcription) {
-  return transcription == OcpTranscription::kMultipleShooting ? "multiple_shooting"
-                                                              : "single_shooting";
+  switch (transcription) {
+    case OcpTranscription::kMultipleShooting:
+      return "multiple_shooting";
+    case OcpTranscription::kSingleShooting:
+      return "single_shooting";
+    case OcpTranscription::kCollocation:
+      return "collocation";
+  }
+  return "?";
 }
 
 OcpTranscription ParseOcpTranscription(const std::string& name) {
-  if (name == "multiple_shooting") return OcpTranscription::kMultipleShooting;
-  if (name == "single_shooting") return OcpTranscription::kSingleShooting;
+  for (OcpTranscription t : {OcpTranscription::kMultipleShooting, OcpTranscription::kSingleShooting,
+                             OcpTranscription::kCollocation}) {
+    if (ToString(t) == name) return t;
+  }
   ThrowInvalidArgument("unknown transcription '", name,
-                       "'; expected multiple_shooting or single_shooting");
+                       "'; expected multiple_shooting, single_shooting or collocation");
 }
 
 std::string ToString(OcpStatus status) {
@@ -56,16 +65,19 @@ std::string ToString(OcpHessian hessian) {
       return "block_bfgs";
     case OcpHessian::kBlockSr1:
       return "block_sr1";
+    case OcpHessian::kSecondOrder:
+      return "second_order";
   }
   return "?";
 }
 
 OcpHessian ParseOcpHessian(const std::string& name) {
-  for (OcpHessian h : {OcpHessian::kLimitedMemory, OcpHessian::kBlockBfgs, OcpHessian::kBlockSr1}) {
+  for (OcpHessian h : {OcpHessian::kLimitedMemory, OcpHessian::kBlockBfgs, OcpHessian::kBlockSr1,
+                       OcpHessian::kSecondOrder}) {
     if (ToString(h) == name) return h;
   }
   ThrowInvalidArgument("unknown OCP Hessian '", name,
-                       "' (expected limited_memory, block_bfgs or block_sr1)");
+                       "' (expected limited_memory, block_bfgs, block_sr1 or second_order)");
 }
 
 void OcpOptions::Validate() const {
@@ -88,15 +100,26 @@ void OcpOptions::Validate() const {
                   "warm-start multipliers must be finite");
   RequireArgument(!warm_start_multipliers.empty() ? warm_start.size() > 0 : true,
                   "warm-start multipliers need a warm start (the primal point)");
+  for (std::size_t i = 0; i < mesh_continuation.size(); ++i) {
+    RequireArgument(
+        mesh_continuation[i] >= 1 && (i == 0 || mesh_continuation[i] > mesh_continuation[i - 1]),
+        "mesh continuation: interval counts must be >= 1 and increasing, got ",
+        mesh_continuation[i], " at position ", i + 1);
+  }
+  RequireArgument(std::isfinite(step_equilibration_weight) && step_equilibration_weight >= 0.0,
+                  "step equilibration weight must be >= 0, got ", step_equilibration_weight);
   RequireArgument(std::isfinite(level_tolerance) && level_tolerance > 0.0,
                   "homotopy level tolerance must be positive, got ", level_tolerance);
   for (std::size_t i = 0; i < homotopy.size(); ++i) {
     const OcpHomotopyLevel& level = homotopy[i];
     RequireArgument(std::isfinite(level.smoothing) && level.smoothing >= 0.0 &&
-                        std::isfinite(level.relaxation) && level.relaxation >= 0.0,
-                    "homotopy level ", i + 1, ": smoothing and relaxation must be >= 0, got ",
-                    level.smoothing, " and ", level.relaxation);
-    RequireArgument(level.smoothing > 0.0 || level.relaxation > 0.0 || !level.parameters.empty(),
+                        std::isfinite(level.relaxation) && level.relaxation >= 0.0 &&
+                        std::isfinite(level.complementarity) && level.complementarity >= 0.0,
+                    "homotopy level ", i + 1,
+                    ": smoothing, relaxation and complementarity relaxation must be >= 0, got ",
+                    level.smoothing, ", ", level.relaxation, " and ", level.complementarity);
+    RequireArgument(level.smoothing > 0.0 || level.relaxation > 0.0 ||
+                        level.complementarity > 0.0 || !level.parameters.empty(),
                     "homotopy level ", i + 1,
                     " neither smooths, relaxes nor changes a parameter (the exact problem is "
                     "always solved last)");

@@ -769,6 +769,31 @@ class ShootingNlp::Impl {
     return z;
   }
 
+  Vector PointFromDecisions(const Matrix& decisions, const Vector& free_initial) {
+    RequireArgument(decisions.rows() == intervals_ && decisions.cols() == nd_,
+                    "shooting NLP: expected ", intervals_, " x ", nd_, " decisions, got ",
+                    decisions.rows(), " x ", decisions.cols());
+    RequireArgument(free_initial.size() == nf_, "shooting NLP: expected ", nf_,
+                    " free initial states, got ", free_initial.size());
+    Vector z = Vector::Zero(num_variables());
+    z.head(nf_) = free_initial;
+    for (int k = 0; k < intervals_; ++k) {
+      for (int j = 0; j < nd_; ++j) {
+        z[DecisionOffset(k) + j] =
+            std::clamp(decisions(k, j), variable_lower_[DecisionOffset(k) + j],
+                       variable_upper_[DecisionOffset(k) + j]);
+      }
+    }
+    if (!multiple_) return z;
+    Vector y = InitialNode(z);
+    for (int k = 0; k < intervals_; ++k) {
+      const Interval interval = Simulate(k, y, z.segment(DecisionOffset(k), nd_), false, false);
+      if (interval.ok) y = interval.y_end;
+      z.segment(NodeOffset(k + 1), ny_) = y;
+    }
+    return z;
+  }
+
   void Describe(const Vector& z, OcpResult* result) {
     const int nc = static_cast<int>(problem_.controls.size());
     result->decision = z;
@@ -868,6 +893,9 @@ class ShootingNlp::Impl {
 ShootingNlp::ShootingNlp(const OcpProblem& problem, const OcpOptions& options) {
   ValidateOcp(problem);
   options.Validate();
+  RequireArgument(options.transcription != OcpTranscription::kCollocation, problem.name,
+                  ": the shooting NLP needs multiple or single shooting, got the collocation "
+                  "transcription");
   if (options.integrator == OcpIntegrator::kTimeStepping) {
     RequireArgument(!problem.speed.enabled, problem.name,
                     ": the time-stepping discretization does not support a free final time "
@@ -923,6 +951,9 @@ bool ShootingNlp::HessianApproximation(const Vector& z, double objective_factor,
 }
 void ShootingNlp::ResetHessian() { impl_->ResetHessian(); }
 void ShootingNlp::Describe(const Vector& z, OcpResult* result) { impl_->Describe(z, result); }
+Vector ShootingNlp::PointFromDecisions(const Matrix& decisions, const Vector& free_initial) {
+  return impl_->PointFromDecisions(decisions, free_initial);
+}
 long ShootingNlp::simulations() const { return impl_->simulations_; }
 long ShootingNlp::fesd_elements() const { return impl_->elements_; }
 

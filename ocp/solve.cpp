@@ -10,9 +10,12 @@
 #include <limits>
 #include <sstream>
 
+#include "collocation.hpp"
 #include "internal.hpp"
 #include "moreau/core/error.hpp"
+#include "moreau/integrators/fesd.hpp"
 #include "moreau/model/projection.hpp"
+#include "nlp.hpp"
 
 namespace moreau {
 namespace {
@@ -28,17 +31,50 @@ using Ipopt::Number;
 constexpr double kWarmStartPush = 1e-9;
 constexpr double kWarmStartBarrier = 1e-6;
 
-// IPOPT's view of the shooting NLP at one level. IPOPT asks for the objective, its gradient,
-// the constraints and their Jacobian separately at the same point; one evaluation with
-// derivatives serves all of them (and the Hessian approximation, which needs the Jacobian).
-class ShootingTnlp final : public Ipopt::TNLP {
+// The shooting NLP behind the interface IPOPT's adapter takes.
+class ShootingAdapter final : public ocp_internal::Nlp {
  public:
-  ShootingTnlp(ShootingNlp* nlp, const Vector& start, const OcpMultipliers* multipliers,
-               const OcpOptions& options, int level, int levels, OcpResult* result)
+  explicit ShootingAdapter(ShootingNlp* nlp) : nlp_(nlp) {}
+  int num_variables() const override { return nlp_->num_variables(); }
+  int num_constraints() const override { return nlp_->num_constraints(); }
+  const Vector& variable_lower() const override { return nlp_->variable_lower(); }
+  const Vector& variable_upper() const override { return nlp_->variable_upper(); }
+  const Vector& constraint_lower() const override { return nlp_->constraint_lower(); }
+  const Vector& constraint_upper() const override { return nlp_->constraint_upper(); }
+  bool Evaluate(const Vector& z, double* objective, Vector* constraints, Vector* gradient,
+                Vector* jacobian_values, std::string* message) override {
+    return nlp_->Evaluate(z, objective, constraints, gradient, jacobian_values, message);
+  }
+  const std::vector<std::pair<int, int>>& JacobianStructure() const override {
+    return nlp_->JacobianStructure();
+  }
+  const std::vector<std::pair<int, int>>& HessianStructure() const override {
+    return nlp_->HessianStructure();
+  }
+  bool Hessian(const Vector& z, double objective_factor, const Vector& lambda,
+               const Vector& gradient, const Vector& jacobian_values,
+               Vector* hessian_values) override {
+    return nlp_->HessianApproximation(z, objective_factor, lambda, gradient, jacobian_values,
+                                      hessian_values);
+  }
+
+ private:
+  ShootingNlp* nlp_;
+};
+
+// IPOPT's view of an NLP at one level. IPOPT asks for the objective, its gradient, the
+// constraints and their Jacobian separately at the same point; one evaluation with
+// derivatives serves all of them (and the Hessian, which needs the Jacobian).
+class OcpTnlp final : public Ipopt::TNLP {
+ public:
+  OcpTnlp(ocp_internal::Nlp* nlp, const Vector& start, const OcpMultipliers* multipliers,
+          const OcpOptions& options, const OcpHomotopyLevel& parameters, int level, int levels,
+          OcpResult* result)
       : nlp_(nlp),
         start_(start),
         multipliers_(multipliers),
         options_(options),
+        parameters_(parameters),
         level_(level),
         levels_(levels),
         result_(result) {}
@@ -119,8 +155,7 @@ class ShootingTnlp final : public Ipopt::TNLP {
     }
     if (!Update(n, x, new_x)) return false;
     const Eigen::Map<const Vector> multipliers(lambda, m);
-    if (!nlp_->HessianApproximation(point_, obj_factor, multipliers, gradient_, jacobian_,
-                                    &hessian_)) {
+    if (!nlp_->Hessian(point_, obj_factor, multipliers, gradient_, jacobian_, &hessian_)) {
       return false;
     }
     std::copy_n(hessian_.data(), hessian_.size(), values);
@@ -136,7 +171,7 @@ class ShootingTnlp final : public Ipopt::TNLP {
       OcpProgress progress;
       progress.level = level_;
       progress.levels = levels_;
-      progress.parameters = nlp_->level();
+      progress.parameters = parameters_;
       progress.iteration = iter;
       progress.objective = obj_value;
       progress.primal_infeasibility = inf_pr;
@@ -177,10 +212,11 @@ class ShootingTnlp final : public Ipopt::TNLP {
     return valid_;
   }
 
-  ShootingNlp* nlp_;
+  ocp_internal::Nlp* nlp_;
   Vector start_;
   const OcpMultipliers* multipliers_;
   OcpOptions options_;
+  OcpHomotopyLevel parameters_;
   int level_, levels_;
   OcpResult* result_;
   Vector point_;
@@ -249,6 +285,25 @@ OcpStatus StatusOf(Ipopt::ApplicationReturnStatus status) {
 }
 
 // Re-simulates the optimal controls with IDA (reference settings) in physical time.
+// Steps of the FESD re-simulation per control interval.
+constexpr double kFesdVerificationRefinement = 10.0;
+
+// max(|g|, h^+) of the terminal constraints at x(T).
+double TerminalError(const OcpProblem& problem, const Vector& x, const Vector& u, double t,
+                     const Vector& p) {
+  double error = 0.0;
+  Vector value;
+  if (!problem.terminal_equalities.empty()) {
+    problem.terminal_equalities.Evaluate(x, u, t, p, &value);
+    error = std::max(error, value.lpNorm<Eigen::Infinity>());
+  }
+  if (!problem.terminal_inequalities.empty()) {
+    problem.terminal_inequalities.Evaluate(x, u, t, p, &value);
+    error = std::max(error, value.cwiseMax(0.0).lpNorm<Eigen::Infinity>());
+  }
+  return error;
+}
+
 void Verify(const OcpProblem& problem, OcpResult* result) {
   const auto start = std::chrono::steady_clock::now();
   Scene scene = problem.scene;
@@ -299,22 +354,39 @@ void Verify(const OcpProblem& problem, OcpResult* result) {
       result->resimulated_final_state = ida.final_state;
       result->resimulated_state_difference =
           (ida.final_state - result->final_state).lpNorm<Eigen::Infinity>();
-      const Vector u = scene.InputValues(scene.final_time);
-      const Vector p = scene.ParameterValues();
-      double error = 0.0;
-      Vector value;
-      if (!problem.terminal_equalities.empty()) {
-        problem.terminal_equalities.Evaluate(ida.final_state, u, ida.final_time, p, &value);
-        error = std::max(error, value.lpNorm<Eigen::Infinity>());
-      }
-      if (!problem.terminal_inequalities.empty()) {
-        problem.terminal_inequalities.Evaluate(ida.final_state, u, ida.final_time, p, &value);
-        error = std::max(error, value.cwiseMax(0.0).lpNorm<Eigen::Infinity>());
-      }
-      result->resimulated_terminal_error = error;
+      result->resimulated_terminal_error =
+          TerminalError(problem, ida.final_state, scene.InputValues(scene.final_time),
+                        ida.final_time, scene.ParameterValues());
     }
   } catch (const std::exception& error) {
     result->verification_message = std::string("IDA re-simulation refused: ") + error.what();
+  }
+  // A second, independent re-simulation: FESD with switch detection on a grid ten times finer
+  // than the control grid (three elements per step, s = 3), another discretization than the
+  // NLP's. Where IDA's reference run is unreliable (the doorway's touching discs, docs/ocp.md)
+  // it is the certificate. (Adaptive FESD fails to locate a grazing switch of the doorway at a
+  // control breakpoint, hence fixed steps.)
+  try {
+    FesdOptions fesd;
+    fesd.stages = 3;
+    fesd.finite_elements = 3;
+    fesd.step_size = (result->grid.back() - result->grid.front()) /
+                     (static_cast<double>(result->grid.size() - 1) * kFesdVerificationRefinement);
+    fesd.keep_elements_after_early_switch = true;
+    const FesdResult run = SimulateFesd(scene, fesd);
+    if (run.status == FesdStatus::kSuccess) {
+      result->fesd_verified = true;
+      result->fesd_resimulated_final_state = run.final_state;
+      result->fesd_resimulated_state_difference =
+          (run.final_state - result->final_state).lpNorm<Eigen::Infinity>();
+      result->fesd_resimulated_terminal_error =
+          TerminalError(problem, run.final_state, scene.InputValues(scene.final_time),
+                        run.final_time, scene.ParameterValues());
+    } else {
+      result->fesd_verification_message = "FESD re-simulation failed: " + run.message;
+    }
+  } catch (const std::exception& error) {
+    result->fesd_verification_message = std::string("FESD re-simulation refused: ") + error.what();
   }
   result->stats.verification_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -322,114 +394,238 @@ void Verify(const OcpProblem& problem, OcpResult* result) {
 
 }  // namespace
 
-OcpResult SolveOcp(const OcpProblem& problem, const OcpOptions& options) {
-  const auto start = std::chrono::steady_clock::now();
-  ShootingNlp nlp(problem, options);
-  OcpResult result;
-  // The homotopy levels, then the exact problem.
-  std::vector<OcpHomotopyLevel> levels = options.homotopy;
-  levels.push_back(OcpHomotopyLevel{});
-  const int num_levels = static_cast<int>(levels.size());
-  nlp.SetLevel(levels.front());
-  Vector z = nlp.InitialGuess();
-  if (options.warm_start.size() > 0) {
-    RequireArgument(options.warm_start.size() == z.size(), "warm start has ",
-                    options.warm_start.size(), " variables, the NLP ", z.size());
-    z = options.warm_start;
+namespace {
+
+// Solves one level with IPOPT from z (and multipliers, if any): a primal-dual warm start keeps
+// the iterate where it is. On return z and multipliers hold IPOPT's last iterate (also when it
+// stopped early), and the level's result is appended to result->levels.
+OcpLevelResult RunLevel(ocp_internal::Nlp* nlp, const OcpOptions& options,
+                        const OcpHomotopyLevel& parameters, int level, int num_levels, bool exact,
+                        Vector* z, OcpMultipliers* multipliers, OcpResult* result) {
+  const auto level_start = std::chrono::steady_clock::now();
+  Ipopt::SmartPtr<Ipopt::IpoptApplication> app = IpoptApplicationFactory();
+  const double tolerance = exact ? options.tolerance : options.level_tolerance;
+  app->Options()->SetNumericValue("tol", tolerance);
+  app->Options()->SetNumericValue("constr_viol_tol", tolerance);
+  app->Options()->SetIntegerValue("max_iter", options.max_iterations);
+  app->Options()->SetIntegerValue("print_level", options.print_level);
+  app->Options()->SetStringValue("sb", "yes");  // no banner
+  // IPOPT relaxes bounds by 1e-8 (relative) internally; moving the solution back onto the
+  // original bounds afterwards (honor_original_bounds) would break the continuity
+  // constraints it satisfied by ~1e-7 (sensitivities of order 10). The iterate is returned
+  // as converged.
+  app->Options()->SetStringValue("honor_original_bounds", "no");
+  app->Options()->SetNumericValue("bound_relax_factor", options.bound_relaxation);
+  if (options.regularize_constraints) {
+    app->Options()->SetStringValue("perturb_always_cd", "yes");
   }
-  OcpMultipliers multipliers = options.warm_start_multipliers;
-  if (!multipliers.empty()) {
-    RequireArgument(multipliers.constraints.size() == nlp.num_constraints() &&
-                        multipliers.lower_bounds.size() == nlp.num_variables() &&
-                        multipliers.upper_bounds.size() == nlp.num_variables(),
+  if (nlp->HessianStructure().empty()) {
+    app->Options()->SetStringValue("hessian_approximation", "limited-memory");
+    app->Options()->SetIntegerValue("limited_memory_max_history", options.lbfgs_memory);
+  }
+  if (!multipliers->empty()) {
+    // A primal-dual warm start (the previous level's solution): keep the iterate where it
+    // is instead of pushing it into the interior, and start the barrier parameter small.
+    app->Options()->SetStringValue("warm_start_init_point", "yes");
+    app->Options()->SetNumericValue("warm_start_bound_push", kWarmStartPush);
+    app->Options()->SetNumericValue("warm_start_bound_frac", kWarmStartPush);
+    app->Options()->SetNumericValue("warm_start_slack_bound_push", kWarmStartPush);
+    app->Options()->SetNumericValue("warm_start_slack_bound_frac", kWarmStartPush);
+    app->Options()->SetNumericValue("warm_start_mult_bound_push", kWarmStartPush);
+    app->Options()->SetNumericValue("mu_init", kWarmStartBarrier);
+  }
+  MOREAU_ASSERT(app->Initialize() == Ipopt::Solve_Succeeded, "IPOPT initialization failed");
+  auto* tnlp = new OcpTnlp(nlp, *z, multipliers->empty() ? nullptr : multipliers, options,
+                           parameters, level, num_levels, result);
+  Ipopt::SmartPtr<Ipopt::TNLP> holder(tnlp);
+  const Ipopt::ApplicationReturnStatus status = app->OptimizeTNLP(holder);
+  OcpLevelResult level_result;
+  level_result.parameters = parameters;
+  level_result.status = StatusOf(status);
+  std::ostringstream s;
+  s << "IPOPT: " << IpoptStatusName(status);
+  if (!tnlp->last_failure().empty() && level_result.status == OcpStatus::kSolverFailure) {
+    s << "; last evaluation failure: " << tnlp->last_failure();
+  }
+  level_result.message = s.str();
+  level_result.iterations = tnlp->iterations();
+  level_result.objective = tnlp->final_objective();
+  level_result.seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - level_start).count();
+  result->levels.push_back(level_result);
+  result->stats.iterations += level_result.iterations;
+  if (tnlp->solution().size() == z->size() && tnlp->solution().allFinite()) {
+    *z = tnlp->solution();
+    *multipliers = tnlp->solution_multipliers();
+  }
+  if (exact) {
+    result->status = level_result.status;
+    result->message = level_result.message;
+    result->objective = level_result.objective;
+  }
+  return level_result;
+}
+
+void CheckWarmStart(const ocp_internal::Nlp& nlp, const OcpOptions& options, Vector* z,
+                    OcpMultipliers* multipliers) {
+  if (options.warm_start.size() > 0) {
+    RequireArgument(options.warm_start.size() == z->size(), "warm start has ",
+                    options.warm_start.size(), " variables, the NLP ", z->size());
+    *z = options.warm_start;
+  }
+  *multipliers = options.warm_start_multipliers;
+  if (!multipliers->empty()) {
+    RequireArgument(multipliers->constraints.size() == nlp.num_constraints() &&
+                        multipliers->lower_bounds.size() == nlp.num_variables() &&
+                        multipliers->upper_bounds.size() == nlp.num_variables(),
                     "warm-start multipliers need ", nlp.num_constraints(), " constraint and ",
                     nlp.num_variables(), " bound multipliers each, got ",
-                    multipliers.constraints.size(), ", ", multipliers.lower_bounds.size(), " and ",
-                    multipliers.upper_bounds.size());
+                    multipliers->constraints.size(), ", ", multipliers->lower_bounds.size(),
+                    " and ", multipliers->upper_bounds.size());
   }
+}
+
+// Decisions of `coarse` (controls, then speeds) held on the intervals of an N-interval grid:
+// fine interval k takes the decisions of the coarse interval containing its midpoint (exact
+// refinement when N is a multiple of the coarse count).
+Matrix ProlongateDecisions(const OcpResult& coarse, int intervals) {
+  const auto nc = coarse.controls.cols();
+  const bool speeds = coarse.speeds.size() > 0;
+  const auto coarse_intervals = coarse.controls.rows();
+  Matrix decisions(intervals, nc + (speeds ? 1 : 0));
+  for (int k = 0; k < intervals; ++k) {
+    const auto j = std::min<Eigen::Index>(
+        coarse_intervals - 1,
+        static_cast<Eigen::Index>((k + 0.5) * static_cast<double>(coarse_intervals) / intervals));
+    decisions.row(k).head(nc) = coarse.controls.row(j);
+    if (speeds) decisions(k, nc) = coarse.speeds[j];
+  }
+  return decisions;
+}
+
+// One shooting solve: the homotopy levels of `levels` then the exact problem (`levels` ends
+// with it), from `start` (empty: the NLP's initial guess or OcpOptions::warm_start).
+void SolveShootingLevels(const OcpProblem& problem, const OcpOptions& options,
+                         const std::vector<OcpHomotopyLevel>& levels, const Vector& start,
+                         OcpResult* result) {
+  ShootingNlp nlp(problem, options);
+  ShootingAdapter adapter(&nlp);
+  const int num_levels = static_cast<int>(levels.size());
+  nlp.SetLevel(levels.front());
+  Vector z = start.size() > 0 ? start : nlp.InitialGuess();
+  OcpMultipliers multipliers;
+  if (start.size() == 0) CheckWarmStart(adapter, options, &z, &multipliers);
   std::string message;
   if (!nlp.Evaluate(z, nullptr, nullptr, nullptr, nullptr, &message)) {
-    result.status = OcpStatus::kSimulationFailure;
-    result.message = "the initial guess cannot be simulated: " + message;
-    return result;
+    result->status = OcpStatus::kSimulationFailure;
+    result->message = "the initial guess cannot be simulated: " + message;
+    return;
   }
-  result.stats.jacobian_nonzeros = static_cast<long>(nlp.JacobianStructure().size());
-  result.stats.hessian_nonzeros = static_cast<long>(nlp.HessianStructure().size());
-
+  result->stats.jacobian_nonzeros = static_cast<long>(nlp.JacobianStructure().size());
+  result->stats.hessian_nonzeros = static_cast<long>(nlp.HessianStructure().size());
   for (int level = 0; level < num_levels; ++level) {
-    const auto level_start = std::chrono::steady_clock::now();
     const bool exact = level == num_levels - 1;
     nlp.SetLevel(levels[static_cast<std::size_t>(level)]);
-    Ipopt::SmartPtr<Ipopt::IpoptApplication> app = IpoptApplicationFactory();
-    const double tolerance = exact ? options.tolerance : options.level_tolerance;
-    app->Options()->SetNumericValue("tol", tolerance);
-    app->Options()->SetNumericValue("constr_viol_tol", tolerance);
-    app->Options()->SetIntegerValue("max_iter", options.max_iterations);
-    app->Options()->SetIntegerValue("print_level", options.print_level);
-    app->Options()->SetStringValue("sb", "yes");  // no banner
-    // IPOPT relaxes bounds by 1e-8 (relative) internally; moving the solution back onto the
-    // original bounds afterwards (honor_original_bounds) would break the continuity
-    // constraints it satisfied by ~1e-7 (sensitivities of order 10). The iterate is returned
-    // as converged.
-    app->Options()->SetStringValue("honor_original_bounds", "no");
-    app->Options()->SetNumericValue("bound_relax_factor", options.bound_relaxation);
-    if (options.regularize_constraints) {
-      app->Options()->SetStringValue("perturb_always_cd", "yes");
-    }
-    if (options.hessian == OcpHessian::kLimitedMemory) {
-      app->Options()->SetStringValue("hessian_approximation", "limited-memory");
-      app->Options()->SetIntegerValue("limited_memory_max_history", options.lbfgs_memory);
-    }
-    if (!multipliers.empty()) {
-      // A primal-dual warm start (the previous level's solution): keep the iterate where it
-      // is instead of pushing it into the interior, and start the barrier parameter small.
-      app->Options()->SetStringValue("warm_start_init_point", "yes");
-      app->Options()->SetNumericValue("warm_start_bound_push", kWarmStartPush);
-      app->Options()->SetNumericValue("warm_start_bound_frac", kWarmStartPush);
-      app->Options()->SetNumericValue("warm_start_slack_bound_push", kWarmStartPush);
-      app->Options()->SetNumericValue("warm_start_slack_bound_frac", kWarmStartPush);
-      app->Options()->SetNumericValue("warm_start_mult_bound_push", kWarmStartPush);
-      app->Options()->SetNumericValue("mu_init", kWarmStartBarrier);
-    }
-    MOREAU_ASSERT(app->Initialize() == Ipopt::Solve_Succeeded, "IPOPT initialization failed");
-    auto* tnlp = new ShootingTnlp(&nlp, z, multipliers.empty() ? nullptr : &multipliers, options,
-                                  level, num_levels, &result);
-    Ipopt::SmartPtr<Ipopt::TNLP> holder(tnlp);
-    const Ipopt::ApplicationReturnStatus status = app->OptimizeTNLP(holder);
-    OcpLevelResult level_result;
-    level_result.parameters = levels[static_cast<std::size_t>(level)];
-    level_result.status = StatusOf(status);
-    std::ostringstream s;
-    s << "IPOPT: " << IpoptStatusName(status);
-    if (!tnlp->last_failure().empty() && level_result.status == OcpStatus::kSolverFailure) {
-      s << "; last evaluation failure: " << tnlp->last_failure();
-    }
-    level_result.message = s.str();
-    level_result.iterations = tnlp->iterations();
-    level_result.objective = tnlp->final_objective();
-    level_result.seconds =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - level_start).count();
-    result.levels.push_back(level_result);
-    result.stats.iterations += level_result.iterations;
-    // The next level starts from this one's last iterate (IPOPT reports it also when it
-    // stopped early), primal and dual.
-    if (tnlp->solution().size() == z.size() && tnlp->solution().allFinite()) {
-      z = tnlp->solution();
-      multipliers = tnlp->solution_multipliers();
-    }
-    if (exact) {
-      result.status = level_result.status;
-      result.message = level_result.message;
-      result.objective = level_result.objective;
+    RunLevel(&adapter, options, levels[static_cast<std::size_t>(level)], level, num_levels, exact,
+             &z, &multipliers, result);
+    result->levels.back().intervals = problem.intervals;
+  }
+  result->multipliers = multipliers;
+  nlp.Describe(z, result);
+  result->stats.simulations += nlp.simulations();
+  result->stats.fesd_elements += nlp.fesd_elements();
+}
+
+OcpResult SolveByShooting(const OcpProblem& problem, const OcpOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  RequireArgument(options.hessian != OcpHessian::kSecondOrder, problem.name,
+                  ": second-order Hessians need the collocation transcription (FESD computes no "
+                  "second-order sensitivities)");
+  OcpResult result;
+  std::vector<OcpHomotopyLevel> levels = options.homotopy;
+  levels.push_back(OcpHomotopyLevel{});
+  // The continuation's counts below the problem's N, then N.
+  std::vector<int> counts;
+  for (int count : options.mesh_continuation) {
+    if (count < problem.intervals) counts.push_back(count);
+  }
+  if (counts.empty()) {
+    SolveShootingLevels(problem, options, levels, Vector(), &result);
+  } else {
+    counts.push_back(problem.intervals);
+    Vector free_initial;
+    for (std::size_t stage = 0; stage < counts.size(); ++stage) {
+      OcpProblem coarse = problem;
+      coarse.intervals = counts[stage];
+      if (coarse.intervals != problem.intervals && problem.initial_controls.size() > 0) {
+        // The problem's guess resampled on the coarser grid.
+        OcpResult guess;
+        guess.controls = problem.initial_controls;
+        coarse.initial_controls = ProlongateDecisions(guess, coarse.intervals);
+      }
+      if (stage == 0) {
+        SolveShootingLevels(coarse, options, levels, Vector(), &result);
+      } else {
+        ShootingNlp fine(coarse, options);
+        const Matrix decisions = ProlongateDecisions(result, coarse.intervals);
+        free_initial.resize(static_cast<Eigen::Index>(problem.free_initial_states.size()));
+        for (std::size_t i = 0; i < problem.free_initial_states.size(); ++i) {
+          free_initial[static_cast<Eigen::Index>(i)] =
+              result.initial_state[problem.free_initial_states[i].state];
+        }
+        const Vector z = fine.PointFromDecisions(decisions, free_initial);
+        SolveShootingLevels(coarse, options, {OcpHomotopyLevel{}}, z, &result);
+      }
+      if (result.status == OcpStatus::kSimulationFailure) break;
     }
   }
-  result.multipliers = multipliers;
-  nlp.Describe(z, &result);
-  result.stats.simulations = nlp.simulations();
-  result.stats.fesd_elements = nlp.fesd_elements();
   result.stats.cpu_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  if (options.verify) Verify(problem, &result);
+  return result;
+}
+
+// The collocation transcription: the relaxed levels of OcpOptions::homotopy (each with
+// complementarity > 0), then the exact level on the pieces of the last relaxed solution.
+OcpResult SolveByCollocation(const OcpProblem& problem, const OcpOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  ocp_internal::CollocationNlp nlp(problem, options);
+  RequireArgument(!options.homotopy.empty(), problem.name,
+                  ": the collocation transcription needs homotopy levels with a complementarity "
+                  "relaxation > 0 (the exact level takes its pieces from the last of them)");
+  for (const OcpHomotopyLevel& level : options.homotopy) nlp.SetRelaxedLevel(level);
+  OcpResult result;
+  const int num_levels = static_cast<int>(options.homotopy.size()) + 1;
+  Vector z = nlp.InitialGuess();
+  OcpMultipliers multipliers;
+  CheckWarmStart(nlp, options, &z, &multipliers);
+  result.stats.jacobian_nonzeros = static_cast<long>(nlp.JacobianStructure().size());
+  for (int level = 0; level + 1 < num_levels; ++level) {
+    const OcpHomotopyLevel& parameters = options.homotopy[static_cast<std::size_t>(level)];
+    nlp.SetRelaxedLevel(parameters);
+    RunLevel(&nlp, options, parameters, level, num_levels, false, &z, &multipliers, &result);
+    result.levels.back().intervals = problem.intervals;
+  }
+  nlp.SetExactLevel(z);
+  // The exact level's bounds differ (multipliers fixed to zero on inactive pieces): the bound
+  // multipliers carry over, IPOPT's push keeps the point where it is.
+  RunLevel(&nlp, options, OcpHomotopyLevel{}, num_levels - 1, num_levels, true, &z, &multipliers,
+           &result);
+  result.levels.back().intervals = problem.intervals;
+  result.multipliers = multipliers;
+  nlp.Describe(z, &result);
+  result.complementarity_residual = nlp.ComplementarityResidual(z);
+  result.stats.cpu_seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return result;
+}
+
+}  // namespace
+
+OcpResult SolveOcp(const OcpProblem& problem, const OcpOptions& options) {
+  OcpResult result = options.transcription == OcpTranscription::kCollocation
+                         ? SolveByCollocation(problem, options)
+                         : SolveByShooting(problem, options);
+  if (options.verify && result.status != OcpStatus::kSimulationFailure) Verify(problem, &result);
   return result;
 }
 

@@ -277,9 +277,12 @@ TEST(CliTest, OcpSolvesWritesItsFilesAndNamesBadInput) {
   ExpectUsageError("ocp wave_rider --tol -1", "tolerance must be positive");
   ExpectUsageError("ocp wave_rider --integrator rk4", "unknown OCP integrator 'rk4'");
   ExpectUsageError("ocp turbo_car --integrator timestepping", "does not support a free final time");
-  ExpectUsageError("ocp doorway --homotopy 0.1", "--homotopy: expected MU:EPS[:NAME=VALUE...]");
+  ExpectUsageError("ocp doorway --homotopy 0.1",
+                   "--homotopy: expected MU:EPS[:SIGMA][:NAME=VALUE...]");
   ExpectUsageError("ocp doorway --homotopy 0:0:radius", "--homotopy: expected MU:EPS");
-  ExpectUsageError("ocp doorway --homotopy 0:0:width=1", "homotopy parameter 'width'");
+  ExpectUsageError("ocp doorway --homotopy 0:0:1e-3:width=1", "homotopy parameter 'width'");
+  ExpectUsageError("ocp doorway --homotopy 0:0.1", "needs a complementarity relaxation > 0");
+  ExpectUsageError("ocp doorway --mesh-continuation 10,x", "--mesh-continuation: expected");
   const std::filesystem::path directory =
       std::filesystem::temp_directory_path() / "moreau_cli_test_ocp";
   std::filesystem::remove_all(directory);

@@ -340,13 +340,20 @@ int main(int argc, char** argv) {
       "comparisons)");
   ocp->add_flag("--single-shooting", single_shooting,
                 "single shooting (default: multiple shooting)");
+  std::string ocp_transcription;
+  auto* ocp_transcription_option = ocp->add_option(
+      "--transcription", ocp_transcription,
+      "multiple_shooting (default), single_shooting or collocation (FESD equations as NLP "
+      "constraints; homotopy levels need a complementarity relaxation SIGMA > 0)");
   auto* ocp_hessian_option = ocp->add_option(
       "--hessian", ocp_hessian,
-      "second-order information: limited_memory (default), block_bfgs or block_sr1");
+      "second-order information: limited_memory (default), block_bfgs, block_sr1 or "
+      "second_order (collocation only)");
   auto* ocp_homotopy_option = ocp->add_option(
       "--homotopy", ocp_homotopy,
-      "levels before the exact problem, MU:EPS[:NAME=VALUE...],... (smoothing mu, terminal "
-      "relaxation eps, scene parameters of the level), or none (default: the problem's)");
+      "levels before the exact problem, MU:EPS[:SIGMA][:NAME=VALUE...],... (smoothing mu, "
+      "terminal relaxation eps, complementarity relaxation sigma of the collocation "
+      "transcription, scene parameters of the level), or none (default: the problem's)");
   auto* ocp_tol_option = ocp->add_option("--tol", ocp_tol, "IPOPT tolerance (tol)");
   auto* ocp_level_tol_option =
       ocp->add_option("--level-tol", ocp_level_tol, "IPOPT tolerance of the homotopy levels");
@@ -354,6 +361,15 @@ int main(int argc, char** argv) {
       ocp->add_option("--max-iterations", ocp_max_iterations, "IPOPT iteration limit per level");
   auto* ocp_print_level_option =
       ocp->add_option("--print-level", ocp_print_level, "IPOPT output level 0..12 (0: silent)");
+  double ocp_equilibration = 0.0;
+  auto* ocp_equilibration_option = ocp->add_option(
+      "--step-equilibration", ocp_equilibration,
+      "collocation transcription: weight of the element-length penalty on relaxed levels");
+  std::string ocp_mesh;
+  auto* ocp_mesh_option = ocp->add_option(
+      "--mesh-continuation", ocp_mesh,
+      "shooting: interval counts N1,N2,... solved first, coarsest first, each prolongated to "
+      "the next (none: no continuation; default: the problem's)");
   ocp->add_flag("--no-verify", no_verify, "skip the IDA re-simulation of the optimal controls");
   bool ocp_no_regularization = false;
   ocp->add_flag("--no-constraint-regularization", ocp_no_regularization,
@@ -424,6 +440,10 @@ int main(int argc, char** argv) {
         overrides.push_back(
             [](OcpOptions* o) { o->transcription = moreau::OcpTranscription::kSingleShooting; });
       }
+      if (ocp_transcription_option->count() > 0) {
+        const auto transcription = moreau::ParseOcpTranscription(ocp_transcription);
+        overrides.push_back([=](OcpOptions* o) { o->transcription = transcription; });
+      }
       if (ocp_hessian_option->count() > 0) {
         const auto hessian = moreau::ParseOcpHessian(ocp_hessian);
         overrides.push_back([=](OcpOptions* o) { o->hessian = hessian; });
@@ -443,6 +463,14 @@ int main(int argc, char** argv) {
       }
       if (ocp_print_level_option->count() > 0) {
         overrides.push_back([=](OcpOptions* o) { o->print_level = ocp_print_level; });
+      }
+      if (ocp_equilibration_option->count() > 0) {
+        overrides.push_back(
+            [=](OcpOptions* o) { o->step_equilibration_weight = ocp_equilibration; });
+      }
+      if (ocp_mesh_option->count() > 0) {
+        const std::vector<int> counts = tool::ParseIntervalCounts(ocp_mesh);
+        overrides.push_back([=](OcpOptions* o) { o->mesh_continuation = counts; });
       }
       if (no_verify) overrides.push_back([](OcpOptions* o) { o->verify = false; });
       if (ocp_no_regularization) {

@@ -70,6 +70,7 @@ Json HomotopyJson(const std::vector<OcpHomotopyLevel>& homotopy) {
     for (const auto& [name, value] : level.parameters) parameters[name] = value;
     levels.push_back({{"smoothing", level.smoothing},
                       {"relaxation", level.relaxation},
+                      {"complementarity", level.complementarity},
                       {"parameters", parameters}});
   }
   return levels;
@@ -97,7 +98,9 @@ Json SummaryJson(const OcpProblem& problem, const OcpOptions& options, const Ocp
     for (const auto& [name, value] : level.parameters.parameters) parameters[name] = value;
     levels.push_back({{"smoothing", level.parameters.smoothing},
                       {"relaxation", level.parameters.relaxation},
+                      {"complementarity", level.parameters.complementarity},
                       {"parameters", parameters},
+                      {"intervals", level.intervals},
                       {"status", ToString(level.status)},
                       {"message", level.message},
                       {"iterations", level.iterations},
@@ -147,12 +150,25 @@ Json SummaryJson(const OcpProblem& problem, const OcpOptions& options, const Ocp
         {"cpu_seconds", result.stats.cpu_seconds},
         {"verification_seconds", result.stats.verification_seconds}}},
   };
+  if (result.complementarity_residual >= 0.0) {
+    summary["complementarity_residual"] = result.complementarity_residual;
+  }
   summary["verification"] = {{"done", result.verified}, {"message", result.verification_message}};
   if (result.verified) {
     summary["verification"]["integrator"] = "ida (rtol 1e-12)";
     summary["verification"]["final_state"] = Named(states, result.resimulated_final_state);
     summary["verification"]["terminal_error"] = result.resimulated_terminal_error;
     summary["verification"]["state_difference"] = result.resimulated_state_difference;
+  }
+  summary["fesd_verification"] = {{"done", result.fesd_verified},
+                                  {"message", result.fesd_verification_message}};
+  if (result.fesd_verified) {
+    summary["fesd_verification"]["integrator"] =
+        "fesd (s = 3, 3 elements, steps of a tenth of a control interval)";
+    summary["fesd_verification"]["final_state"] =
+        Named(states, result.fesd_resimulated_final_state);
+    summary["fesd_verification"]["terminal_error"] = result.fesd_resimulated_terminal_error;
+    summary["fesd_verification"]["state_difference"] = result.fesd_resimulated_state_difference;
   }
   return summary;
 }
@@ -216,7 +232,8 @@ std::string Format(const std::vector<std::string>& names, const Vector& values) 
 std::vector<OcpHomotopyLevel> ParseHomotopy(const std::string& text) {
   std::vector<OcpHomotopyLevel> levels;
   if (text == "none") return levels;
-  const std::string usage = "--homotopy: expected MU:EPS[:NAME=VALUE...][,...] or none, got '";
+  const std::string usage =
+      "--homotopy: expected MU:EPS[:SIGMA][:NAME=VALUE...][,...] or none, got '";
   auto number = [](const std::string& field, double* value) {
     try {
       std::size_t used = 0;
@@ -236,7 +253,12 @@ std::vector<OcpHomotopyLevel> ParseHomotopy(const std::string& text) {
     OcpHomotopyLevel level;
     bool ok = fields.size() >= 2 && number(fields[0], &level.smoothing) &&
               number(fields[1], &level.relaxation);
-    for (std::size_t i = 2; ok && i < fields.size(); ++i) {
+    std::size_t first_parameter = 2;
+    if (ok && fields.size() >= 3 && fields[2].find('=') == std::string::npos) {
+      ok = number(fields[2], &level.complementarity);
+      first_parameter = 3;
+    }
+    for (std::size_t i = first_parameter; ok && i < fields.size(); ++i) {
       const auto equals = fields[i].find('=');
       double value = 0.0;
       ok =
@@ -248,6 +270,29 @@ std::vector<OcpHomotopyLevel> ParseHomotopy(const std::string& text) {
   }
   RequireArgument(!levels.empty(), usage, text, "'");
   return levels;
+}
+
+std::vector<int> ParseIntervalCounts(const std::string& text) {
+  std::vector<int> counts;
+  if (text == "none") return counts;
+  std::stringstream stream(text);
+  std::string item;
+  while (std::getline(stream, item, ',')) {
+    int count = 0;
+    std::size_t used = 0;
+    try {
+      count = std::stoi(item, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    RequireArgument(used == item.size() && used > 0 && count >= 1,
+                    "--mesh-continuation: expected interval counts N1,N2,... (>= 1) or none, got '",
+                    text, "'");
+    counts.push_back(count);
+  }
+  RequireArgument(!counts.empty(), "--mesh-continuation: expected N1,N2,... or none, got '", text,
+                  "'");
+  return counts;
 }
 
 void ListOcpProblems() {
@@ -283,9 +328,10 @@ int RunOcpCommand(const OcpCommandSettings& settings) {
         reported_level = progress.level;
         if (progress.level + 1 < progress.levels) {
           std::fprintf(stderr,
-                       "[moreau ocp] homotopy level %d/%d: smoothing %g, terminal relaxation %g\n",
+                       "[moreau ocp] homotopy level %d/%d: smoothing %g, terminal relaxation %g, "
+                       "complementarity relaxation %g\n",
                        progress.level + 1, progress.levels, progress.parameters.smoothing,
-                       progress.parameters.relaxation);
+                       progress.parameters.relaxation, progress.parameters.complementarity);
         } else {
           std::fprintf(stderr, "[moreau ocp] level %d/%d: the exact problem\n", progress.level + 1,
                        progress.levels);
@@ -322,6 +368,10 @@ int RunOcpCommand(const OcpCommandSettings& settings) {
   std::printf("x0           %s\n", Format(states, result.initial_state).c_str());
   std::printf("x(T)         %s\n", Format(states, result.final_state).c_str());
   std::printf("switches     %zu\n", result.events.size());
+  if (result.complementarity_residual >= 0.0) {
+    std::printf("complementarity residual %.3g (largest cross-complementarity product)\n",
+                result.complementarity_residual);
+  }
   if (result.verified) {
     std::printf(
         "re-simulated IDA rtol 1e-12: terminal-constraint error %.3g, |x_ida(T) - x(T)| %.3g\n",
@@ -330,15 +380,29 @@ int RunOcpCommand(const OcpCommandSettings& settings) {
     std::printf("re-simulated no%s%s\n", result.verification_message.empty() ? "" : ": ",
                 result.verification_message.c_str());
   }
+  if (result.fesd_verified) {
+    std::printf(
+        "re-simulated FESD (steps H/10): terminal-constraint error %.3g, "
+        "|x_fesd(T) - x(T)| %.3g\n",
+        result.fesd_resimulated_terminal_error, result.fesd_resimulated_state_difference);
+  } else if (!result.fesd_verification_message.empty()) {
+    std::printf("re-simulated no: %s\n", result.fesd_verification_message.c_str());
+  }
   for (std::size_t i = 0; i + 1 < result.levels.size(); ++i) {
     const OcpLevelResult& level = result.levels[i];
     std::string parameters;
+    // Mesh continuation: the coarser meshes' levels come first.
+    const std::string mesh = level.intervals != 0 && level.intervals != problem.intervals
+                                 ? ", mesh N = " + std::to_string(level.intervals)
+                                 : "";
     for (const auto& [name, value] : level.parameters.parameters) {
       parameters += ", " + name + " " + std::to_string(value);
     }
     std::printf(
-        "homotopy     level %zu (smoothing %g, relaxation %g%s): %s, %d iterations, %.3g s\n",
-        i + 1, level.parameters.smoothing, level.parameters.relaxation, parameters.c_str(),
+        "homotopy     level %zu (smoothing %g, relaxation %g, complementarity %g%s%s): %s, %d "
+        "iterations, %.3g s\n",
+        i + 1, level.parameters.smoothing, level.parameters.relaxation,
+        level.parameters.complementarity, parameters.c_str(), mesh.c_str(),
         ToString(level.status).c_str(), level.iterations, level.seconds);
   }
   std::printf(

@@ -95,7 +95,16 @@ struct OcpProblem {
 /// output sizes, bounds, an invalid scene).
 void ValidateOcp(const OcpProblem& problem);
 
-enum class OcpTranscription { kMultipleShooting, kSingleShooting };
+/// The transcription (docs/ocp.md, "Transcription").
+enum class OcpTranscription {
+  kMultipleShooting,  ///< FESD per interval, node states as variables (the default)
+  kSingleShooting,    ///< FESD chained over the intervals
+  /// The FESD equations as NLP constraints: stage states, moving-set multipliers and element
+  /// lengths are variables, complementarity is relaxed (Scholtes) on the homotopy levels and
+  /// exact on the last level, whose pieces (per element, which constraints are active) come
+  /// from the last relaxed solution. Moving sets only (sweeping processes), no speed of time.
+  kCollocation,
+};
 std::string ToString(OcpTranscription transcription);
 OcpTranscription ParseOcpTranscription(const std::string& name);
 
@@ -122,6 +131,12 @@ enum class OcpHessian {
   /// As kBlockBfgs with symmetric rank-one updates (may be indefinite; IPOPT corrects the
   /// inertia).
   kBlockSr1,
+  /// Collocation transcription only: the Hessian of the Lagrangian from the exact second
+  /// derivatives (automatic differentiation) of the dynamics, the moving-set constraints, the
+  /// costs and the terminal and path constraints, except one term: the (x, t) curvature of
+  /// Lambda^T grad_x c(x, t) P w in the collocation equations, which needs third derivatives
+  /// of c, is left out (zero for constraints quadratic in x and independent of t).
+  kSecondOrder,
 };
 std::string ToString(OcpHessian hessian);
 OcpHessian ParseOcpHessian(const std::string& name);
@@ -142,6 +157,11 @@ struct OcpHomotopyLevel {
   /// Scene parameters (by name) and their values on this level; the others, and every
   /// parameter on the exact level, keep the problem's values.
   std::vector<std::pair<std::string, double>> parameters;
+  /// sigma >= 0, collocation transcription only: the complementarity products of every
+  /// element and constraint are relaxed to <= sigma (Scholtes). Every level of the
+  /// collocation transcription needs sigma > 0; the exact level is sigma = 0 with the pieces
+  /// fixed.
+  double complementarity = 0.0;
 };
 
 /// Multipliers of an NLP solution (IPOPT's sign conventions), for warm starts.
@@ -192,9 +212,26 @@ struct OcpOptions {
   std::vector<OcpHomotopyLevel> homotopy;
   /// IPOPT tolerance of the homotopy levels (their solutions are only starting points).
   double level_tolerance = 1e-6;
+  /// Collocation transcription, relaxed levels: weight w of the penalty
+  /// w / N sum_k,n ((h_kn - H/N_fe) / (H/N_fe))^2 that keeps element lengths near equal where
+  /// nothing switches (where lengths are otherwise free); the exact level imposes equal
+  /// lengths between switches instead. >= 0.
+  double step_equilibration_weight = 1e-2;
+  /// Collocation transcription: also require c >= 0 at s check points per element, midway
+  /// between consecutive collocation nodes of the collocation polynomial (on inactive
+  /// pieces), so that a trajectory cannot pass through a constraint between the nodes (a
+  /// discrete optimum that "tunnels" through a wall is not a trajectory of the dynamics).
+  bool collocation_check_points = true;
   /// IPOPT's relative relaxation of variable bounds (bound_relax_factor); the solution may
   /// exceed a bound by this fraction, never more (it is returned as converged, not clipped).
   double bound_relaxation = 1e-12;
+  /// Mesh continuation (shooting): interval counts solved first, coarsest first (increasing;
+  /// counts >= OcpProblem::intervals are skipped, so one list serves every N). The first is
+  /// solved with every homotopy level; each later count, and finally the problem's N, starts
+  /// from the previous solution prolongated (fine interval k takes the decisions of the coarse
+  /// interval containing its midpoint; node states by forward simulation) and solves the
+  /// exact problem only (docs/ocp.md, "Scaling in N"). Empty: no continuation.
+  std::vector<int> mesh_continuation;
   /// Warm start: a previous OcpResult::decision (same problem and transcription); empty for a
   /// cold start from the initial guesses and a forward simulation. With
   /// warm_start_multipliers (a previous OcpResult::multipliers) IPOPT starts from the
@@ -234,6 +271,7 @@ struct OcpIteration {
 /// One level of the solve (the homotopy levels, then the exact problem).
 struct OcpLevelResult {
   OcpHomotopyLevel parameters;  ///< (0, 0, none) for the exact problem
+  int intervals = 0;            ///< N of this level (mesh continuation)
   OcpStatus status = OcpStatus::kSolverFailure;
   std::string message;  ///< IPOPT's return status
   int iterations = 0;
@@ -269,6 +307,10 @@ struct OcpResult {
   Vector final_state;                    ///< x(T) of the discretized optimum
   double running_cost = 0.0;             ///< int L dt at the optimum (0 without L)
   double terminal_equality_error = 0.0;  ///< max |g| at the discretized optimum
+  /// Collocation transcription: the largest |cross-complementarity product| of the returned
+  /// point over elements and constraints (0 up to the constraint tolerance on a solved exact
+  /// level); -1 for the shooting transcriptions, where the integrator enforces it.
+  double complementarity_residual = -1.0;
   Trajectory trajectory;                 ///< FESD at the optimum, physical time
   std::vector<Event> events;             ///< switches of that trajectory
   std::vector<RelaySignal> relays;       ///< relay memories of that trajectory
@@ -281,6 +323,13 @@ struct OcpResult {
   Vector resimulated_final_state;
   double resimulated_terminal_error = 0.0;
   double resimulated_state_difference = 0.0;
+  /// The same by FESD with switch detection (s = 3, 3 elements, steps a tenth of a control
+  /// interval), a second reference where IDA's is unreliable (docs/ocp.md, "Verification").
+  bool fesd_verified = false;
+  std::string fesd_verification_message;
+  Vector fesd_resimulated_final_state;
+  double fesd_resimulated_terminal_error = 0.0;
+  double fesd_resimulated_state_difference = 0.0;
   OcpStats stats;
 };
 
@@ -338,6 +387,9 @@ class ShootingNlp {
   /// Unpacks a solution into the result fields (controls, grid, node states, trajectory),
   /// re-integrating with the exact integrator.
   void Describe(const Vector& z, OcpResult* result);
+  /// The point with these decisions (N rows: the controls, then the speed of time; clamped to
+  /// their bounds) and free initial states, node states from a forward simulation.
+  Vector PointFromDecisions(const Matrix& decisions, const Vector& free_initial);
   long simulations() const;
   long fesd_elements() const;
 
