@@ -80,10 +80,9 @@ int main(int argc, char** argv) {
                                        {"constraint_filter", filter},
                                        {"linear_solver", linear_solver}}};
   const double start = ProcessCpuSeconds();
-  const moreau::SimulationResult result =
-      moreau::Simulate(scene, settings, [&](double t) {
-        if (progress) std::cerr << "t = " << t << "   \r" << std::flush;
-      });
+  const moreau::SimulationResult result = moreau::Simulate(scene, settings, [&](double t) {
+    if (progress) std::cerr << "t = " << t << "   \r" << std::flush;
+  });
   const double seconds = ProcessCpuSeconds() - start;
   if (progress) std::cerr << "\n";
 

@@ -5,7 +5,6 @@
 //   build/release/bench/fesd_bench --benchmark_filter=Overhead --benchmark_repetitions=5
 //   build/release/bench/fesd_bench --benchmark_filter=ElementRatio   (issue 15, item 5)
 #include <benchmark/benchmark.h>
-
 #include <time.h>
 
 #include <algorithm>

@@ -48,7 +48,7 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
   Vector v_end = v_;
   Violation violation;
   std::string trial_failure;  // why the trial pass suspected a switch, if not by signs
-  GroupSetup trial_setup;  // one element of fixed length (its vectors reused across elements)
+  GroupSetup trial_setup;     // one element of fixed length (its vectors reused across elements)
   trial_setup.a_zero = a_zero_;
   trial_setup.h_fixed = h_trial;
   for (int e = 0; e < *remaining; ++e) {

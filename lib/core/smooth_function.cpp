@@ -271,22 +271,19 @@ void SmoothFunction::SparseHessianDirection(const ConstVectorRef& x, const Const
                                             SparseMatrix* rows_matrix,
                                             const std::vector<int>* rows) const {
   RequireNonEmpty(*this);
-  RequireArgument(direction.size() == wrt.Columns(static_cast<int>(x.size()),
-                                                  static_cast<int>(u.size()),
-                                                  static_cast<int>(p.size())),
-                  "function '", impl_->name(), "': direction has ", direction.size(),
-                  " entries, expected one per selected column");
+  RequireArgument(
+      direction.size() == wrt.Columns(static_cast<int>(x.size()), static_cast<int>(u.size()),
+                                      static_cast<int>(p.size())),
+      "function '", impl_->name(), "': direction has ", direction.size(),
+      " entries, expected one per selected column");
   impl_->SparseHessianDirection(x, u, t, p, wrt, direction, rows_matrix, rows);
 }
 
 // Reference implementation from the dense derivatives: row k from the Hessian of output k
 // alone (every selected column stored). Implementations that detect sparsity override it.
-void SmoothFunction::Concept::SparseHessianDirection(const ConstVectorRef& x,
-                                                     const ConstVectorRef& u, double t,
-                                                     const ConstVectorRef& p, Wrt wrt,
-                                                     const ConstVectorRef& direction,
-                                                     SparseMatrix* rows_matrix,
-                                                     const std::vector<int>* rows) {
+void SmoothFunction::Concept::SparseHessianDirection(
+    const ConstVectorRef& x, const ConstVectorRef& u, double t, const ConstVectorRef& p, Wrt wrt,
+    const ConstVectorRef& direction, SparseMatrix* rows_matrix, const std::vector<int>* rows) {
   const int m = num_outputs();
   std::vector<int> all;
   if (rows == nullptr) {

@@ -542,8 +542,7 @@ class UmfpackSolver final : public LinearSolver {
       if (symbolic_ != nullptr) umfpack_di_free_symbolic(&symbolic_);
       col_pattern_.assign(col, col + n + 1);
       row_pattern_.assign(row, row + col[n]);
-      if (umfpack_di_symbolic(n, n, col, row, values, &symbolic_, control_, info_) !=
-          UMFPACK_OK) {
+      if (umfpack_di_symbolic(n, n, col, row, values, &symbolic_, control_, info_) != UMFPACK_OK) {
         symbolic_ = nullptr;
         rcond_ = 0.0;
         return FactorizationStatus::kSingular;
@@ -567,9 +566,8 @@ class UmfpackSolver final : public LinearSolver {
     if (n_ == 0) return;
     MOREAU_ASSERT(numeric_ != nullptr, "solve before factorization");
     solution_.resize(n_);
-    umfpack_di_solve(system, matrix_.outerIndexPtr(), matrix_.innerIndexPtr(),
-                     matrix_.valuePtr(), solution_.data(), rhs.data(), numeric_, control_,
-                     solve_info_);
+    umfpack_di_solve(system, matrix_.outerIndexPtr(), matrix_.innerIndexPtr(), matrix_.valuePtr(),
+                     solution_.data(), rhs.data(), numeric_, control_, solve_info_);
     rhs = solution_;
   }
   void Release() {

@@ -291,8 +291,8 @@ namespace {
 // Calls f(i, j) for every pair that is old_working[i] and new_working[j] (both increasing):
 // a value of the old layout that has a place in the new one.
 template <class F>
-void ForCommonWorkingPairs(const std::vector<int>& old_working,
-                           const std::vector<int>& new_working, F f) {
+void ForCommonWorkingPairs(const std::vector<int>& old_working, const std::vector<int>& new_working,
+                           F f) {
   std::size_t i = 0;
   for (std::size_t j = 0; j < new_working.size(); ++j) {
     while (i < old_working.size() && old_working[i] < new_working[j]) ++i;

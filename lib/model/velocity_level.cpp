@@ -222,8 +222,8 @@ static void AssembleVelocityLevel(const LoweredSystem& system, const PointEvalua
 // element cost on F1). The rows are those of the sparse path below, source by source.
 static void AssembleVelocityLevelDense(const LoweredSystem& system, const PointEvaluation& e,
                                        const CurvatureTerms& curvature, const ConstVectorRef& v,
-                                       const std::vector<PairRole>& roles,
-                                       Derivatives derivatives, VelocityLevelEvaluation* out) {
+                                       const std::vector<PairRole>& roles, Derivatives derivatives,
+                                       VelocityLevelEvaluation* out) {
   const bool with_y = derivatives != Derivatives::kNone;
   const bool all = derivatives == Derivatives::kAll;
   const int ny = system.num_states(), nz = system.num_algebraic();
@@ -577,7 +577,9 @@ namespace internal {
 class VelocitySolver {
  public:
   VelocitySolver(const LoweredSystem& system, bool linear)
-      : problem_(system, linear), newton_(VelocityNewtonOptions(system.sparse())), linear_(linear) {}
+      : problem_(system, linear),
+        newton_(VelocityNewtonOptions(system.sparse())),
+        linear_(linear) {}
 
   // point: the system's evaluation at (y, v0) with derivatives, or null.
   bool Solve(const LoweredSystem& system, const Vector& y, const std::vector<bool>& a_zero,

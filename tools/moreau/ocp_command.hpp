@@ -28,8 +28,8 @@ struct OcpCommandSettings {
 // for an unknown problem or invalid options.
 int RunOcpCommand(const OcpCommandSettings& settings);
 
-// Homotopy levels from "MU:EPS[:SIGMA][:NAME=VALUE...],..." (smoothing, terminal relaxation) or "none". Throws
-// std::invalid_argument naming the bad entry.
+// Homotopy levels from "MU:EPS[:SIGMA][:NAME=VALUE...],..." (smoothing, terminal relaxation) or
+// "none". Throws std::invalid_argument naming the bad entry.
 std::vector<OcpHomotopyLevel> ParseHomotopy(const std::string& text);
 // Interval counts from "N1,N2,..." (--mesh-continuation) or "none". Throws
 // std::invalid_argument.

@@ -227,8 +227,8 @@ class SmoothFunction {
                                        const ConstVectorRef& p, Wrt wrt,
                                        const ConstVectorRef& weights, SparseMatrix* hess,
                                        const std::vector<int>* rows);
-    virtual void SparseHessianDirection(const ConstVectorRef& x, const ConstVectorRef& u,
-                                        double t, const ConstVectorRef& p, Wrt wrt,
+    virtual void SparseHessianDirection(const ConstVectorRef& x, const ConstVectorRef& u, double t,
+                                        const ConstVectorRef& p, Wrt wrt,
                                         const ConstVectorRef& direction, SparseMatrix* rows_matrix,
                                         const std::vector<int>* rows);
     virtual bool has_sparse_state_jacobian() const { return false; }

@@ -56,7 +56,7 @@ class DerivativeMatrix {
   void Finalize();
 
   // --- reading (after Finalize) ------------------------------------------------------------
-  const Matrix& dense() const;         ///< dense storage only
+  const Matrix& dense() const;  ///< dense storage only
   /// Dense storage only: the matrix to write in place (sizes from SetZero; writing keeps it
   /// finished). For producers that compute whole rows at once (velocity level).
   Matrix& MutableDense();

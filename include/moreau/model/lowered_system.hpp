@@ -408,7 +408,7 @@ class LoweredSystem {
   bool time_freezing_ = false;
   bool sparse_dynamics_ = false;  // dynamics with a hand-written sparse Jacobian
   bool sparse_ = false;           // sparse derivative storage
-  mutable Nonzeros nonzeros_;  // counted on first use after a layout (nonzeros())
+  mutable Nonzeros nonzeros_;     // counted on first use after a layout (nonzeros())
   mutable bool nonzeros_valid_ = false;
   mutable Vector f_scratch_;
   mutable Eigen::RowVectorXd rate_gradient_;

@@ -311,9 +311,9 @@ struct OcpResult {
   /// point over elements and constraints (0 up to the constraint tolerance on a solved exact
   /// level); -1 for the shooting transcriptions, where the integrator enforces it.
   double complementarity_residual = -1.0;
-  Trajectory trajectory;                 ///< FESD at the optimum, physical time
-  std::vector<Event> events;             ///< switches of that trajectory
-  std::vector<RelaySignal> relays;       ///< relay memories of that trajectory
+  Trajectory trajectory;            ///< FESD at the optimum, physical time
+  std::vector<Event> events;        ///< switches of that trajectory
+  std::vector<RelaySignal> relays;  ///< relay memories of that trajectory
   std::vector<OcpIteration> log;
   std::vector<OcpLevelResult> levels;
   /// Verification by re-simulation (IDA at rtol 1e-12, controls piecewise constant in
