@@ -205,15 +205,13 @@ void GroupSystem::AssembleJacobian(const Vector& da, const Vector& db, SystemMat
     const int k = event_pair_;
     const int power = setup_.indicator_power[static_cast<std::size_t>(k)];
     const double weight = setup_.indicator_weights[k] / std::pow(tau_, power);
-    // Row k of the indicator derivatives (the smallest indicator); with sparse storage the
-    // other rows enter with weight zero, so that the pattern stays when the minimum moves.
-    event_weights_.setZero(np_);
-    event_weights_[k] = db[0] * weight;
+    // Row k of the indicator derivatives (the smallest indicator) only: its entries stay in
+    // the pattern while k is the minimum (db = 0 included), and the event row stays sparse.
+    const double row_weight = db[0] * weight;
     for (int e = 0; e < m; ++e) {
-      jacobian->AddRowCombination(event_row, element_offset(e) + last, event_weights_,
-                                  indicators_.d_y);
+      jacobian->AddScaledRow(event_row, element_offset(e) + last, k, row_weight, indicators_.d_y);
     }
-    jacobian->AddRowCombination(event_row, v_offset(), event_weights_, indicators_.d_v);
+    jacobian->AddScaledRow(event_row, v_offset(), k, row_weight, indicators_.d_v);
     if (power > 0) {
       // d/dh of iota / tau^p with tau = h / h_ref.
       const double d_tau = -power * weight * indicators_.values[k] / tau_ / setup_.h_reference;

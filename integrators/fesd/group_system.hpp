@@ -93,7 +93,6 @@ class GroupSystem final : public MixedComplementaritySystem {
   // accuracy. Other rows keep their absolute scale (their v locates switches).
   Vector velocity_scale_;
   Vector start_scratch_;  // scratch: element start state
-  Vector event_weights_;  // scratch: weights of the event row
   VelocityLevelEvaluation velocity_;
   IndicatorEvaluation indicators_;
   double h_jacobian_ = 0.0;

@@ -4,6 +4,7 @@
 #include <umfpack.h>
 
 #include <Eigen/LU>
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -143,26 +144,29 @@ void SystemMatrix::AddWeightedRows(int row0, int col0, const ConstVectorRef& row
   }
 }
 
-void SystemMatrix::AddRowCombination(int row, int col0, const ConstVectorRef& weights,
-                                     const DerivativeMatrix& m) {
-  MOREAU_ASSERT(weights.size() == m.rows() && row < n_ && col0 + m.cols() <= n_,
-                "AddRowCombination: wrong sizes");
+void SystemMatrix::AddScaledRow(int row, int col0, int k, double weight,
+                                const DerivativeMatrix& m) {
+  MOREAU_ASSERT(k >= 0 && k < m.rows() && row < n_ && col0 + m.cols() <= n_,
+                "AddScaledRow: wrong sizes");
   if (!m.is_sparse()) {
-    for (Eigen::Index k = 0; k < weights.size(); ++k) {
-      if (weights[k] == 0.0) continue;
-      if (!sparse_) {
-        dense_.row(row).segment(col0, m.cols()) += weights[k] * m.dense().row(k);
-      } else {
-        AddBlock(row, col0, weights[k] * m.dense().row(k));
-      }
+    if (!sparse_) {
+      dense_.row(row).segment(col0, m.cols()) += weight * m.dense().row(k);
+    } else {
+      AddBlock(row, col0, weight * m.dense().row(k));
     }
     return;
   }
+  // Compressed columns with ascending row indices: row k's entry of column j, if stored, is
+  // found by binary search.
   const SparseMatrix& block = m.sparse();
+  const int* outer = block.outerIndexPtr();
+  const int* inner = block.innerIndexPtr();
+  const double* values = block.valuePtr();
   for (int j = 0; j < block.outerSize(); ++j) {
-    for (SparseMatrix::InnerIterator it(block, j); it; ++it) {
-      AddEntry(row, col0 + j, weights[it.row()] * it.value());
-    }
+    const int* begin = inner + outer[j];
+    const int* end = inner + outer[j + 1];
+    const int* at = std::lower_bound(begin, end, k);
+    if (at != end && *at == k) AddEntry(row, col0 + j, weight * values[at - inner]);
   }
 }
 

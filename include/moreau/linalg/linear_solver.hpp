@@ -58,11 +58,11 @@ class SystemMatrix {
   /// with sparse storage rows of weight zero add no entries).
   void AddWeightedRows(int row0, int col0, const ConstVectorRef& row_weights,
                        const DerivativeMatrix& m);
-  /// A(row, col0 + j) += sum_k weights(k) M(k, j): a combination of the rows of M into one
-  /// row. With sparse storage every stored entry of M enters (zero weights included), so
-  /// that the pattern does not depend on which weights vanish.
-  void AddRowCombination(int row, int col0, const ConstVectorRef& weights,
-                         const DerivativeMatrix& m);
+  /// A(row, col0 + j) += weight * M(k, j): one row of M into one row of A. With sparse
+  /// storage every stored entry of row k enters (weight zero included), so that the pattern
+  /// depends on k only; rows of M other than k add nothing (a combination of all rows would
+  /// make a dense row, which sparse LU's threshold pivoting can turn into dense fronts).
+  void AddScaledRow(int row, int col0, int k, double weight, const DerivativeMatrix& m);
   /// A(row0 + i, col0 + i) += value, i = 0..count-1.
   void AddDiagonal(int row0, int col0, int count, double value);
   void AddEntry(int row, int col, double value);
