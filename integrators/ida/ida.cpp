@@ -675,9 +675,8 @@ class IdaRun {
       return minimum;
     };
     double lo = t_a, hi = t_negative;
-    const double resolution =
-        kHiddenRootResolution * std::numeric_limits<double>::epsilon() *
-        (std::fabs(t_b) + (t_b - t_a));
+    const double resolution = kHiddenRootResolution * std::numeric_limits<double>::epsilon() *
+                              (std::fabs(t_b) + (t_b - t_a));
     while (hi - lo > resolution) {
       const double mid = 0.5 * (lo + hi);
       if (!RootsAt(mid, &hidden_work_)) return false;
