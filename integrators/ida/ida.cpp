@@ -514,6 +514,7 @@ class IdaRun {
 
   // IDAReInit at (t, Y_, Yp_), its counters accumulated first.
   void ReInit(double t) {
+    last_sample_time_ = std::numeric_limits<double>::quiet_NaN();  // a new solution from t
     AccumulateStats();
     Check(IDAReInit(memory_, t, Y_->vector, Yp_->vector), "IDAReInit");
     counted_ = {};
@@ -610,9 +611,20 @@ class IdaRun {
     hidden_samples_.resize(K + 1, m);
     for (int j = 0; j <= K; ++j) {
       times[static_cast<std::size_t>(j)] = j == K ? t_b : t_a + (t_b - t_a) * j / K;
-      if (!RootsAt(times[static_cast<std::size_t>(j)], &hidden_work_)) return false;
+      if (j == 0 && t_a == last_sample_time_) {
+        // The previous step's end, sampled there: the same accepted solution (the interpolant
+        // passes through it), with the root offsets of now.
+        hidden_work_ = last_sample_;
+        for (int k = 0; k < np_; ++k) hidden_work_[k] += root_offset_[static_cast<std::size_t>(k)];
+      } else if (!RootsAt(times[static_cast<std::size_t>(j)], &hidden_work_)) {
+        return false;
+      }
       hidden_samples_.row(j) = hidden_work_.transpose();
     }
+    // Kept without the offsets, which ArmRoots may change before the next step.
+    last_sample_time_ = t_b;
+    last_sample_ = hidden_samples_.row(K).transpose();
+    for (int k = 0; k < np_; ++k) last_sample_[k] -= root_offset_[static_cast<std::size_t>(k)];
     const double threshold = -options_.event_tolerance;
     double t_negative = std::numeric_limits<double>::infinity();
     for (int i = 0; i < m; ++i) {
@@ -972,10 +984,10 @@ class IdaRun {
   }
 
   int Roots(N_Vector Y, double* out) {
-    Vector y, z, v;
-    Unpack(Y, &y, &z, &v);
+    Unpack(Y, &root_y_, &root_z_, &root_v_);
+    const Vector& y = root_y_;
     if (np_ > 0) {
-      system_.EvaluateEventIndicators(y, v, a_zero_, Derivatives::kNone, &indicators_);
+      system_.EvaluateEventIndicators(y, root_v_, a_zero_, Derivatives::kNone, &indicators_);
       for (int k = 0; k < np_; ++k) {
         out[k] = indicators_.values[k] + root_offset_[static_cast<std::size_t>(k)];
       }
@@ -1207,6 +1219,11 @@ class IdaRun {
   Matrix hidden_samples_;
   Vector hidden_work_;
   std::vector<int> hidden_roots_;
+  // The root functions without offsets at the end of the last scanned step, and its time
+  // (NaN after a restart): the next step's first sample.
+  double last_sample_time_ = std::numeric_limits<double>::quiet_NaN();
+  Vector last_sample_;
+  Vector root_y_, root_z_, root_v_;  // Roots' unpacked arguments (no allocation per call)
   // Per algebraic unknown i: its IDA column (ny + c for the c-th continuous one, carried as
   // z_c; ny + nc + i for a jump one). Per position-level row: the IDA row of the index-1
   // multiplier it determines, or -1.
