@@ -874,7 +874,8 @@ class CollocationNlp::Impl {
   // Dense blocks over a set of columns, scattered into the union of their lower triangles.
   struct HessianBlock {
     std::vector<int> columns;
-    std::vector<int> position;  // n * n entries (i, j) -> index in the values, or -1 if i < j
+    std::vector<int>
+        position;  // n * n entries (i, j) -> index in the values (-1 above the diagonal)
   };
 
   void BuildHessianStructure() {
@@ -891,36 +892,7 @@ class CollocationNlp::Impl {
       block.columns = NodeColumns(k, std::min(k, intervals_ - 1));
       node_hessian_.push_back(std::move(block));
     }
-    hessian_structure_.clear();
-    auto collect = [&](const HessianBlock& block) {
-      for (int a : block.columns) {
-        for (int b : block.columns) {
-          if (a >= b) hessian_structure_.emplace_back(a, b);
-        }
-      }
-    };
-    for (const HessianBlock& block : element_hessian_) collect(block);
-    for (const HessianBlock& block : node_hessian_) collect(block);
-    std::sort(hessian_structure_.begin(), hessian_structure_.end());
-    hessian_structure_.erase(std::unique(hessian_structure_.begin(), hessian_structure_.end()),
-                             hessian_structure_.end());
-    auto locate = [&](HessianBlock* block) {
-      const int n = static_cast<int>(block->columns.size());
-      block->position.assign(static_cast<std::size_t>(n) * static_cast<std::size_t>(n), -1);
-      for (int i = 0; i < n; ++i) {
-        for (int j = 0; j < n; ++j) {
-          const int a = block->columns[static_cast<std::size_t>(i)];
-          const int b = block->columns[static_cast<std::size_t>(j)];
-          if (a < b) continue;
-          const auto it = std::lower_bound(hessian_structure_.begin(), hessian_structure_.end(),
-                                           std::make_pair(a, b));
-          block->position[static_cast<std::size_t>(i * n + j)] =
-              static_cast<int>(it - hessian_structure_.begin());
-        }
-      }
-    };
-    for (HessianBlock& block : element_hessian_) locate(&block);
-    for (HessianBlock& block : node_hessian_) locate(&block);
+    ocp_internal::BuildHessianPattern({&element_hessian_, &node_hessian_}, &hessian_structure_);
   }
 
   static void Scatter(const HessianBlock& block, const Matrix& local, Vector* values) {

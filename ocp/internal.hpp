@@ -1,6 +1,11 @@
 #pragma once
-// Private to moreau::ocp: the scene the transcription integrates.
+// Private to moreau::ocp: the scene the transcription integrates, the Hessian pattern of the
+// transcriptions.
 
+#include <algorithm>
+#include <cstddef>
+#include <initializer_list>
+#include <utility>
 #include <vector>
 
 #include "moreau/ocp/ocp.hpp"
@@ -21,5 +26,44 @@ struct AugmentedScene {
 };
 
 AugmentedScene Augment(const OcpProblem& problem);
+
+// The pattern of a symmetric Hessian assembled from dense blocks, each over a list of
+// variables (Block::columns): *structure is the union of the blocks' lower triangles, sorted
+// by (row, column) without duplicates, as IPOPT takes it. Each block's Block::position (n * n
+// entries, local (i, j) at i * n + j) gets the index in *structure of (columns[i], columns[j])
+// where columns[i] >= columns[j], and -1 above the diagonal: every unordered pair of variables
+// is stored once. Shared by the shooting and collocation transcriptions.
+template <class Block>
+void BuildHessianPattern(std::initializer_list<std::vector<Block>*> groups,
+                         std::vector<std::pair<int, int>>* structure) {
+  structure->clear();
+  for (const std::vector<Block>* group : groups) {
+    for (const Block& block : *group) {
+      for (int a : block.columns) {
+        for (int b : block.columns) {
+          if (a >= b) structure->emplace_back(a, b);
+        }
+      }
+    }
+  }
+  std::sort(structure->begin(), structure->end());
+  structure->erase(std::unique(structure->begin(), structure->end()), structure->end());
+  for (std::vector<Block>* group : groups) {
+    for (Block& block : *group) {
+      const std::size_t n = block.columns.size();
+      block.position.assign(n * n, -1);
+      for (std::size_t i = 0; i < n; ++i) {
+        for (std::size_t j = 0; j < n; ++j) {
+          const int a = block.columns[i];
+          const int b = block.columns[j];
+          if (a < b) continue;
+          const auto it =
+              std::lower_bound(structure->begin(), structure->end(), std::make_pair(a, b));
+          block.position[i * n + j] = static_cast<int>(it - structure->begin());
+        }
+      }
+    }
+  }
+}
 
 }  // namespace moreau::ocp_internal

@@ -533,11 +533,12 @@ class ShootingNlp::Impl {
 
   // --- Hessian approximation (docs/ocp.md, "Second-order information") ---------------------
   // A dense block of the Hessian over `columns`: a quasi-Newton block, or the exact Hessian
-  // of the functions at a node. `position` maps every local entry (i, j), i >= j, to its
-  // place in the lower-triangular values.
+  // of the functions at a node. `position` maps every local entry (i, j) with
+  // columns[i] >= columns[j] to its place in the lower-triangular values
+  // (ocp_internal::BuildHessianPattern; -1 above the diagonal).
   struct HessianBlock {
     std::vector<int> columns;
-    std::vector<int> position;  // size n * n, entry i * n + j (i >= j used)
+    std::vector<int> position;  // size n * n, entry i * n + j
     int node = 0;               // exact blocks: the node and the interval of its decisions
     int decisions = 0;
     bool terminal = false;  // exact block of the terminal functions (else path constraints)
@@ -583,37 +584,7 @@ class ShootingNlp::Impl {
       quasi_newton_interval_.push_back(-1);
       quasi_newton_blocks_.push_back(std::move(block));
     }
-    // Union of the blocks' lower triangles, sorted by (row, column).
-    hessian_structure_.clear();
-    auto collect = [&](const HessianBlock& block) {
-      for (int a : block.columns) {
-        for (int b : block.columns) {
-          if (a >= b) hessian_structure_.emplace_back(a, b);
-        }
-      }
-    };
-    for (const HessianBlock& block : quasi_newton_blocks_) collect(block);
-    for (const HessianBlock& block : exact_blocks_) collect(block);
-    std::sort(hessian_structure_.begin(), hessian_structure_.end());
-    hessian_structure_.erase(std::unique(hessian_structure_.begin(), hessian_structure_.end()),
-                             hessian_structure_.end());
-    auto locate = [&](HessianBlock* block) {
-      const int n = static_cast<int>(block->columns.size());
-      block->position.assign(static_cast<std::size_t>(n) * static_cast<std::size_t>(n), -1);
-      for (int i = 0; i < n; ++i) {
-        for (int j = 0; j < n; ++j) {
-          const int a = block->columns[static_cast<std::size_t>(i)];
-          const int b = block->columns[static_cast<std::size_t>(j)];
-          const std::pair<int, int> entry(std::max(a, b), std::min(a, b));
-          const auto it =
-              std::lower_bound(hessian_structure_.begin(), hessian_structure_.end(), entry);
-          block->position[static_cast<std::size_t>(i * n + j)] =
-              static_cast<int>(it - hessian_structure_.begin());
-        }
-      }
-    };
-    for (HessianBlock& block : quasi_newton_blocks_) locate(&block);
-    for (HessianBlock& block : exact_blocks_) locate(&block);
+    ocp_internal::BuildHessianPattern({&quasi_newton_blocks_, &exact_blocks_}, &hessian_structure_);
   }
 
   // Adds a symmetric local matrix over block.columns into the lower-triangular values.

@@ -15,6 +15,7 @@
 #include <Eigen/Dense>
 #include <Eigen/SparseCholesky>
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
@@ -513,6 +514,7 @@ class IdaRun {
 
   // IDAReInit at (t, Y_, Yp_), its counters accumulated first.
   void ReInit(double t) {
+    last_sample_time_ = std::numeric_limits<double>::quiet_NaN();  // a new solution from t
     AccumulateStats();
     Check(IDAReInit(memory_, t, Y_->vector, Yp_->vector), "IDAReInit");
     counted_ = {};
@@ -523,6 +525,7 @@ class IdaRun {
     Check(IDASetStopTime(memory_, t_end), "IDASetStopTime");
     int stalled_steps = 0;
     while (!failed()) {
+      const double t_previous = t_;
       double t_return = t_;
       const int flag = IDASolve(memory_, t_end, &t_return, Y_->vector, Yp_->vector, IDA_ONE_STEP);
       if (flag < 0) {
@@ -549,19 +552,29 @@ class IdaRun {
                  "resolution of t; the model may be singular or not finite just beyond t)");
         return;
       }
+      // A root inside the step that IDA's sign test at the step's ends cannot see (a contact
+      // shorter than the step) ends the phase there instead, from IDA's interpolant.
+      double t_hidden = 0.0;
+      const bool hidden = t_return > t_previous && FindHiddenRoot(t_previous, t_return, &t_hidden);
+      if (hidden) {
+        Check(IDAGetDky(memory_, t_hidden, 0, Y_->vector), "IDAGetDky");
+        Check(IDAGetDky(memory_, t_hidden, 1, Yp_->vector), "IDAGetDky");
+        t_return = t_hidden;
+      }
+      const bool root = hidden || flag == IDA_ROOT_RETURN;
       RecordOutputTimes(t_return);
       t_ = t_return;
       y_ = View(Y_->vector).head(ny_);
       v_ = View(Y_->vector).tail(nz_);
-      if (flag != IDA_ROOT_RETURN) ArmRoots(/*phase_start=*/false);
+      if (!root) ArmRoots(/*phase_start=*/false);
       if (options_.record_steps) {
-        double h = 0.0;
-        IDAGetLastStep(memory_, &h);
+        double h = t_ - t_previous;
+        if (!hidden) IDAGetLastStep(memory_, &h);
         Record(t_, h);
       }
       if (progress_) progress_(t_);
-      if (flag == IDA_ROOT_RETURN) {
-        if (!HandleRoots()) return;
+      if (root) {
+        if (!HandleRoots(hidden ? &hidden_roots_ : nullptr)) return;
         Check(IDASetStopTime(memory_, t_end), "IDASetStopTime");
         if (t_ >= t_end) return;
         continue;
@@ -571,6 +584,137 @@ class IdaRun {
         return;
       }
     }
+  }
+
+  // Roots inside a step. IDA compares the signs of the root functions at the ends of each
+  // step, so a root function that falls below zero and recovers within one step is not seen.
+  // In free flight at constant velocity the solution is linear, BDF's local error is zero and
+  // the steps double without bound: a body passed straight through a fixed disc (x' = (1, 0)
+  // from (-5, 0.9), no event at any rtol), and the doorway's optimal controls lost a contact
+  // of 0.018 time units inside a step of 0.21 (pusher and slider at t = 0.96), which left
+  // IDA's re-simulation 1.2e-4 from FESD and time-stepping (docs/ida.md, "Contacts inside a
+  // step"). The root functions are sampled on IDA's interpolant at kHiddenRootIntervals + 1
+  // equally spaced times of the step; around the smallest sample of each function a
+  // parabola through three samples predicts the minimum (exact for the quadratic distance
+  // functions of bodies in free flight), refined by successive parabolic interpolation
+  // while the predicted minimum is below -event_tolerance. A function found below
+  // -event_tolerance (the resolution of the status decisions: a shallower dip is a graze the
+  // decision would not resolve) has its first zero located by bisection on the interpolant,
+  // to IDA's own root resolution. Only functions positive at the step's start are watched
+  // (IDA reports decreases through zero only). On success *t_root is the time and
+  // hidden_roots_ flags the functions at or below zero there.
+  bool FindHiddenRoot(double t_a, double t_b, double* t_root) {
+    const int m = np_ + nr_;
+    if (m == 0) return false;
+    constexpr int K = kHiddenRootIntervals;
+    std::array<double, K + 1> times{};
+    hidden_samples_.resize(K + 1, m);
+    for (int j = 0; j <= K; ++j) {
+      times[static_cast<std::size_t>(j)] = j == K ? t_b : t_a + (t_b - t_a) * j / K;
+      if (j == 0 && t_a == last_sample_time_) {
+        // The previous step's end, sampled there: the same accepted solution (the interpolant
+        // passes through it), with the root offsets of now.
+        hidden_work_ = last_sample_;
+        for (int k = 0; k < np_; ++k) hidden_work_[k] += root_offset_[static_cast<std::size_t>(k)];
+      } else if (!RootsAt(times[static_cast<std::size_t>(j)], &hidden_work_)) {
+        return false;
+      }
+      hidden_samples_.row(j) = hidden_work_.transpose();
+    }
+    // Kept without the offsets, which ArmRoots may change before the next step.
+    last_sample_time_ = t_b;
+    last_sample_ = hidden_samples_.row(K).transpose();
+    for (int k = 0; k < np_; ++k) last_sample_[k] -= root_offset_[static_cast<std::size_t>(k)];
+    const double threshold = -options_.event_tolerance;
+    double t_negative = std::numeric_limits<double>::infinity();
+    for (int i = 0; i < m; ++i) {
+      const auto g = hidden_samples_.col(i);
+      if (!(g[0] > 0.0)) continue;
+      // An interior sample below the threshold (the step's end is IDA's own test).
+      bool below = false;
+      for (int j = 1; j < K && !below; ++j) {
+        if (g[j] < threshold) {
+          t_negative = std::min(t_negative, times[static_cast<std::size_t>(j)]);
+          below = true;
+        }
+      }
+      if (below) continue;
+      Eigen::Index j_min = 0;
+      g.minCoeff(&j_min);
+      const int j0 = std::clamp(static_cast<int>(j_min) - 1, 0, K - 2);
+      std::array<double, 3> a{times[static_cast<std::size_t>(j0)],
+                              times[static_cast<std::size_t>(j0 + 1)],
+                              times[static_cast<std::size_t>(j0 + 2)]};
+      std::array<double, 3> b{g[j0], g[j0 + 1], g[j0 + 2]};
+      for (int iteration = 0; iteration < kHiddenRootRefinements; ++iteration) {
+        // The parabola through (a, b) in Newton form, and its vertex.
+        const double d1 = (b[1] - b[0]) / (a[1] - a[0]);
+        const double d2 = (b[2] - b[1]) / (a[2] - a[1]);
+        const double c2 = (d2 - d1) / (a[2] - a[0]);
+        if (!(c2 > 0.0)) break;  // not convex: no interior minimum
+        const double t_v = 0.5 * (a[0] + a[1]) - d1 / (2.0 * c2);
+        if (!(t_v > a[0] && t_v < a[2]) || t_v == a[1]) break;
+        const double predicted = b[0] + d1 * (t_v - a[0]) + c2 * (t_v - a[0]) * (t_v - a[1]);
+        if (!(predicted < threshold)) break;
+        if (!RootsAt(t_v, &hidden_work_)) break;
+        const double value = hidden_work_[i];
+        if (value < threshold) {
+          t_negative = std::min(t_negative, t_v);
+          break;
+        }
+        // Keep the three points that bracket the smallest value.
+        if (t_v < a[1]) {
+          a = value < b[1] ? std::array<double, 3>{a[0], t_v, a[1]}
+                           : std::array<double, 3>{t_v, a[1], a[2]};
+          b = value < b[1] ? std::array<double, 3>{b[0], value, b[1]}
+                           : std::array<double, 3>{value, b[1], b[2]};
+        } else {
+          a = value < b[1] ? std::array<double, 3>{a[1], t_v, a[2]}
+                           : std::array<double, 3>{a[0], a[1], t_v};
+          b = value < b[1] ? std::array<double, 3>{b[1], value, b[2]}
+                           : std::array<double, 3>{b[0], b[1], value};
+        }
+      }
+    }
+    if (!std::isfinite(t_negative)) return false;
+    // The first zero of the watched functions in [t_a, t_negative]: positive at lo, a
+    // watched function at or below zero at hi.
+    auto watched_minimum = [&](const Vector& values) {
+      double minimum = std::numeric_limits<double>::infinity();
+      for (int i = 0; i < m; ++i) {
+        if (hidden_samples_(0, i) > 0.0) minimum = std::min(minimum, values[i]);
+      }
+      return minimum;
+    };
+    double lo = t_a, hi = t_negative;
+    const double resolution = kHiddenRootResolution * std::numeric_limits<double>::epsilon() *
+                              (std::fabs(t_b) + (t_b - t_a));
+    while (hi - lo > resolution) {
+      const double mid = 0.5 * (lo + hi);
+      if (!RootsAt(mid, &hidden_work_)) return false;
+      (watched_minimum(hidden_work_) <= 0.0 ? hi : lo) = mid;
+    }
+    if (!RootsAt(hi, &hidden_work_)) return false;
+    hidden_roots_.assign(static_cast<std::size_t>(m), 0);
+    for (int i = 0; i < m; ++i) {
+      if (hidden_samples_(0, i) > 0.0 && hidden_work_[i] <= 0.0) {
+        hidden_roots_[static_cast<std::size_t>(i)] = -1;
+      }
+    }
+    *t_root = hi;
+    return true;
+  }
+
+  // The root functions at t on IDA's interpolant of the last step; false outside it.
+  bool RootsAt(double t, Vector* g) {
+    if (IDAGetDky(memory_, t, 0, dky_->vector) < 0) return false;
+    g->resize(np_ + nr_);
+    try {
+      Roots(dky_->vector, g->data());
+    } catch (const std::exception&) {
+      return false;  // not evaluable there: IDA's own test at the step's end stands
+    }
+    return g->allFinite();
   }
 
   // Trajectory points at the output times passed by the last step (IDA's interpolant).
@@ -595,15 +739,20 @@ class IdaRun {
     result_.trajectory.Append(t, y_.head(nx_), Algebraic(View(Y_->vector)), h);
   }
 
-  // At a root: flip the relays whose switching function vanished, decide the statuses of the
-  // pairs, restart.
-  bool HandleRoots() {
+  // At a root (IDA's, or `hidden`: the root functions that reached zero inside a step,
+  // FindHiddenRoot): flip the relays whose switching function vanished, decide the statuses
+  // of the pairs, restart.
+  bool HandleRoots(const std::vector<int>* hidden = nullptr) {
     if (++result_.stats.num_events > options_.max_events) {
       Fail(IdaStatus::kTooManyEvents, t_, std::to_string(options_.max_events) + " events");
       return false;
     }
     std::vector<int> found(static_cast<std::size_t>(np_ + nr_), 0);
-    IDAGetRootInfo(memory_, found.data());
+    if (hidden != nullptr) {
+      found = *hidden;
+    } else {
+      IDAGetRootInfo(memory_, found.data());
+    }
     EndPhase(&found);
     Vector switching(nr_);
     for (int i = 0; i < nr_; ++i) {
@@ -835,10 +984,10 @@ class IdaRun {
   }
 
   int Roots(N_Vector Y, double* out) {
-    Vector y, z, v;
-    Unpack(Y, &y, &z, &v);
+    Unpack(Y, &root_y_, &root_z_, &root_v_);
+    const Vector& y = root_y_;
     if (np_ > 0) {
-      system_.EvaluateEventIndicators(y, v, a_zero_, Derivatives::kNone, &indicators_);
+      system_.EvaluateEventIndicators(y, root_v_, a_zero_, Derivatives::kNone, &indicators_);
       for (int k = 0; k < np_; ++k) {
         out[k] = indicators_.values[k] + root_offset_[static_cast<std::size_t>(k)];
       }
@@ -969,6 +1118,12 @@ class IdaRun {
 
   // Projection onto the phase's position-level conditions: Gauss-Newton iterations until |P|
   // is at round-off level.
+  // Hidden roots (FindHiddenRoot): sub-intervals sampled per step (five evaluations of the
+  // root functions per step); parabolic refinements of a predicted dip; the bisection's
+  // resolution in units of eps (|t| + h), IDA's own root resolution (IDARcheck3: 100 uround).
+  static constexpr int kHiddenRootIntervals = 4;
+  static constexpr int kHiddenRootRefinements = 8;
+  static constexpr double kHiddenRootResolution = 100.0;
   static constexpr int kProjectionIterations = 3;
   static constexpr double kProjectionTolerance = 1e-15;
   // Regularization of the sparse projection's Gram matrix relative to its largest diagonal
@@ -1060,6 +1215,15 @@ class IdaRun {
   PointEvaluation point_;
   VelocityLevelEvaluation velocity_;
   IndicatorEvaluation indicators_;
+  // FindHiddenRoot's samples (rows: times, columns: root functions), a row, and its result.
+  Matrix hidden_samples_;
+  Vector hidden_work_;
+  std::vector<int> hidden_roots_;
+  // The root functions without offsets at the end of the last scanned step, and its time
+  // (NaN after a restart): the next step's first sample.
+  double last_sample_time_ = std::numeric_limits<double>::quiet_NaN();
+  Vector last_sample_;
+  Vector root_y_, root_z_, root_v_;  // Roots' unpacked arguments (no allocation per call)
   // Per algebraic unknown i: its IDA column (ny + c for the c-th continuous one, carried as
   // z_c; ny + nc + i for a jump one). Per position-level row: the IDA row of the index-1
   // multiplier it determines, or -1.

@@ -13,6 +13,7 @@
 
 #include "../problems/reference_problems.hpp"
 #include "moreau/integrators/fesd.hpp"
+#include "moreau/model/projection.hpp"
 #include "moreau/scenes/catalog.hpp"
 #include "moreau/scenes/crowd.hpp"
 
@@ -512,6 +513,15 @@ Vector FesdFinalState(const Scene& scene) {
   return result.final_state;
 }
 
+// The final state certified feasible: every moving-set constraint at least -event_tolerance
+// (free sides are watched down to that resolution, kept sides are projected onto zero).
+void ExpectFeasibleFinalState(const Scene& scene, const IdaResult& ida, double event_tolerance) {
+  const double minimum =
+      MinimumMovingSetConstraint(scene, ida.final_state, ida.final_time,
+                                 scene.InputValues(ida.final_time), scene.ParameterValues());
+  EXPECT_GE(minimum, -event_tolerance) << "smallest constraint at x(T) " << ida.final_state;
+}
+
 void ExpectIdaAgreesWithFesd(const Scene& scene, const Vector& fesd) {
   for (double rtol : {1e-8, 1e-10, 1e-12}) {
     IdaOptions options = IdaOptions::Reference();
@@ -519,6 +529,7 @@ void ExpectIdaAgreesWithFesd(const Scene& scene, const Vector& fesd) {
     options.absolute_tolerance = rtol / 100.0;
     const IdaResult ida = SimulateIda(scene, options);
     ASSERT_EQ(ida.status, IdaStatus::kSuccess) << "rtol " << rtol << ": " << ida.message;
+    ExpectFeasibleFinalState(scene, ida, options.event_tolerance);
     EXPECT_LE((ida.final_state - fesd).lpNorm<Eigen::Infinity>(),
               kDoorwayAgreementPerRtol * rtol + kDoorwayFesdAccuracy)
         << "rtol " << rtol << ": IDA " << ida.final_state.transpose() << ", FESD "
@@ -562,6 +573,126 @@ TEST(IdaTest, DoorwayPlanAgreesWithFesd) {
   const Vector fesd = FesdFinalState(scene);
   EXPECT_GT(fesd[1], 1.0) << "slider height at T";
   ExpectIdaAgreesWithFesd(scene, fesd);
+}
+
+// The doorway as solved by `moreau ocp doorway` (collocation, N = 20): its optimal controls,
+// piecewise constant on intervals of 0.6, as inputs of S5.
+Scene DoorwayOptimumScene() {
+  const double controls[20][2] = {
+      {0.1676530446276647, -2.1794299467309544},  {-0.8742518583665925, -1.647438947409691},
+      {-2.3008400692503286, 0.37811115664874995}, {-1.4891512487163974, 1.9510540922861717},
+      {-0.5966242215388278, 2.4302831166683365},  {-0.10110631832557485, 2.512727713498518},
+      {0.26460132261420816, 2.3262971864616913},  {0.46910247502488106, 2.2766478914791515},
+      {1.0939199014383618, 1.8525761780282728},   {0.935297055933438, 1.815967172549068},
+      {0.608608051031823, 1.859058840348385},     {0.05892853682005426, 1.999985721893435},
+      {-0.09678597937436269, 1.9845048532743208}, {-0.35206224464209124, 1.8314550804312453},
+      {0.3212912708824081, -3.1234541409752103},  {1.2242254606599956, -2.5259000035636996},
+      {2.2583795977502588, -1.9529963465576619},  {2.685256160101231, -1.4508291217745304},
+      {2.9812589476233904, -1.082226483658619},   {3.089673714845338, -0.724065200453324}};
+  Scene scene = MakeScene("S5");
+  for (int j = 0; j < 2; ++j) {
+    PiecewiseConstantSignal& signal = scene.inputs[static_cast<std::size_t>(j)].signal;
+    signal.breakpoints.clear();
+    signal.values.clear();
+    for (int k = 0; k < 20; ++k) {
+      if (k > 0) signal.breakpoints.push_back(0.6 * k);
+      signal.values.push_back(controls[k][j]);
+    }
+  }
+  return scene;
+}
+
+TEST(IdaTest, DoorwayOptimumAgreesWithFesd) {
+  // On the doorway's optimal controls the pusher touches the slider from t = 0.964 to 0.982
+  // while both fly free before and after: IDA took one step from 0.81 to 1.01 over it (linear
+  // motion, zero local error), the pusher-slider distance was positive at both ends of the
+  // step, and the contact was missed. IDA's re-simulation then ended 1.2e-4 from FESD (and
+  // from time-stepping, which converges to FESD's answer) at every rtol.
+  const Scene scene = DoorwayOptimumScene();
+  const Vector fesd = FesdFinalState(scene);
+  EXPECT_GT(fesd[1], 0.0) << "the slider above the doorway at T";
+  ExpectIdaAgreesWithFesd(scene, fesd);
+}
+
+// A point flying at unit speed along x2 = 0.9 towards the fixed unit disc at the origin:
+// contact at x1 = -sqrt(1 - 0.81), slide over the disc (angle phi from phi0 = pi - asin 0.9,
+// phi' = -sin phi) to its top, where the multiplier vanishes, after
+// tau = ln tan(phi0 / 2); then free flight along x2 = 1. x0 = (x0, 0.9), tf = 5 - x0.
+Scene DiscInTheWayScene(double x0) {
+  Scene scene;
+  scene.name = "disc_in_the_way";
+  scene.state_names = {"x1", "x2"};
+  scene.initial_state = Vector{{x0, 0.9}};
+  scene.final_time = 5.0 - x0;
+  scene.dynamics = MakeSmoothFunction(
+      "disc_in_the_way.f", 2, [](const auto&, const auto&, const auto&, const auto&, auto& out) {
+        out[0] = 1.0;
+        out[1] = 0.0;
+      });
+  MovingSet disc;
+  disc.name = "disc";
+  disc.constraint_names = {"c"};
+  disc.constraints = MakeSmoothFunction(
+      "disc_in_the_way.c", 1, [](const auto& x, const auto&, const auto&, const auto&, auto& out) {
+        out[0] = x[0] * x[0] + x[1] * x[1] - 1.0;
+      });
+  scene.effects.push_back(disc);
+  return scene;
+}
+
+TEST(IdaTest, ContactInsideOneStepIsNotMissed) {
+  // In free flight the solution is linear, BDF's local error vanishes and IDA's steps double
+  // without bound (about 40 time units at x1 = 0 from x0 = -50): the whole disc fits inside one
+  // step, the constraint is positive at both of its ends, and the point flew through the disc
+  // (x(T) = (5, 0.9), no event) at every rtol.
+  for (double x0 : {-5.0, -50.0}) {
+    const Scene scene = DiscInTheWayScene(x0);
+    const double height = scene.initial_state[1];
+    const double enter = -x0 - std::sqrt(1.0 - height * height);
+    const double tau = std::log(std::tan(0.5 * (std::numbers::pi - std::asin(height))));
+    const IdaResult ida = SimulateIda(scene, IdaOptions::Reference());
+    ASSERT_EQ(ida.status, IdaStatus::kSuccess) << "x0 = " << x0 << ": " << ida.message;
+    ExpectFeasibleFinalState(scene, ida, IdaOptions::Reference().event_tolerance);
+    EXPECT_NEAR(ida.final_state[0], scene.final_time - enter - tau, kReferenceAccuracy)
+        << "x0 = " << x0;
+    EXPECT_NEAR(ida.final_state[1], 1.0, kReferenceAccuracy) << "x0 = " << x0;
+    ASSERT_EQ(ida.events.size(), 2u) << "x0 = " << x0;
+    EXPECT_EQ(ida.events[0].kind, EventKind::kEnter);
+    EXPECT_NEAR(ida.events[0].t, enter, kReferenceAccuracy);
+    EXPECT_EQ(ida.events[1].kind, EventKind::kLeave);
+    EXPECT_NEAR(ida.events[1].t, enter + tau, kReferenceAccuracy);
+  }
+}
+
+// IDA at a loose tolerance on the diode bridge against its reference (rtol 1e-12): the
+// global error of v_L(T) over two source periods and 14 restarts, measured 3.8e-5 at rtol
+// 1e-4 (0.4 rtol |v_L|); ten times rtol |v_L| is the bound, 90 times below the 0.9 V of a
+// missed conduction interval.
+constexpr double kLooseRtol = 1e-4;
+constexpr double kLooseAgreementPerRtol = 10.0;
+
+TEST(IdaTest, DiodeBridgeAtLooseToleranceKeepsEveryConductionInterval) {
+  // At rtol 1e-4 IDA stepped over the conduction interval of D2 and D3 from t = 0.0337 to
+  // 0.0352 (their multipliers' root functions positive at both ends of the step) and ended
+  // with v_L = 8.605 V instead of 9.510 V, with 10 events instead of 14.
+  const Scene scene = MakeScene("diode_bridge");
+  IdaOptions reference_options = IdaOptions::Reference();
+  // IDA's default Newton coefficient, as DiodeBridgeTest.CertificatesAndPairedSwitches
+  // (tests/integrators/complementarity_test.cpp) explains.
+  reference_options.newton_convergence_factor = 0.33;
+  const ReferenceSolution reference = ComputeReference(scene, {}, reference_options);
+  IdaOptions options;
+  options.relative_tolerance = kLooseRtol;
+  options.absolute_tolerance = kLooseRtol / 100.0;
+  const IdaResult ida = SimulateIda(scene, options);
+  ASSERT_EQ(ida.status, IdaStatus::kSuccess) << ida.message;
+  ASSERT_EQ(ida.events.size(), reference.events.size());
+  for (std::size_t k = 0; k < ida.events.size(); ++k) {
+    EXPECT_EQ(ida.events[k].what, reference.events[k].what) << k;
+    EXPECT_EQ(ida.events[k].kind, reference.events[k].kind) << k;
+  }
+  EXPECT_NEAR(ida.final_state[0], reference.final_state[0],
+              kLooseAgreementPerRtol * kLooseRtol * std::fabs(reference.final_state[0]));
 }
 
 // A point moving up at unit speed from the touching point (1, 0) of the discs of radius 8

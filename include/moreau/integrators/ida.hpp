@@ -20,14 +20,15 @@
 /// kappa P (Baumgarte stabilization, IdaOptions::drift_rate) makes the constraint manifold of
 /// the phase attracting, so integration errors do not drift off it; at the end of every phase
 /// the state is projected back onto P = 0 (minimum-norm correction) before the statuses of
-/// the next phase are decided. Root functions watch the
-/// free side of every pair (LoweredSystem::EvaluateEventIndicators: c of inactive
-/// constraints, multipliers of active ones, lambda of inactive modes, theta of sliding ones)
-/// and the relays' switching functions. At a root the new statuses come from the velocity-
-/// level complementarity problem at the event state (LoweredSystem::DecideStatuses: the slow
-/// solution), a relay flips its memory, and IDA restarts from consistent values. Sliding
-/// modes are DAE phases, never chattering. Control breakpoints restart IDA with the new input
-/// values; an indicator that is zero at a breakpoint or at tf is decided there.
+/// the next phase are decided. Root functions watch the free side of every pair
+/// (LoweredSystem::EvaluateEventIndicators: c of inactive constraints, multipliers of active
+/// ones, lambda of inactive modes, theta of sliding ones) and the relays' switching functions;
+/// they are also sampled inside every step on IDA's interpolant, so that a contact that begins
+/// and ends within one step is found. At a root the new statuses come from the velocity-level
+/// complementarity problem at the event state (LoweredSystem::DecideStatuses: the slow
+/// solution), a relay flips its memory, and IDA restarts from consistent values. Sliding modes
+/// are DAE phases, never chattering. Control breakpoints restart IDA with the new input values;
+/// an indicator that is zero at a breakpoint or at tf is decided there.
 ///
 /// Accuracy is tolerance-driven (rtol, atol); IdaOptions::Reference() (rtol = 1e-12) gives
 /// the reference solutions that tests and benchmarks compare the other integrators with.
