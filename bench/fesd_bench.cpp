@@ -4,15 +4,18 @@
 //   build/release/bench/fesd_bench
 //   build/release/bench/fesd_bench --benchmark_filter=Overhead --benchmark_repetitions=5
 //   build/release/bench/fesd_bench --benchmark_filter=ElementRatio   (issue 15, item 5)
+//   build/release/bench/fesd_bench --benchmark_filter=AdaptiveVsIda  (issue 16, per-step cost)
 #include <benchmark/benchmark.h>
 #include <time.h>
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <stdexcept>
 #include <vector>
 
 #include "moreau/integrators/fesd.hpp"
+#include "moreau/integrators/ida.hpp"
 #include "moreau/integrators/radau.hpp"
 #include "moreau/scenes/catalog.hpp"
 
@@ -168,6 +171,60 @@ void BM_FesdElementRatio(benchmark::State& state) {
 BENCHMARK(BM_FesdElementRatio)
     ->ArgsProduct({{0, 1}, {2, 3}})
     ->ArgNames({"scene", "stages"})
+    ->Unit(benchmark::kMillisecond);
+
+// Adaptive FESD against IDA at the same tolerances (issue 16): per iteration one adaptive
+// FESD run and one IDA run of the scene with rtol = 10^-range(2) and atol = rtol / 100 (as
+// bench/adaptive_tolerance), interleaved and timed in CPU time like BM_FesdElementRatio.
+// This compares equal tolerances, not equal errors (the report's table "Adaptive FESD against
+// IDA" does that): it tracks FESD's cost per step and its counters, cheaply, between changes.
+// Counters: medians of the CPU milliseconds and of the ratio; FESD's steps, Newton iterations
+// and factorizations per run.
+const char* const kAdaptiveScenes[] = {"F1", "S2", "S3", "S4", "H1"};
+
+void BM_FesdAdaptiveVsIda(benchmark::State& state) {
+  const moreau::Scene scene = moreau::MakeScene(kAdaptiveScenes[state.range(0)]);
+  const double rtol = std::pow(10.0, -static_cast<double>(state.range(2)));
+  moreau::FesdOptions fesd;
+  fesd.stages = static_cast<int>(state.range(1));
+  fesd.adaptive = true;
+  fesd.relative_tolerance = rtol;
+  fesd.absolute_tolerance = rtol / 100.0;
+  fesd.record_trajectory = false;
+  moreau::IdaOptions ida;
+  ida.relative_tolerance = rtol;
+  ida.absolute_tolerance = rtol / 100.0;
+  std::vector<double> fesd_ms, ida_ms, ratios;
+  moreau::FesdStats stats;
+  for (auto _ : state) {
+    const double t0 = ThreadCpuSeconds();
+    const moreau::FesdResult a = moreau::SimulateFesd(scene, fesd);
+    const double t1 = ThreadCpuSeconds();
+    const moreau::IdaResult b = moreau::SimulateIda(scene, ida);
+    const double t2 = ThreadCpuSeconds();
+    if (a.status != moreau::FesdStatus::kSuccess) {
+      state.SkipWithError(a.message.c_str());
+      break;
+    }
+    stats = a.stats;
+    fesd_ms.push_back(1e3 * (t1 - t0));
+    ida_ms.push_back(1e3 * (t2 - t1));
+    ratios.push_back((t1 - t0) / (t2 - t1));
+  }
+  if (ratios.empty()) return;
+  state.SetLabel(kAdaptiveScenes[state.range(0)]);
+  state.counters["fesd_ms"] = Median(fesd_ms);
+  state.counters["ida_ms"] = Median(ida_ms);
+  state.counters["ratio"] = Median(ratios);
+  state.counters["steps"] = static_cast<double>(stats.num_steps);
+  state.counters["rejected"] =
+      static_cast<double>(stats.num_rejected_steps + stats.num_failed_steps);
+  state.counters["newton"] = static_cast<double>(stats.num_newton_iterations);
+  state.counters["lu"] = static_cast<double>(stats.num_factorizations);
+}
+BENCHMARK(BM_FesdAdaptiveVsIda)
+    ->ArgsProduct({{0, 1, 2, 3, 4}, {3, 4}, {4, 8}})
+    ->ArgNames({"scene", "stages", "rtol_exp"})
     ->Unit(benchmark::kMillisecond);
 
 // FESD against smooth Radau IIA on a scene without effects, interleaved in one run (so that

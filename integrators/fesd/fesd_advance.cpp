@@ -388,18 +388,29 @@ Violation FesdRun::EndViolation(const internal::CollocationStages& stages, const
   Vector solved;
   if (np_ == 0) return violation;
   // y is the last stage's state (Radau IIA: c_s = 1): solved from that stage's evaluation
-  // (a linear velocity level needs no evaluation of its own).
+  // (a linear velocity level needs no evaluation of its own; a nonlinear one is solved by
+  // Newton from the stage's algebraic values). That is the solve the element's certificates
+  // make at its last stage (ConsistentFreeSides), which therefore take it from end_level_.
   const int last = s_ - 1;
+  end_level_.valid = false;
   const bool at_stage = y.size() == stages.stage_state(last).size() &&
                         (y.array() == stages.stage_state(last).array()).all();
-  if (!(at_stage ? system_.SolveVelocityLevel(y, a_zero_, *v, stages.stage_algebraic(last),
-                                              stages.stage(last), &solved)
-                 : system_.SolveVelocityLevel(y, a_zero_, *v, &solved))) {
+  const Vector& z_last = stages.stage_algebraic(last);
+  if (!(at_stage
+            ? system_.SolveVelocityLevel(y, a_zero_, z_last, z_last, stages.stage(last), &solved)
+            : system_.SolveVelocityLevel(y, a_zero_, *v, &solved))) {
     return violation;
   }
   *v = solved;
   IndicatorEvaluation& end = indicators_;
   system_.EvaluateEventIndicators(y, solved, a_zero_, Derivatives::kNone, &end);
+  if (at_stage) {
+    end_level_.valid = true;
+    end_level_.a_zero = a_zero_;
+    end_level_.y = y;
+    end_level_.z = z_last;
+    end_level_.indicators = end.values;
+  }
   for (int k = 0; k < np_ && !violation.found; ++k) {
     if (end.values[k] < -options_.event_tolerance * scales[k]) {
       violation = {true, element, FreeSideIsJump(k) ? 1.0 : EndCrossing(stages, k, end.values[k])};

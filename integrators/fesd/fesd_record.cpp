@@ -140,6 +140,15 @@ void FesdRun::ConsistentFreeSides(const Vector& y, const PointEvaluation& stage,
     jump |= FreeSideIsJump(k);
   }
   if (!jump) return;
+  if (end_level_.valid && end_level_.a_zero == a_zero_ && y.size() == end_level_.y.size() &&
+      z.size() == end_level_.z.size() && (y.array() == end_level_.y.array()).all() &&
+      (z.array() == end_level_.z.array()).all()) {
+    // The element's end state: solved by EndViolation with the same arguments.
+    for (int k = 0; k < np_; ++k) {
+      if (FreeSideIsJump(k)) free[k] = end_level_.indicators[k];
+    }
+    return;
+  }
   Vector& v = stage_v_;
   // From the stage's evaluation: a linear velocity level needs no evaluation of its own.
   if (!system_.SolveVelocityLevel(y, a_zero_, z, z, stage, &v)) {
@@ -196,6 +205,7 @@ void FesdRun::Certificates(const internal::CollocationStages& stages, const Vect
   }
   element->cross_complementarity = cross;
   element->complementarity = stage_residual;
+  end_level_.valid = false;  // used by this element's last stage only
 }
 
 }  // namespace moreau::internal

@@ -374,6 +374,17 @@ class FesdRun {
   mutable IndicatorEvaluation indicators_;
   mutable std::vector<Vector> free_sides_;
   mutable Vector stage_y_, stage_v_;  // a stage state and its consistent velocity level
+  // The consistent velocity level and indicators that EndViolation solved at an element's end
+  // state, which is its last stage (c_s = 1), from that stage's evaluation and algebraic
+  // values: the element's certificates need the same solve there (ConsistentFreeSides with the
+  // same y, statuses, z and evaluation), so they take it from here. Keyed by y and z (bitwise)
+  // and valid only until the next element system is evaluated (Record follows EndViolation).
+  struct EndLevel {
+    bool valid = false;
+    std::vector<bool> a_zero;
+    Vector y, z, indicators;
+  };
+  mutable EndLevel end_level_;
 };
 
 }  // namespace moreau::internal

@@ -139,8 +139,10 @@ bool GroupSystem::Evaluate(const Vector& w, bool with_jacobian, Vector* r, Vecto
     const Vector y_end = EndState(w);
     const auto v = w.segment(v_offset(), nz_);
     const Derivatives level = with_jacobian ? Derivatives::kStates : Derivatives::kNone;
-    VelocityLevelEvaluation velocity;
-    IndicatorEvaluation indicators;
+    // Into the members that AssembleJacobian reads (with derivatives) or into scratch (values
+    // for the line search), so that no evaluation allocates.
+    VelocityLevelEvaluation& velocity = with_jacobian ? velocity_ : value_velocity_;
+    IndicatorEvaluation& indicators = with_jacobian ? indicators_ : value_indicators_;
     system_->EvaluateVelocityLevel(y_end, v, LoweredSystem::RolesFor(setup_.a_zero), level,
                                    &velocity);
     system_->EvaluateEventIndicators(y_end, v, setup_.a_zero, level, &indicators);
@@ -161,8 +163,6 @@ bool GroupSystem::Evaluate(const Vector& w, bool with_jacobian, Vector* r, Vecto
     (*a)[0] = (setup_.h_max - h) / setup_.h_max;
     (*b)[0] = best >= 0 ? smallest : 1.0;
     if (with_jacobian) {
-      velocity_ = std::move(velocity);
-      indicators_ = std::move(indicators);
       event_b_ = (*b)[0];
       event_pair_ = best;
       tau_ = tau;

@@ -92,9 +92,11 @@ class GroupSystem final : public MixedComplementaritySystem {
   // the group (index-1 indicators come from the state), so a relative tolerance costs no
   // accuracy. Other rows keep their absolute scale (their v locates switches).
   Vector velocity_scale_;
-  Vector start_scratch_;  // scratch: element start state
-  VelocityLevelEvaluation velocity_;
+  Vector start_scratch_;              // scratch: element start state
+  VelocityLevelEvaluation velocity_;  // at the last with-Jacobian evaluation
   IndicatorEvaluation indicators_;
+  VelocityLevelEvaluation value_velocity_;  // scratch of values-only evaluations
+  IndicatorEvaluation value_indicators_;
   double h_jacobian_ = 0.0;
   double event_b_ = 0.0;
   int event_pair_ = -1;
