@@ -1,5 +1,6 @@
 #include "constraint_filter.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -46,7 +47,6 @@ bool NearActiveFilter::Update(const Vector& y, const std::vector<bool>& a_zero, 
     const double c = values_[k];
     keep[i] = forced_[i] || active[i] || !(c > margin) || (working[i] && !(c > 2.0 * margin));
   }
-  std::fill(forced_.begin(), forced_.end(), false);
   *previous = system_->working_layout();
   const bool changed = system_->SetWorkingPairs(keep);
   if (changed) ++stats_.changes;
@@ -64,6 +64,8 @@ bool NearActiveFilter::Check(const Vector& y, double* smallest) {
   ++stats_.rechecks;
   return false;
 }
+
+void NearActiveFilter::StepAccepted() { std::fill(forced_.begin(), forced_.end(), false); }
 
 std::vector<bool> NearActiveFilter::working() const {
   std::vector<bool> flags(static_cast<std::size_t>(system_->num_declared_pairs()), false);

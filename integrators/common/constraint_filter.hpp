@@ -36,8 +36,13 @@ class NearActiveFilter {
               LoweredSystem::WorkingLayout* previous);
   // True if every left-out constraint is positive at y; otherwise they are marked to join the
   // working set at the next Update (the caller solves the step again). *smallest: the
-  // smallest left-out constraint at y (infinity if none).
+  // smallest left-out constraint at y (infinity if none). A marked constraint stays in the
+  // working set until StepAccepted: otherwise the hysteresis test could drop it again at the
+  // retry's Update (its value at the step start far above the margin) and the step would be
+  // solved again and again without it.
   bool Check(const Vector& y, double* smallest);
+  // The step was accepted: constraints marked by Check are filtered by the margin again.
+  void StepAccepted();
   // The working set as flags over the declared pairs (snapshots), and its restoration.
   std::vector<bool> working() const;
   bool Restore(const std::vector<bool>& working, LoweredSystem::WorkingLayout* previous);

@@ -20,7 +20,10 @@ bool FesdRun::Advance(double step_end, int* remaining) {
     UpdateWorkingSet(step_end - tau_);
     bool retry = false;
     const bool switched = AdvanceOnce(step_end, remaining, &retry);
-    if (!retry) return switched;
+    if (!retry) {
+      filter_.StepAccepted();
+      return switched;
+    }
   }
 }
 

@@ -309,6 +309,7 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
         --k;  // the same step again (k + 1 after the loop's increment; unsigned wrap at 0)
         continue;
       }
+      filter.StepAccepted();
       if (options.sensitivities) {
         if (!StepTransfer(&stages, y, w, h, options.newton, &transfer)) {
           std::ostringstream message;

@@ -1,7 +1,8 @@
 // The crowd of 100 agents (issue 15 acceptance): FESD with sparse storage and the near-active
 // constraint filter keeps every element certified (no overlap of any pair or wall, declared or
 // not; complementarity residuals of every element), and the filter changes nothing: the same
-// events and the same states as the run that assembles every declared constraint.
+// events and the same states as the run that assembles every declared constraint; and a
+// constraint the filter's margin misses is caught by the stage check (a one-state scene).
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -10,6 +11,7 @@
 
 #include "moreau/integrators/fesd.hpp"
 #include "moreau/integrators/timestepping.hpp"
+#include "moreau/model/scene_file.hpp"
 #include "moreau/scenes/crowd.hpp"
 
 namespace moreau {
@@ -128,6 +130,84 @@ TEST(CrowdLargeTest, TimeSteppingWithTheFilterEqualsTheFullSystem) {
     ASSERT_LE((runs[0].trajectory.x[k] - runs[1].trajectory.x[k]).lpNorm<Eigen::Infinity>(),
               kFilterAgreement)
         << "t " << runs[0].trajectory.t[k];
+  }
+}
+
+// The stage check behind the filter's margin. The margin uses the rate at the step start, so
+// constraints approached with growing speed are missed. Two points start at rest and
+// accelerate towards the wall x1 >= 0: x1' = -20 t from 0.05, x2' = -40 t from 0.18, with
+// x2 >= x1. Closed form: x1 reaches the wall at t1 = sqrt(0.005) and stops; x2 = 0.18 - 20 t^2
+// reaches it at t2 = sqrt(0.009), and both stay at 0. The first step (margins 1e-9 at rest)
+// leaves both constraints out; its stage check finds x1 < 0, the wall joins, the step is
+// solved again; now x2 passes the stopped x1, the pair joins and the step is solved a third
+// time (time-stepping; FESD stops its first step at the wall's contact and takes the pair in
+// by the margin after it). A joined constraint must stay until its step is accepted: the
+// hysteresis test alone would drop the wall again at the second retry (x1(0) is far above the
+// margin), and the retries would alternate between the two forever (they did).
+constexpr char kAcceleratingTowardsWall[] = R"(
+name = "accelerating"
+description = "two points accelerating towards the wall x1 >= 0, x2 >= x1"
+states = ["x1", "x2"]
+x0 = [0.05, 0.18]
+tf = 0.5
+dynamics = ["-20*t", "-40*t"]
+
+[[effects]]
+kind = "moving_set"
+name = "walls"
+constraint_names = ["wall", "pair"]
+constraints = ["x1", "x2 - x1"]
+)";
+// FESD s = 2 integrates the free motions (quadratic in t) exactly (Radau IIA is exact for
+// polynomial x of degree <= 2s - 1), so the contact times are located to the Newton
+// tolerance; 1e-10 leaves room for the switch-time equations' conditioning (speeds 1.4, 3.8).
+constexpr double kContactTimeTolerance = 1e-10;
+
+TEST(CrowdLargeTest, ConstraintsMissedByTheMarginJoinAndTheStepIsSolvedAgain) {
+  const Scene scene = ParseScene(kAcceleratingTowardsWall, "accelerating.toml");
+  FesdOptions fesd;
+  fesd.stages = 2;
+  fesd.step_size = 0.1;
+  fesd.constraint_filter = ConstraintFilter::kOn;
+  const FesdResult rechecked = SimulateFesd(scene, fesd);
+  fesd.constraint_filter = ConstraintFilter::kOff;
+  const FesdResult full = SimulateFesd(scene, fesd);
+  ASSERT_EQ(rechecked.status, FesdStatus::kSuccess) << rechecked.message;
+  ASSERT_EQ(full.status, FesdStatus::kSuccess) << full.message;
+  EXPECT_GE(rechecked.stats.num_filter_rechecks, 1);
+  ASSERT_EQ(rechecked.events.size(), full.events.size());
+  ASSERT_GE(rechecked.events.size(), 2u);
+  EXPECT_NEAR(rechecked.events[0].t, std::sqrt(0.005), kContactTimeTolerance);
+  EXPECT_NEAR(rechecked.events[1].t, std::sqrt(0.009), kContactTimeTolerance);
+  for (std::size_t k = 0; k < full.events.size(); ++k) {
+    EXPECT_EQ(rechecked.events[k].what, full.events[k].what) << "event " << k;
+    EXPECT_NEAR(rechecked.events[k].t, full.events[k].t, kFilterAgreement) << "event " << k;
+  }
+  ASSERT_EQ(rechecked.trajectory.size(), full.trajectory.size());
+  for (std::size_t k = 0; k < full.trajectory.size(); ++k) {
+    EXPECT_GE(rechecked.trajectory.x[k][0], -kOverlapTolerance) << "t " << full.trajectory.t[k];
+    EXPECT_GE(rechecked.trajectory.x[k][1] - rechecked.trajectory.x[k][0], -kOverlapTolerance)
+        << "t " << full.trajectory.t[k];
+    EXPECT_LE((rechecked.trajectory.x[k] - full.trajectory.x[k]).lpNorm<Eigen::Infinity>(),
+              kFilterAgreement)
+        << "t " << full.trajectory.t[k];
+  }
+
+  TimeSteppingOptions stepping;
+  stepping.stages = 2;
+  stepping.step_size = 0.1;
+  stepping.constraint_filter = ConstraintFilter::kOn;
+  const TimeSteppingResult stepped = SimulateTimeStepping(scene, stepping);
+  stepping.constraint_filter = ConstraintFilter::kOff;
+  const TimeSteppingResult stepped_full = SimulateTimeStepping(scene, stepping);
+  ASSERT_EQ(stepped.status, TimeSteppingStatus::kSuccess) << stepped.message;
+  ASSERT_EQ(stepped_full.status, TimeSteppingStatus::kSuccess) << stepped_full.message;
+  EXPECT_GE(stepped.stats.num_filter_rechecks, 2);
+  ASSERT_EQ(stepped.trajectory.size(), stepped_full.trajectory.size());
+  for (std::size_t k = 0; k < stepped.trajectory.size(); ++k) {
+    EXPECT_LE((stepped.trajectory.x[k] - stepped_full.trajectory.x[k]).lpNorm<Eigen::Infinity>(),
+              kFilterAgreement)
+        << "t " << stepped.trajectory.t[k];
   }
 }
 
