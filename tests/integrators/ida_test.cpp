@@ -504,6 +504,21 @@ constexpr double kDoorwayAgreementPerRtol = 200.0;
 constexpr double kDoorwayFesdAccuracy = 1e-10;
 
 // FESD s = 3, h = 0.05 on `scene`.
+// S5 with its two inputs piecewise constant on the 20 control intervals of 0.6.
+Scene S5WithControls(const double (&controls)[20][2]) {
+  Scene scene = MakeScene("S5");
+  for (int j = 0; j < 2; ++j) {
+    PiecewiseConstantSignal& signal = scene.inputs[static_cast<std::size_t>(j)].signal;
+    signal.breakpoints.clear();
+    signal.values.clear();
+    for (int k = 0; k < 20; ++k) {
+      if (k > 0) signal.breakpoints.push_back(0.6 * k);
+      signal.values.push_back(controls[k][j]);
+    }
+  }
+  return scene;
+}
+
 Vector FesdFinalState(const Scene& scene) {
   FesdOptions fesd;
   fesd.stages = 3;
@@ -560,16 +575,7 @@ TEST(IdaTest, DoorwayPlanAgreesWithFesd) {
                               {1.861, 2.432},  {1.637, 2.57},   {1.351, 2.714},  {1.049, 2.831},
                               {-0.258, 2.99},  {-0.321, 2.984}, {-0.738, -5.0},  {-0.123, -5.0},
                               {0.451, -3.167}, {5.0, 0.0},      {5.0, 0.0},      {2.857, 0.0}};
-  Scene scene = MakeScene("S5");
-  for (int j = 0; j < 2; ++j) {
-    PiecewiseConstantSignal& signal = scene.inputs[static_cast<std::size_t>(j)].signal;
-    signal.breakpoints.clear();
-    signal.values.clear();
-    for (int k = 0; k < 20; ++k) {
-      if (k > 0) signal.breakpoints.push_back(0.6 * k);
-      signal.values.push_back(plan[k][j]);
-    }
-  }
+  const Scene scene = S5WithControls(plan);
   const Vector fesd = FesdFinalState(scene);
   EXPECT_GT(fesd[1], 1.0) << "slider height at T";
   ExpectIdaAgreesWithFesd(scene, fesd);
@@ -589,17 +595,7 @@ Scene DoorwayOptimumScene() {
       {0.3212912708824081, -3.1234541409752103},  {1.2242254606599956, -2.5259000035636996},
       {2.2583795977502588, -1.9529963465576619},  {2.685256160101231, -1.4508291217745304},
       {2.9812589476233904, -1.082226483658619},   {3.089673714845338, -0.724065200453324}};
-  Scene scene = MakeScene("S5");
-  for (int j = 0; j < 2; ++j) {
-    PiecewiseConstantSignal& signal = scene.inputs[static_cast<std::size_t>(j)].signal;
-    signal.breakpoints.clear();
-    signal.values.clear();
-    for (int k = 0; k < 20; ++k) {
-      if (k > 0) signal.breakpoints.push_back(0.6 * k);
-      signal.values.push_back(controls[k][j]);
-    }
-  }
-  return scene;
+  return S5WithControls(controls);
 }
 
 TEST(IdaTest, DoorwayOptimumAgreesWithFesd) {
