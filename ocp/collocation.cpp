@@ -23,6 +23,25 @@ using RowMajorMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eig
 // elements may shrink to place a switch and grow to cover the rest of the interval).
 constexpr double kMinElementFraction = 1e-3;
 constexpr double kMaxElementFraction = 3.0;
+// Element minima of a free constraint (OcpOptions::collocation_element_minima): samples per
+// element before the search (the polynomial X has degree s, c of it a few times that: at most
+// a few local minima per element, each between two of 16 samples), and the golden-section
+// search's final bracket in theta (the Illinois iteration usually ends on a zero slope or a
+// bracket at rounding level first). The row's gradient is that of v (LocateMinima) at fixed
+// theta*, exact where dv/dtheta(theta*) = 0: a bracket of 1e-10 leaves |dv/dtheta| <=
+// |v''| 1e-10.
+constexpr int kMinimumSamples = 16;
+constexpr double kMinimumBracket = 1e-10;
+// Illinois converges superlinearly (order about 1.44): from a bracket of 1/16 to 1e-10 in
+// well under 100 slope evaluations; the cap only guards against a non-terminating loop.
+constexpr int kMinimumIterations = 100;
+// Pinned ends (LocateMinima): the search starts this far inside (c_m at the end is zero only
+// to the solver's tolerance, and c_m / theta magnifies that residual by 1 / theta). A dip
+// inside the margin is at most |c''| kPinnedMargin^2 / 8 (the slope at the margin is
+// nonnegative). Measured on the doorway: with 1e-3 IPOPT stopped at
+// Solved_To_Acceptable_Level with a pinned end 8e-8 off the wall; with 1e-2 Solve_Succeeded
+// with x(T) within 2.5e-8 of it.
+constexpr double kPinnedMargin = 1e-2;
 }  // namespace
 
 class CollocationNlp::Impl {
@@ -112,6 +131,13 @@ class CollocationNlp::Impl {
     return TerminalRow() + num_terminal_equalities_ + num_terminal_inequalities_ + k * num_path_;
   }
   int NumRows() const { return PathRow(intervals_ + 1); }
+  // The element-minimum rows (ImposeElementMinima): per element one per constraint, appended
+  // after all other rows only while imposed, so that the NLP of the other levels is unchanged
+  // (their IPOPT paths change at round-off level with any extra row, and they are sensitive to
+  // it: with free extra rows the doorway's exact level did not converge).
+  int NumMinimumRows() const { return options_.collocation_element_minima ? nc_ : 0; }
+  int MinimumRow(int k, int e) const { return NumRows() + (k * elements_ + e) * nc_; }
+  int NumRowsWithMinima() const { return NumRows() + intervals_ * elements_ * NumMinimumRows(); }
 
   // The element's start: the previous element's last stage, or the initial state.
   bool StartIsInitial(int k, int e) const { return k == 0 && e == 0; }
@@ -288,6 +314,21 @@ class CollocationNlp::Impl {
         for (int c : block.columns) structure_.emplace_back(block.row + r, c);
       }
     }
+    // The element minima's blocks last: their values follow all others.
+    structure_with_minima_ = structure_;
+    for (int k = 0; k < intervals_; ++k) {
+      for (int e = 0; e < elements_; ++e) {
+        const int index =
+            AddBlock(MinimumRow(k, e), NumMinimumRows(),
+                     check_columns_[static_cast<std::size_t>(k * elements_ + e)].columns);
+        minimum_block_.push_back(index);
+        if (index < 0) continue;
+        const Block& block = blocks_[static_cast<std::size_t>(index)];
+        for (int r = 0; r < block.rows; ++r) {
+          for (int c : block.columns) structure_with_minima_.emplace_back(block.row + r, c);
+        }
+      }
+    }
   }
 
   Eigen::Map<RowMajorMatrix> BlockValues(int index, Vector* values) const {
@@ -330,6 +371,46 @@ class CollocationNlp::Impl {
       }
     }
     exact_ = false;
+    minima_imposed_ = false;
+  }
+
+  // On the exact level (same pieces): c_m's minimum over the element >= 0 for every inactive
+  // piece instead of c_m >= 0 at the check points (the minimum bounds c there, and an active
+  // check row next to an active minimum at almost the same theta would be an almost parallel
+  // pair of active constraints). The check rows' multipliers move to the minimum's row: to
+  // first order the same force, acting at the minimiser instead of at the check points.
+  void ImposeElementMinima(Vector* multipliers) {
+    MOREAU_ASSERT(exact_ && NumMinimumRows() > 0, "element minima need the exact level");
+    const int rows = NumRows(), all = NumRowsWithMinima();
+    constraint_lower_.conservativeResize(all);
+    constraint_upper_.conservativeResize(all);
+    constraint_lower_.tail(all - rows).setConstant(-kInfinity);
+    constraint_upper_.tail(all - rows).setConstant(kInfinity);
+    const bool move = multipliers != nullptr && multipliers->size() == rows;
+    if (move) {
+      multipliers->conservativeResize(all);
+      multipliers->tail(all - rows).setZero();
+    }
+    for (int k = 0; k < intervals_; ++k) {
+      for (int e = 0; e < elements_; ++e) {
+        for (int m = 0; m < nc_; ++m) {
+          if (pieces_[Piece(k, e, m)]) continue;
+          double sum = 0.0;
+          for (int q = 0; q < NumCheckPoints(); ++q) {
+            const int row = CheckRow(k, e) + q * nc_ + m;
+            constraint_lower_[row] = -kInfinity;
+            if (move) {
+              sum += (*multipliers)[row];
+              (*multipliers)[row] = 0.0;
+            }
+          }
+          constraint_lower_[MinimumRow(k, e) + m] = 0.0;
+          if (move) (*multipliers)[MinimumRow(k, e) + m] = sum;
+        }
+      }
+    }
+    minima_imposed_ = true;
+    points_valid_ = false;
   }
 
   // Per element and constraint: is the constraint active (c = 0, Lambda >= 0) on the piece?
@@ -414,6 +495,7 @@ class CollocationNlp::Impl {
       }
     }
     exact_ = true;
+    minima_imposed_ = false;
     pieces_ = active;
     return count;
   }
@@ -556,6 +638,7 @@ class CollocationNlp::Impl {
   Point& Check(int k, int e, int q) {
     return check_points_[static_cast<std::size_t>((k * elements_ + e) * NumCheckPoints() + q)];
   }
+  Point& MinimumPoint(int k, int e, int m) { return minimum_points_[Piece(k, e, m)]; }
   Point& Stage(int k, int e, int i) {
     return points_[static_cast<std::size_t>((k * elements_ + e) * stages_ + i)];
   }
@@ -568,6 +651,166 @@ class CollocationNlp::Impl {
     return interval_start_points_[static_cast<std::size_t>(k)];
   }
 
+  // The collocation polynomial of element (k, e) at theta in [0, 1]:
+  // X(theta) = X_0 + sum_j w_j(theta) (X_j - X_0).
+  Vector PolynomialState(int k, int e, const Vector& weights) {
+    const Vector& x_start = Start(k, e).x;
+    Vector x = x_start;
+    for (int j = 0; j < stages_; ++j) x += weights[j] * (Stage(k, e, j).x - x_start);
+    return x;
+  }
+
+  bool HasMinimumRow(int k, int e, int m) const {
+    return minima_imposed_ && !pieces_[Piece(k, e, m)];
+  }
+
+  // Element minima, per inactive constraint m of element (k, e): the row is the minimum over
+  // theta of v(theta) = c_m(X(theta), t_start + theta h) / phi(theta). phi = 1, except at an
+  // end that a neighbouring active piece pins to c_m = 0: there c_m(theta) vanishes like the
+  // distance to the end, and min c_m >= 0 would have a zero gradient exactly where the
+  // trajectory leaves the wall tangentially (IPOPT then crawls: measured 1000 iterations at
+  // infeasibility 1e-7 on the doorway). Dividing by theta (start pinned), 1 - theta (end
+  // pinned) or both keeps the row's gradient away from zero there (v -> dc_m/dtheta at the
+  // pinned end) and c_m >= 0 on the element is still v >= 0. Pinned ends are searched from
+  // kPinnedMargin inside (c_m at the end is only zero to the solver's tolerance).
+  struct Weight {
+    bool start = false, end = false;
+    double Value(double theta) const { return (start ? theta : 1.0) * (end ? 1.0 - theta : 1.0); }
+    double Slope(double theta) const {
+      if (start && end) return 1.0 - 2.0 * theta;
+      return start ? 1.0 : (end ? -1.0 : 0.0);
+    }
+    double Curvature() const { return start && end ? -2.0 : 0.0; }
+  };
+  Weight MinimumWeight(int k, int e, int m) const {
+    Weight w;
+    if (e > 0) {
+      w.start = pieces_[Piece(k, e - 1, m)];
+    } else if (k > 0) {
+      w.start = pieces_[Piece(k - 1, elements_ - 1, m)];
+    }
+    if (e + 1 < elements_) {
+      w.end = pieces_[Piece(k, e + 1, m)];
+    } else if (k + 1 < intervals_) {
+      w.end = pieces_[Piece(k + 1, 0, m)];
+    }
+    return w;
+  }
+
+  // The minimiser theta* of v for every inactive constraint m of element (k, e), and the point
+  // there. Samples locate the smallest sampled value; the minimiser is that sample where the
+  // slope dv/dtheta points out of the search interval (an end, taken exactly), else the root
+  // of the slope between the sample and the neighbour it descends to, by the Illinois method
+  // (the global minimiser unless two minima within 1/16 of an element compete). A root of the
+  // slope, not a search on values: near a flat minimum the values stop deciding at rounding
+  // level while theta* still moves, and the row's gradient at fixed theta* is exact only where
+  // the slope is 0. Without a sign change of the slope, golden-section search on the values.
+  void LocateMinima(int k, int e, double start, double h, const Vector& u, bool derivatives) {
+    const Vector& x_start = Start(k, e).x;
+    Vector value;
+    Matrix jacobian;
+    // (c_m, dc_m/dtheta) at theta.
+    auto constraint_at = [&](double theta, int m) -> std::pair<double, double> {
+      const Vector x = PolynomialState(k, e, tableau_.InterpolationWeights(theta));
+      const Vector w = tableau_.InterpolationDerivativeWeights(theta);
+      Vector dx = Vector::Zero(n_);  // dX/dtheta
+      for (int j = 0; j < stages_; ++j) dx += w[j] * (Stage(k, e, j).x - x_start);
+      for (const Set& set : sets_) {
+        if (m < set.offset || m >= set.offset + set.size) continue;
+        set.constraints.Jacobian(x, u, start + theta * h, parameters_, Wrt::XT(), &value,
+                                 &jacobian);
+        const int row = m - set.offset;
+        return {value[row], jacobian.row(row).head(n_).dot(dx) + jacobian(row, n_) * h};
+      }
+      return {0.0, 0.0};
+    };
+    const double ratio = 0.5 * (std::sqrt(5.0) - 1.0);
+    for (int m = 0; m < nc_; ++m) {
+      if (!HasMinimumRow(k, e, m)) continue;
+      const Weight weight = MinimumWeight(k, e, m);
+      // v and dv/dtheta = (c' phi - c phi') / phi^2.
+      auto v_at = [&](double theta) {
+        const auto [c, dc] = constraint_at(theta, m);
+        const double phi = weight.Value(theta);
+        return std::pair<double, double>{c / phi,
+                                         (dc * phi - c * weight.Slope(theta)) / (phi * phi)};
+      };
+      const double first = weight.start ? kPinnedMargin : 0.0;
+      const double last = weight.end ? 1.0 - kPinnedMargin : 1.0;
+      auto sample_theta = [&](Eigen::Index i) {
+        return first + (last - first) * static_cast<double>(i) / kMinimumSamples;
+      };
+      Vector samples(kMinimumSamples + 1);
+      for (int i = 0; i <= kMinimumSamples; ++i) samples[i] = v_at(sample_theta(i)).first;
+      Eigen::Index best = 0;
+      samples.minCoeff(&best);
+      double theta = sample_theta(best);
+      const double slope = v_at(theta).second;
+      // The neighbour the slope descends to (none: theta is an end with an outward slope).
+      const int toward = slope > 0.0 ? -1 : (slope < 0.0 ? 1 : 0);
+      const Eigen::Index neighbour = best + toward;
+      if (toward != 0 && neighbour >= 0 && neighbour <= kMinimumSamples) {
+        const double other = sample_theta(neighbour);
+        double lo = std::min(theta, other), hi = std::max(theta, other);
+        double slope_lo = toward < 0 ? v_at(lo).second : slope;
+        double slope_hi = toward < 0 ? slope : v_at(hi).second;
+        if (slope_lo < 0.0 && slope_hi > 0.0) {
+          // Illinois: regula falsi, halving the weight of an end kept twice.
+          int kept = 0;
+          for (int iteration = 0; iteration < kMinimumIterations && hi - lo > kMinimumBracket;
+               ++iteration) {
+            double mid = (lo * slope_hi - hi * slope_lo) / (slope_hi - slope_lo);
+            // A secant point on an end (one slope negligible next to the other): bisect.
+            if (!(mid > lo && mid < hi)) mid = 0.5 * (lo + hi);
+            if (!(mid > lo && mid < hi)) break;  // the bracket at rounding level
+            const double slope_mid = v_at(mid).second;
+            if (slope_mid == 0.0) {
+              lo = hi = mid;
+              break;
+            }
+            if (slope_mid < 0.0) {
+              lo = mid;
+              slope_lo = slope_mid;
+              if (kept == -1) slope_hi *= 0.5;
+              kept = -1;
+            } else {
+              hi = mid;
+              slope_hi = slope_mid;
+              if (kept == 1) slope_lo *= 0.5;
+              kept = 1;
+            }
+          }
+          theta = 0.5 * (lo + hi);
+        } else {
+          lo = sample_theta(std::max<Eigen::Index>(best - 1, 0));
+          hi = sample_theta(std::min<Eigen::Index>(best + 1, kMinimumSamples));
+          double a = hi - ratio * (hi - lo), b = lo + ratio * (hi - lo);
+          double fa = v_at(a).first, fb = v_at(b).first;
+          while (hi - lo > kMinimumBracket) {
+            if (fa <= fb) {
+              hi = b;
+              b = a;
+              fb = fa;
+              a = hi - ratio * (hi - lo);
+              fa = v_at(a).first;
+            } else {
+              lo = a;
+              a = b;
+              fa = fb;
+              b = lo + ratio * (hi - lo);
+              fb = v_at(b).first;
+            }
+          }
+          if (std::min(fa, fb) < samples[best]) theta = fa <= fb ? a : b;
+        }
+      }
+      const std::size_t piece = Piece(k, e, m);
+      minimum_theta_[piece] = theta;
+      EvaluatePoint(PolynomialState(k, e, tableau_.InterpolationWeights(theta)), start + theta * h,
+                    u, nullptr, derivatives, &minimum_points_[piece]);
+    }
+  }
+
   void EvaluatePoints(const Vector& z, bool derivatives) {
     // Evaluate and Hessian are called at the same point (IPOPT): evaluate once.
     if (points_valid_ && (points_derivatives_ || !derivatives) && z.size() == points_z_.size() &&
@@ -577,6 +820,8 @@ class CollocationNlp::Impl {
     points_valid_ = false;
     points_.resize(static_cast<std::size_t>(intervals_ * elements_ * stages_));
     check_points_.resize(static_cast<std::size_t>(intervals_ * elements_ * NumCheckPoints()));
+    minimum_points_.resize(static_cast<std::size_t>(intervals_ * elements_ * nc_));
+    minimum_theta_.assign(static_cast<std::size_t>(intervals_ * elements_ * nc_), 0.0);
     const Vector u0 = Inputs(z, 0);
     EvaluatePoint(InitialState(z), tau_[0], u0, nullptr, derivatives, &initial_point_);
     interval_start_points_.resize(static_cast<std::size_t>(intervals_));
@@ -605,6 +850,7 @@ class CollocationNlp::Impl {
           EvaluatePoint(x, start + check_theta_[static_cast<std::size_t>(q)] * h, u, nullptr,
                         derivatives, &Check(k, e, q));
         }
+        if (minima_imposed_) LocateMinima(k, e, start, h, u, derivatives);
       }
     }
     points_z_ = z;
@@ -659,9 +905,9 @@ class CollocationNlp::Impl {
                 Vector* jacobian_values, std::string* message) {
     const bool derivatives = gradient != nullptr || jacobian_values != nullptr;
     EvaluatePoints(z, derivatives);
-    Vector g = Vector::Zero(NumRows());
+    Vector g = Vector::Zero(constraint_lower_.size());
     Vector values;
-    if (derivatives) values.setZero(static_cast<Eigen::Index>(structure_.size()));
+    if (derivatives) values.setZero(static_cast<Eigen::Index>(Structure().size()));
     const Matrix& a = tableau_.a;
     const Vector& cc = tableau_.c;
     for (int k = 0; k < intervals_; ++k) {
@@ -691,6 +937,12 @@ class CollocationNlp::Impl {
         g.segment(ComplementarityRow(k, e), nc_) = c_sum.cwiseProduct(lambda_sum);
         for (int q = 0; q < NumCheckPoints(); ++q) {
           g.segment(CheckRow(k, e) + q * nc_, nc_) = Check(k, e, q).c;
+        }
+        // Element minima of the inactive constraints (the other rows are free and stay 0).
+        for (int m = 0; minima_imposed_ && m < nc_; ++m) {
+          if (!HasMinimumRow(k, e, m)) continue;
+          g[MinimumRow(k, e) + m] = MinimumPoint(k, e, m).c[m] /
+                                    MinimumWeight(k, e, m).Value(minimum_theta_[Piece(k, e, m)]);
         }
         if (e > 0) g[EquilibrationRow(k, e)] = h - z[LengthIndex(k, e - 1)];
         if (!derivatives) continue;
@@ -791,6 +1043,35 @@ class CollocationNlp::Impl {
             rows.col(layout.lengths + e) += check_theta_[static_cast<std::size_t>(q)] * p.c_t;
           }
         }
+        // Element minima: c_m(X(theta*), t_start + theta* h) at fixed theta* (envelope theorem:
+        // dc_m/dtheta = 0 at an interior minimiser, and theta* = 0 or 1 is fixed at an end).
+        if (minima_imposed_) {
+          const ElementColumns& layout = check_columns_[static_cast<std::size_t>(index)];
+          auto block = BlockValues(minimum_block_[static_cast<std::size_t>(index)], &values);
+          for (int m = 0; m < nc_; ++m) {
+            if (!HasMinimumRow(k, e, m)) continue;
+            const Point& p = MinimumPoint(k, e, m);
+            const double theta = minimum_theta_[Piece(k, e, m)];
+            const Vector w = tableau_.InterpolationWeights(theta) /
+                             MinimumWeight(k, e, m).Value(theta);  // over phi(theta*)
+            auto row = block.row(m);
+            const double start_weight = 1.0 / MinimumWeight(k, e, m).Value(theta) - w.sum();
+            if (StartIsInitial(k, e)) {
+              for (int f = 0; f < nf_; ++f) {
+                row[f] += start_weight *
+                          p.c_x(m, problem_.free_initial_states[static_cast<std::size_t>(f)].state);
+              }
+            } else {
+              row.segment(layout.start, n_) += start_weight * p.c_x.row(m);
+            }
+            for (int j = 0; j < stages_; ++j) {
+              row.segment(layout.stages + j * n_, n_) += w[j] * p.c_x.row(m);
+            }
+            const double c_t = p.c_t[m] / MinimumWeight(k, e, m).Value(theta);
+            for (int l = 0; l < e; ++l) row[layout.lengths + l] += c_t;
+            row[layout.lengths + e] += theta * c_t;
+          }
+        }
         if (e > 0) {
           auto block = BlockValues(
               equilibration_block_[static_cast<std::size_t>(k * (elements_ - 1) + e - 1)], &values);
@@ -868,6 +1149,26 @@ class CollocationNlp::Impl {
       }
     }
     return worst;
+  }
+
+  std::vector<int> InteriorMinimumRows(const Vector& z, double margin) {
+    EvaluatePoints(z, false);
+    std::vector<int> rows;
+    for (int k = 0; k < intervals_; ++k) {
+      for (int e = 0; e < elements_; ++e) {
+        for (int m = 0; m < nc_; ++m) {
+          if (!HasMinimumRow(k, e, m)) continue;
+          const double theta = minimum_theta_[Piece(k, e, m)];
+          const Weight phi = MinimumWeight(k, e, m);
+          const double first = phi.start ? kPinnedMargin : 0.0;
+          const double last = phi.end ? 1.0 - kPinnedMargin : 1.0;
+          if (theta > first + margin && theta < last - margin) {
+            rows.push_back(MinimumRow(k, e) + m);
+          }
+        }
+      }
+    }
+    return rows;
   }
 
   // --- Hessian (OcpHessian::kSecondOrder) ----------------------------------------------------
@@ -1098,6 +1399,83 @@ class CollocationNlp::Impl {
                                                          check_theta_[static_cast<std::size_t>(q)]);
           AddMapped(map, ConstraintHessian(Check(k, e, q), weights), &local);
         }
+        // Element minima: mu_m r with r(z) = v(theta*(z), z), v = c_m(y) / phi(theta),
+        // y = (X, t) linear in z at fixed theta. r'' = y_z^T c_yy y_z / phi + g g^T
+        // d theta*/dz, g = d^2 v / dtheta dz, and d theta*/dz = -g / v'' from dv/dtheta = 0
+        // (interior minima; at an end of the search interval theta* is fixed). Near a flat
+        // minimum the second term is large (a curvature of -1.3e4 measured at the doorway's
+        // plan): without it IPOPT's model of the row is poor.
+        for (int m = 0; minima_imposed_ && m < nc_; ++m) {
+          if (!HasMinimumRow(k, e, m)) continue;
+          const double weight = lambda[MinimumRow(k, e) + m];
+          if (weight == 0.0) continue;
+          const double theta = minimum_theta_[Piece(k, e, m)];
+          const Vector w = tableau_.InterpolationWeights(theta);
+          Map map(static_cast<std::size_t>(n_ + 1));
+          const Map start_map = PointMap(k, e, -1, false);
+          for (int c = 0; c < n_; ++c) {
+            for (const auto& [column, coefficient] : start_map[static_cast<std::size_t>(c)]) {
+              map[static_cast<std::size_t>(c)].emplace_back(column, coefficient * (1.0 - w.sum()));
+            }
+            for (int j = 0; j < stages_; ++j) {
+              map[static_cast<std::size_t>(c)].emplace_back(layout.stages + j * StageSize() + c,
+                                                            w[j]);
+            }
+          }
+          map[static_cast<std::size_t>(n_)] = start_map[static_cast<std::size_t>(n_)];
+          map[static_cast<std::size_t>(n_)].emplace_back(layout.lengths + e, theta);
+          const Point& p = MinimumPoint(k, e, m);
+          const Matrix& c_yy = p.c_hessians[static_cast<std::size_t>(m)];
+          const Weight phi = MinimumWeight(k, e, m);
+          const double phi_value = phi.Value(theta), phi_slope = phi.Slope(theta);
+          AddMapped(map, (weight / phi_value) * c_yy, &local);
+          const double first = phi.start ? kPinnedMargin : 0.0;
+          const double last = phi.end ? 1.0 - kPinnedMargin : 1.0;
+          if (theta <= first || theta >= last) continue;
+          // y' = dy/dtheta = (sum_j w'_j Z_j, h) and y''; w'' by central differences of w'
+          // (exact for s <= 3, where w' is quadratic; O(1e-8) relative otherwise).
+          constexpr double kDelta = 1e-4;
+          const Vector dw = tableau_.InterpolationDerivativeWeights(theta);
+          const Vector ddw = (tableau_.InterpolationDerivativeWeights(theta + kDelta) -
+                              tableau_.InterpolationDerivativeWeights(theta - kDelta)) /
+                             (2.0 * kDelta);
+          const Vector& x_start = Start(k, e).x;
+          Vector dy = Vector::Zero(n_ + 1), ddy = Vector::Zero(n_ + 1);
+          for (int j = 0; j < stages_; ++j) {
+            dy.head(n_) += dw[j] * (Stage(k, e, j).x - x_start);
+            ddy.head(n_) += ddw[j] * (Stage(k, e, j).x - x_start);
+          }
+          dy[n_] = h;
+          Vector c_y(n_ + 1);
+          c_y.head(n_) = p.c_x.row(m).transpose();
+          c_y[n_] = p.c_t[m];
+          // v'' from c, c' and c'' (phi is at most quadratic).
+          const double c_value = p.c[m], dc = c_y.dot(dy), ddc = dy.dot(c_yy * dy) + c_y.dot(ddy);
+          const double curvature =
+              ddc / phi_value - 2.0 * dc * phi_slope / (phi_value * phi_value) -
+              c_value * phi.Curvature() / (phi_value * phi_value) +
+              2.0 * c_value * phi_slope * phi_slope / (phi_value * phi_value * phi_value);
+          if (!(curvature > 0.0)) continue;  // not a strict minimum: no theta* derivative
+          // d y' / dz: the start with -sum_j w'_j, stage j with w'_j, t' = h_e.
+          Map derivative_map(static_cast<std::size_t>(n_ + 1));
+          for (int c = 0; c < n_; ++c) {
+            for (const auto& [column, coefficient] : start_map[static_cast<std::size_t>(c)]) {
+              derivative_map[static_cast<std::size_t>(c)].emplace_back(column,
+                                                                       -coefficient * dw.sum());
+            }
+            for (int j = 0; j < stages_; ++j) {
+              derivative_map[static_cast<std::size_t>(c)].emplace_back(
+                  layout.stages + j * StageSize() + c, dw[j]);
+            }
+          }
+          derivative_map[static_cast<std::size_t>(n_)].emplace_back(layout.lengths + e, 1.0);
+          // d/dz of v' = c'/phi - c phi'/phi^2.
+          const Vector g =
+              (MappedGradient(map, c_yy * dy, size) + MappedGradient(derivative_map, c_y, size)) /
+                  phi_value -
+              MappedGradient(map, c_y, size) * (phi_slope / (phi_value * phi_value));
+          local -= (weight / curvature) * g * g.transpose();
+        }
         // (d) The step-equilibration penalty.
         if (!exact_ && options_.step_equilibration_weight > 0.0) {
           const double nominal = interval_length_ / elements_;
@@ -1325,6 +1703,7 @@ class CollocationNlp::Impl {
   std::vector<double> tau_;
   OcpHomotopyLevel level_;
   bool exact_ = false;
+  bool minima_imposed_ = false;  // ImposeElementMinima
   std::vector<bool> pieces_;
   Vector variable_lower_, variable_upper_, constraint_lower_, constraint_upper_;
   Vector base_variable_upper_, base_constraint_lower_, base_constraint_upper_;
@@ -1332,11 +1711,18 @@ class CollocationNlp::Impl {
       check_columns_, hessian_columns_;
   std::vector<HessianBlock> element_hessian_, node_hessian_;
   std::vector<Block> blocks_;
-  std::vector<std::pair<int, int>> structure_, hessian_structure_;
+  std::vector<std::pair<int, int>> structure_, structure_with_minima_, hessian_structure_;
+  const std::vector<std::pair<int, int>>& Structure() const {
+    return minima_imposed_ ? structure_with_minima_ : structure_;
+  }
   std::vector<int> collocation_block_, feasibility_block_, complementarity_block_, check_block_,
-      length_block_, equilibration_block_, path_block_;
+      minimum_block_, length_block_, equilibration_block_, path_block_;
   int terminal_block_ = -1;
   std::vector<Point> points_, interval_start_points_, check_points_;
+  // Element minima per (element, constraint) (Piece's index): theta* and the point there,
+  // valid where HasMinimumRow.
+  std::vector<Point> minimum_points_;
+  std::vector<double> minimum_theta_;
   Point initial_point_;
   Vector points_z_;
   bool points_valid_ = false, points_derivatives_ = false;
@@ -1363,7 +1749,7 @@ bool CollocationNlp::Evaluate(const Vector& z, double* objective, Vector* constr
   return impl_->Evaluate(z, objective, constraints, gradient, jacobian_values, message);
 }
 const std::vector<std::pair<int, int>>& CollocationNlp::JacobianStructure() const {
-  return impl_->structure_;
+  return impl_->Structure();
 }
 const std::vector<std::pair<int, int>>& CollocationNlp::HessianStructure() const {
   return impl_->hessian_structure_;
@@ -1376,8 +1762,14 @@ void CollocationNlp::SetRelaxedLevel(const OcpHomotopyLevel& level) {
   impl_->SetRelaxedLevel(level);
 }
 int CollocationNlp::SetExactLevel(const Vector& z) { return impl_->SetExactLevel(z); }
+void CollocationNlp::ImposeElementMinima(Vector* multipliers) {
+  impl_->ImposeElementMinima(multipliers);
+}
 double CollocationNlp::ComplementarityResidual(const Vector& z) {
   return impl_->ComplementarityResidual(z);
+}
+std::vector<int> CollocationNlp::InteriorMinimumRows(const Vector& z, double margin) {
+  return impl_->InteriorMinimumRows(z, margin);
 }
 Vector CollocationNlp::InitialGuess() { return impl_->InitialGuess(); }
 void CollocationNlp::Describe(const Vector& z, OcpResult* result) { impl_->Describe(z, result); }

@@ -28,7 +28,9 @@ namespace moreau::ocp_internal {
 //    either Lambda = 0 with c >= 0, or c = 0 at every stage and the start with Lambda >= 0)
 //    and elements whose boundary carries no change of the active set have equal lengths (step
 //    equilibration), so complementarity holds exactly and the NLP is smooth: its solutions
-//    are FESD trajectories with switches on element boundaries.
+//    are FESD trajectories with switches on element boundaries;
+//  - element minima (ImposeElementMinima): the exact level again, with every inactive piece's
+//    constraint nonnegative on the whole collocation polynomial, not only at check points.
 // Only scenes whose effects are moving sets are supported (no speed of time).
 class CollocationNlp final : public Nlp {
  public:
@@ -55,9 +57,18 @@ class CollocationNlp final : public Nlp {
   // The exact level with the pieces read from z (a solution of a relaxed level). Returns the
   // number of (element, constraint) pieces with the constraint active.
   int SetExactLevel(const Vector& z);
+  // On the exact level, with the same pieces (OcpOptions::collocation_element_minima): every
+  // inactive piece's constraint has its minimum over the element's collocation polynomial
+  // >= 0 instead of c >= 0 at the check points; the check rows' multipliers (IPOPT's, one per
+  // constraint; may be null) move to the minimum's row.
+  void ImposeElementMinima(Vector* multipliers);
   // Largest |cross-complementarity product| (c summed over an element's points times Lambda
   // summed over them) over elements and constraints at z.
   double ComplementarityResidual(const Vector& z);
+  // Rows of the element minima (OcpOptions::collocation_element_minima) imposed at z whose
+  // minimiser theta* lies at least margin inside its search interval (for the derivative
+  // tests).
+  std::vector<int> InteriorMinimumRows(const Vector& z, double margin);
   // Variables from a FESD simulation of the problem's initial controls (dense output at the
   // stage times of equal elements; multipliers from the velocity level).
   Vector InitialGuess();

@@ -611,6 +611,20 @@ OcpResult SolveByCollocation(const OcpProblem& problem, const OcpOptions& option
   RunLevel(&nlp, options, OcpHomotopyLevel{}, num_levels - 1, num_levels, true, &z, &multipliers,
            &result);
   result.levels.back().intervals = problem.intervals;
+  // Then the same pieces with every free constraint's minimum over each element >= 0, from that
+  // solution: the check points leave corners between them that the optimum may cut, and its
+  // controls then produce contacts the NLP does not have (docs/ocp.md, "Doorway"). From the
+  // exact solution the corners are small; an earlier form of these rows, started from a
+  // relaxed solution with corners down to c = -6.5e-2, did not converge in 1000 iterations.
+  if (options.collocation_element_minima && result.status == OcpStatus::kSolved) {
+    const int rows = nlp.num_constraints();
+    nlp.ImposeElementMinima(&multipliers.constraints);
+    RunLevel(&nlp, options, OcpHomotopyLevel{}, num_levels - 1, num_levels, true, &z, &multipliers,
+             &result);
+    result.levels.back().intervals = problem.intervals;
+    // The returned multipliers warm-start a new solve, which starts without the appended rows.
+    if (multipliers.constraints.size() > rows) multipliers.constraints.conservativeResize(rows);
+  }
   result.multipliers = multipliers;
   nlp.Describe(z, &result);
   result.complementarity_residual = nlp.ComplementarityResidual(z);

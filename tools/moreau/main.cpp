@@ -375,6 +375,11 @@ int main(int argc, char** argv) {
   ocp->add_flag("--no-constraint-regularization", ocp_no_regularization,
                 "IPOPT regularizes the constraint block only after a wrong inertia (default: "
                 "at every iteration, perturb_always_cd)");
+  bool ocp_no_element_minima = false;
+  ocp->add_flag("--no-element-minima", ocp_no_element_minima,
+                "collocation transcription: stop after the exact level with c >= 0 at check "
+                "points only (default: then re-solve it with every free constraint's minimum "
+                "over each element >= 0)");
   ocp->add_option("--out", ocp_settings.out_directory,
                   "output directory (default: out/ocp/<problem>)");
   ocp->add_flag("--no-plot", no_plot, "do not write solution.png");
@@ -473,6 +478,9 @@ int main(int argc, char** argv) {
         overrides.push_back([=](OcpOptions* o) { o->mesh_continuation = counts; });
       }
       if (no_verify) overrides.push_back([](OcpOptions* o) { o->verify = false; });
+      if (ocp_no_element_minima) {
+        overrides.push_back([](OcpOptions* o) { o->collocation_element_minima = false; });
+      }
       if (ocp_no_regularization) {
         overrides.push_back([](OcpOptions* o) { o->regularize_constraints = false; });
       }

@@ -398,6 +398,16 @@ int RunOcpCommand(const OcpCommandSettings& settings) {
     for (const auto& [name, value] : level.parameters.parameters) {
       parameters += ", " + name + " " + std::to_string(value);
     }
+    // A level that relaxes nothing is an exact solve before the last one (the collocation
+    // transcription's exact level before its element-minima solve; homotopy levels must
+    // relax something).
+    const OcpHomotopyLevel& p = level.parameters;
+    if (p.smoothing == 0.0 && p.relaxation == 0.0 && p.complementarity == 0.0 &&
+        p.parameters.empty()) {
+      std::printf("exact        level (before the last solve): %s, %d iterations, %.3g s\n",
+                  ToString(level.status).c_str(), level.iterations, level.seconds);
+      continue;
+    }
     std::printf(
         "homotopy     level %zu (smoothing %g, relaxation %g, complementarity %g%s%s): %s, %d "
         "iterations, %.3g s\n",

@@ -222,6 +222,16 @@ struct OcpOptions {
   /// pieces), so that a trajectory cannot pass through a constraint between the nodes (a
   /// discrete optimum that "tunnels" through a wall is not a trajectory of the dynamics).
   bool collocation_check_points = true;
+  /// Collocation transcription: after the exact level, solve it again from its solution with
+  /// the same pieces and, per element and inactive (free) constraint m, the minimum over the
+  /// element of c_m(X(theta), t(theta)) / phi(theta) >= 0 instead of the check points (X the
+  /// collocation polynomial, theta in [0, 1]; phi = 1, or the distance to an end that an
+  /// active neighbour pins to c_m = 0). The minimiser is located at every evaluation; the
+  /// row's gradient at fixed minimiser is exact (envelope theorem) and the second-order
+  /// Hessian includes the minimiser's dependence. Without it an optimum can cut a corner
+  /// between the check points, and its controls then produce a contact the NLP does not have
+  /// (docs/ocp.md, "Collocation transcription" and "Doorway").
+  bool collocation_element_minima = true;
   /// IPOPT's relative relaxation of variable bounds (bound_relax_factor); the solution may
   /// exceed a bound by this fraction, never more (it is returned as converged, not clipped).
   double bound_relaxation = 1e-12;
