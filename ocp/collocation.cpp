@@ -1244,6 +1244,26 @@ class CollocationNlp::Impl {
     return map;
   }
 
+  // y = (X(theta), t(theta)) of the collocation polynomial of element (k, e) at theta in
+  // [0, 1], with interpolation weights w of the stages: X = (1 - sum w) x_start + sum_j w_j
+  // X_j, t = t_start + theta h_e (linear in the element's columns at fixed theta).
+  Map InterpolatedPointMap(int k, int e, const Vector& w, double theta) const {
+    const ElementColumns& layout = hessian_columns_[static_cast<std::size_t>(k * elements_ + e)];
+    Map map(static_cast<std::size_t>(n_ + 1));
+    const Map start_map = PointMap(k, e, -1, false);
+    for (int c = 0; c < n_; ++c) {
+      for (const auto& [column, coefficient] : start_map[static_cast<std::size_t>(c)]) {
+        map[static_cast<std::size_t>(c)].emplace_back(column, coefficient * (1.0 - w.sum()));
+      }
+      for (int j = 0; j < stages_; ++j) {
+        map[static_cast<std::size_t>(c)].emplace_back(layout.stages + j * StageSize() + c, w[j]);
+      }
+    }
+    map[static_cast<std::size_t>(n_)] = start_map[static_cast<std::size_t>(n_)];
+    map[static_cast<std::size_t>(n_)].emplace_back(layout.lengths + e, theta);
+    return map;
+  }
+
   // local += D^T M D (M symmetric over y) and gradient-outer terms are the caller's.
   static void AddMapped(const Map& map, const Matrix& m, Matrix* local) {
     const int size = static_cast<int>(map.size());
@@ -1382,21 +1402,8 @@ class CollocationNlp::Impl {
         for (int q = 0; q < NumCheckPoints(); ++q) {
           const Vector weights = lambda.segment(CheckRow(k, e) + q * nc_, nc_);
           if (weights.lpNorm<Eigen::Infinity>() == 0.0) continue;
-          const Vector& w = check_weights_[static_cast<std::size_t>(q)];
-          Map map(static_cast<std::size_t>(n_ + 1));
-          const Map start_map = PointMap(k, e, -1, false);
-          for (int c = 0; c < n_; ++c) {
-            for (const auto& [column, coefficient] : start_map[static_cast<std::size_t>(c)]) {
-              map[static_cast<std::size_t>(c)].emplace_back(column, coefficient * (1.0 - w.sum()));
-            }
-            for (int j = 0; j < stages_; ++j) {
-              map[static_cast<std::size_t>(c)].emplace_back(layout.stages + j * StageSize() + c,
-                                                            w[j]);
-            }
-          }
-          map[static_cast<std::size_t>(n_)] = start_map[static_cast<std::size_t>(n_)];
-          map[static_cast<std::size_t>(n_)].emplace_back(layout.lengths + e,
-                                                         check_theta_[static_cast<std::size_t>(q)]);
+          const Map map = InterpolatedPointMap(k, e, check_weights_[static_cast<std::size_t>(q)],
+                                               check_theta_[static_cast<std::size_t>(q)]);
           AddMapped(map, ConstraintHessian(Check(k, e, q), weights), &local);
         }
         // Element minima: mu_m r with r(z) = v(theta*(z), z), v = c_m(y) / phi(theta),
@@ -1411,19 +1418,7 @@ class CollocationNlp::Impl {
           if (weight == 0.0) continue;
           const double theta = minimum_theta_[Piece(k, e, m)];
           const Vector w = tableau_.InterpolationWeights(theta);
-          Map map(static_cast<std::size_t>(n_ + 1));
-          const Map start_map = PointMap(k, e, -1, false);
-          for (int c = 0; c < n_; ++c) {
-            for (const auto& [column, coefficient] : start_map[static_cast<std::size_t>(c)]) {
-              map[static_cast<std::size_t>(c)].emplace_back(column, coefficient * (1.0 - w.sum()));
-            }
-            for (int j = 0; j < stages_; ++j) {
-              map[static_cast<std::size_t>(c)].emplace_back(layout.stages + j * StageSize() + c,
-                                                            w[j]);
-            }
-          }
-          map[static_cast<std::size_t>(n_)] = start_map[static_cast<std::size_t>(n_)];
-          map[static_cast<std::size_t>(n_)].emplace_back(layout.lengths + e, theta);
+          const Map map = InterpolatedPointMap(k, e, w, theta);
           const Point& p = MinimumPoint(k, e, m);
           const Matrix& c_yy = p.c_hessians[static_cast<std::size_t>(m)];
           const Weight phi = MinimumWeight(k, e, m);
@@ -1457,6 +1452,7 @@ class CollocationNlp::Impl {
               2.0 * c_value * phi_slope * phi_slope / (phi_value * phi_value * phi_value);
           if (!(curvature > 0.0)) continue;  // not a strict minimum: no theta* derivative
           // d y' / dz: the start with -sum_j w'_j, stage j with w'_j, t' = h_e.
+          const Map start_map = PointMap(k, e, -1, false);
           Map derivative_map(static_cast<std::size_t>(n_ + 1));
           for (int c = 0; c < n_; ++c) {
             for (const auto& [column, coefficient] : start_map[static_cast<std::size_t>(c)]) {
