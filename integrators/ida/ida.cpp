@@ -1116,14 +1116,14 @@ class IdaRun {
     return free_b == (side == ContinuousSide::kB);
   }
 
-  // Projection onto the phase's position-level conditions: Gauss-Newton iterations until |P|
-  // is at round-off level.
   // Hidden roots (FindHiddenRoot): sub-intervals sampled per step (five evaluations of the
   // root functions per step); parabolic refinements of a predicted dip; the bisection's
   // resolution in units of eps (|t| + h), IDA's own root resolution (IDARcheck3: 100 uround).
   static constexpr int kHiddenRootIntervals = 4;
   static constexpr int kHiddenRootRefinements = 8;
   static constexpr double kHiddenRootResolution = 100.0;
+  // Projection onto the phase's position-level conditions: Gauss-Newton iterations until |P|
+  // is at round-off level.
   static constexpr int kProjectionIterations = 3;
   static constexpr double kProjectionTolerance = 1e-15;
   // Regularization of the sparse projection's Gram matrix relative to its largest diagonal
