@@ -42,6 +42,11 @@ constexpr int kMinimumIterations = 100;
 // Solved_To_Acceptable_Level with a pinned end 8e-8 off the wall; with 1e-2 Solve_Succeeded
 // with x(T) within 2.5e-8 of it.
 constexpr double kPinnedMargin = 1e-2;
+// OpposedToActivePiece: normals at least this close to opposite (the doorway's two discs at
+// their touching point: -1; a pusher constraint against a slider constraint: |cosine| <=
+// 1/sqrt(2), the pusher-slider gradient has both bodies' components). -0.99 is reached by the
+// slider on one disc within |x2| < 0.57 of the doorway (discs of radius 8).
+constexpr double kOpposedNormalCosine = 0.99;
 }  // namespace
 
 class CollocationNlp::Impl {
@@ -379,8 +384,61 @@ class CollocationNlp::Impl {
   // check row next to an active minimum at almost the same theta would be an almost parallel
   // pair of active constraints). The check rows' multipliers move to the minimum's row: to
   // first order the same force, acting at the minimiser instead of at the check points.
-  void ImposeElementMinima(Vector* multipliers) {
+  // Except where the minimum is opposed to an active piece (OpposedToActivePiece): there the
+  // check points stay.
+  void ImposeElementMinima(const Vector& z, Vector* multipliers) {
     MOREAU_ASSERT(exact_ && NumMinimumRows() > 0, "element minima need the exact level");
+    std::vector<bool> rows(pieces_.size(), false);
+    for (int k = 0; k < intervals_; ++k) {
+      for (int e = 0; e < elements_; ++e) {
+        for (int m = 0; m < nc_; ++m) {
+          rows[Piece(k, e, m)] = !pieces_[Piece(k, e, m)] && !OpposedToActivePiece(z, k, e, m);
+        }
+      }
+    }
+    ImposeElementMinimumRows(rows, multipliers);
+  }
+
+  // An inactive constraint m whose normal, at its smallest sampled value on the element's
+  // polynomial, is opposite to an active constraint's normal (cosine below
+  // -kOpposedNormalCosine): the doorway's touching point, where the slider riding one disc
+  // passes the other. There the true trajectory has c_m = 0 at one instant, and the
+  // polynomial's c_m at the passage is minus the active constraint's interpolation error
+  // between the nodes (c_1 + c_2 = 2 |x - (cos t, 0)|^2 for the two discs): the row's
+  // gradient is almost minus those of the active piece's stage rows, the minimum's sign is
+  // that of a discretization error, and IPOPT does not converge on it (measured with s = 4:
+  // infeasibility stuck at 1.2e-8 at element (12, 1)). Such pairs keep c_m >= 0 at the nodes
+  // and check points: a dip between them is of the size of the active piece's own deviation
+  // from its wall.
+  bool OpposedToActivePiece(const Vector& z, int k, int e, int m) {
+    EvaluatePoints(z, false);
+    const double start = StartTime(z, k, e), h = z[LengthIndex(k, e)];
+    const Vector u = Inputs(z, k);
+    Point lowest, p;
+    double lowest_value = kInfinity;
+    for (int q = 0; q <= kMinimumSamples; ++q) {
+      const double theta = static_cast<double>(q) / kMinimumSamples;
+      const Vector x = PolynomialState(k, e, tableau_.InterpolationWeights(theta));
+      EvaluatePoint(x, start + theta * h, u, nullptr, true, &p);
+      if (p.c[m] < lowest_value) {
+        lowest_value = p.c[m];
+        lowest = p;
+      }
+    }
+    const double norm = lowest.c_x.row(m).norm();
+    for (int a = 0; a < nc_; ++a) {
+      if (!pieces_[Piece(k, e, a)] || norm == 0.0) continue;
+      const double other = lowest.c_x.row(a).norm();
+      if (other > 0.0 &&
+          lowest.c_x.row(m).dot(lowest.c_x.row(a)) < -kOpposedNormalCosine * norm * other) {
+        return true;
+      }
+    }
+    return false;
+  }
+
+  // The element-minimum rows where rows[Piece(k, e, m)] (inactive pieces only).
+  void ImposeElementMinimumRows(const std::vector<bool>& rows_present, Vector* multipliers) {
     const int rows = NumRows(), all = NumRowsWithMinima();
     constraint_lower_.conservativeResize(all);
     constraint_upper_.conservativeResize(all);
@@ -394,7 +452,8 @@ class CollocationNlp::Impl {
     for (int k = 0; k < intervals_; ++k) {
       for (int e = 0; e < elements_; ++e) {
         for (int m = 0; m < nc_; ++m) {
-          if (pieces_[Piece(k, e, m)]) continue;
+          if (!rows_present[Piece(k, e, m)]) continue;
+          MOREAU_ASSERT(!pieces_[Piece(k, e, m)], "element minima on inactive pieces only");
           double sum = 0.0;
           for (int q = 0; q < NumCheckPoints(); ++q) {
             const int row = CheckRow(k, e) + q * nc_ + m;
@@ -409,6 +468,7 @@ class CollocationNlp::Impl {
         }
       }
     }
+    minimum_rows_ = rows_present;
     minima_imposed_ = true;
     points_valid_ = false;
   }
@@ -443,8 +503,11 @@ class CollocationNlp::Impl {
     return static_cast<std::size_t>((k * elements_ + e) * nc_ + m);
   }
 
-  int SetExactLevel(const Vector& z) {
-    const std::vector<bool> active = Pieces(z);
+  int SetExactLevel(const Vector& z) { return SetExactPieces(Pieces(z)); }
+
+  int SetExactPieces(const std::vector<bool>& active) {
+    MOREAU_ASSERT(active.size() == static_cast<std::size_t>(intervals_ * elements_ * nc_),
+                  "one piece per element and constraint");
     variable_upper_ = base_variable_upper_;
     constraint_lower_ = base_constraint_lower_;
     constraint_upper_ = base_constraint_upper_;
@@ -498,6 +561,135 @@ class CollocationNlp::Impl {
     minima_imposed_ = false;
     pieces_ = active;
     return count;
+  }
+
+  // --- refinement (OcpOptions::collocation_refinement_stages) ---------------------------------
+  // The exact level with the pieces of `coarse` (same N and N_fe, fewer stages), and its
+  // element minima if they are imposed there.
+  void SetRefinedLevel(const Impl& coarse) {
+    MOREAU_ASSERT(coarse.exact_ && coarse.intervals_ == intervals_ &&
+                      coarse.elements_ == elements_ && coarse.n_ == n_ && coarse.nc_ == nc_ &&
+                      coarse.nd_ == nd_ && coarse.nf_ == nf_,
+                  "a refinement needs the coarse transcription's exact level on the same mesh");
+    SetExactPieces(coarse.pieces_);
+    if (coarse.minima_imposed_) ImposeElementMinimumRows(coarse.minimum_rows_, nullptr);
+  }
+
+  // The coarse solution zc on this transcription: decisions and element lengths as they are;
+  // the stage states on the coarse collocation polynomial at this tableau's nodes (element
+  // ends unchanged); the multipliers Lambda by the polynomial through the coarse stages
+  // (clamped to >= 0, zero on inactive pieces). IPOPT's multipliers (mc, if not empty) go to
+  // *mf: rows and bounds of decisions, lengths, the interval, terminal, path and element-minimum
+  // rows as they are; per element the collocation rows' mu as a density: nu = A^T mu
+  // approximates b_i p(t_i) (p the costate: with f = 0 only the last stage's mu = p is
+  // nonzero, and the last row of A is b), so p_i = nu_i / b_i is interpolated to the new
+  // nodes and mapped back by mu = A^-T (b p); the stage feasibility rows' and the Lambda
+  // bounds' multipliers as densities over the weights b. The check and complementarity rows
+  // are free on the exact level (zero multipliers).
+  Vector Interpolate(const Impl& coarse, const Vector& zc, const OcpMultipliers& mc,
+                     OcpMultipliers* mf) const {
+    const RadauTableau& tc = coarse.tableau_;
+    const int sc = coarse.stages_;
+    // Per new stage i: the coarse polynomial's weights at c_i (over the start and the coarse
+    // stages) and the Lagrange weights over the coarse nodes c_1..c_sc (Lambda has no start
+    // value).
+    std::vector<Vector> polynomial(static_cast<std::size_t>(stages_));
+    Matrix lagrange(stages_, sc);
+    for (int i = 0; i < stages_; ++i) {
+      polynomial[static_cast<std::size_t>(i)] = tc.InterpolationWeights(tableau_.c[i]);
+      for (int j = 0; j < sc; ++j) {
+        double w = 1.0;
+        for (int l = 0; l < sc; ++l) {
+          if (l != j) w *= (tableau_.c[i] - tc.c[l]) / (tc.c[j] - tc.c[l]);
+        }
+        lagrange(i, j) = w;
+      }
+    }
+    // Densities over the quadrature weights: values at the coarse nodes -> this tableau's.
+    const Vector b_coarse_inverse = tc.b.cwiseInverse();
+    auto density = [&](const Matrix& coarse_values) -> Matrix {  // sc x cols -> stages_ x cols
+      return tableau_.b.asDiagonal() * (lagrange * (b_coarse_inverse.asDiagonal() * coarse_values));
+    };
+    Vector z = Vector::Zero(variable_lower_.size());
+    z.head(nf_) = zc.head(nf_);
+    const bool duals = !mc.empty() && mf != nullptr;
+    if (duals) {
+      mf->constraints = Vector::Zero(constraint_lower_.size());
+      mf->lower_bounds = Vector::Zero(z.size());
+      mf->upper_bounds = Vector::Zero(z.size());
+      mf->lower_bounds.head(nf_) = mc.lower_bounds.head(nf_);
+      mf->upper_bounds.head(nf_) = mc.upper_bounds.head(nf_);
+    }
+    auto copy = [&](int fine, int from, int size) {
+      z.segment(fine, size) = zc.segment(from, size);
+      if (!duals) return;
+      mf->lower_bounds.segment(fine, size) = mc.lower_bounds.segment(from, size);
+      mf->upper_bounds.segment(fine, size) = mc.upper_bounds.segment(from, size);
+    };
+    Matrix states(sc, n_), lambdas(sc, nc_), rows(sc, n_);
+    for (int k = 0; k < intervals_; ++k) {
+      copy(ControlOffset(k), coarse.ControlOffset(k), nd_);
+      for (int e = 0; e < elements_; ++e) {
+        copy(LengthIndex(k, e), coarse.LengthIndex(k, e), 1);
+        const Vector x_start = coarse.StartIsInitial(k, e)
+                                   ? coarse.InitialState(zc)
+                                   : Vector(zc.segment(coarse.StartOffset(k, e), n_));
+        for (int j = 0; j < sc; ++j) {
+          states.row(j) = zc.segment(coarse.StateOffset(k, e, j), n_).transpose();
+          lambdas.row(j) = zc.segment(coarse.LambdaOffset(k, e, j), nc_).transpose();
+        }
+        const Matrix lambda = lagrange * lambdas;
+        for (int i = 0; i < stages_; ++i) {
+          Vector x = x_start;
+          for (int j = 0; j < sc; ++j) {
+            x += polynomial[static_cast<std::size_t>(i)][j] * (states.row(j).transpose() - x_start);
+          }
+          z.segment(StateOffset(k, e, i), n_) = x;
+          for (int m = 0; m < nc_; ++m) {
+            z[LambdaOffset(k, e, i) + m] =
+                pieces_[Piece(k, e, m)] ? std::max(0.0, lambda(i, m)) : 0.0;
+          }
+        }
+        if (!duals) continue;
+        // (9a) collocation rows: mu -> nu = A^T mu ~ b p -> p at the new nodes -> mu.
+        for (int j = 0; j < sc; ++j) {
+          rows.row(j) =
+              mc.constraints.segment(coarse.CollocationRow(k, e) + j * n_, n_).transpose();
+        }
+        const Matrix mu = tableau_.a_inverse.transpose() * density(tc.a.transpose() * rows);
+        Matrix feasibility(sc, nc_), lower(sc, nc_), upper(sc, nc_);
+        for (int j = 0; j < sc; ++j) {
+          feasibility.row(j) =
+              mc.constraints.segment(coarse.FeasibilityRow(k, e) + j * nc_, nc_).transpose();
+          lower.row(j) = mc.lower_bounds.segment(coarse.LambdaOffset(k, e, j), nc_).transpose();
+          upper.row(j) = mc.upper_bounds.segment(coarse.LambdaOffset(k, e, j), nc_).transpose();
+        }
+        const Matrix feasibility_fine = density(feasibility);
+        const Matrix lower_fine = density(lower).cwiseMax(0.0);
+        const Matrix upper_fine = density(upper).cwiseMax(0.0);
+        for (int i = 0; i < stages_; ++i) {
+          mf->constraints.segment(CollocationRow(k, e) + i * n_, n_) = mu.row(i).transpose();
+          mf->constraints.segment(FeasibilityRow(k, e) + i * nc_, nc_) =
+              feasibility_fine.row(i).transpose();
+          mf->lower_bounds.segment(LambdaOffset(k, e, i), nc_) = lower_fine.row(i).transpose();
+          mf->upper_bounds.segment(LambdaOffset(k, e, i), nc_) = upper_fine.row(i).transpose();
+        }
+        if (minima_imposed_ && coarse.minima_imposed_ && mc.constraints.size() > coarse.NumRows()) {
+          mf->constraints.segment(MinimumRow(k, e), NumMinimumRows()) =
+              mc.constraints.segment(coarse.MinimumRow(k, e), coarse.NumMinimumRows());
+        }
+      }
+      if (duals) {
+        mf->constraints.segment(LengthRow(k), elements_) =
+            mc.constraints.segment(coarse.LengthRow(k), elements_);
+      }
+    }
+    if (duals) {
+      const int tail = NumRows() - TerminalRow();
+      mf->constraints.segment(TerminalRow(), tail) =
+          mc.constraints.segment(coarse.TerminalRow(), tail);
+    }
+    return z;
   }
 
   // --- evaluation ---------------------------------------------------------------------------
@@ -661,7 +853,7 @@ class CollocationNlp::Impl {
   }
 
   bool HasMinimumRow(int k, int e, int m) const {
-    return minima_imposed_ && !pieces_[Piece(k, e, m)];
+    return minima_imposed_ && minimum_rows_[Piece(k, e, m)];
   }
 
   // Element minima, per inactive constraint m of element (k, e): the row is the minimum over
@@ -1701,6 +1893,7 @@ class CollocationNlp::Impl {
   bool exact_ = false;
   bool minima_imposed_ = false;  // ImposeElementMinima
   std::vector<bool> pieces_;
+  std::vector<bool> minimum_rows_;  // per piece: its element-minimum row is imposed
   Vector variable_lower_, variable_upper_, constraint_lower_, constraint_upper_;
   Vector base_variable_upper_, base_constraint_lower_, base_constraint_upper_;
   std::vector<ElementColumns> collocation_columns_, feasibility_columns_, complementarity_columns_,
@@ -1758,14 +1951,22 @@ void CollocationNlp::SetRelaxedLevel(const OcpHomotopyLevel& level) {
   impl_->SetRelaxedLevel(level);
 }
 int CollocationNlp::SetExactLevel(const Vector& z) { return impl_->SetExactLevel(z); }
-void CollocationNlp::ImposeElementMinima(Vector* multipliers) {
-  impl_->ImposeElementMinima(multipliers);
+void CollocationNlp::ImposeElementMinima(const Vector& z, Vector* multipliers) {
+  impl_->ImposeElementMinima(z, multipliers);
 }
 double CollocationNlp::ComplementarityResidual(const Vector& z) {
   return impl_->ComplementarityResidual(z);
 }
 std::vector<int> CollocationNlp::InteriorMinimumRows(const Vector& z, double margin) {
   return impl_->InteriorMinimumRows(z, margin);
+}
+void CollocationNlp::SetRefinedLevel(const CollocationNlp& coarse) {
+  impl_->SetRefinedLevel(*coarse.impl_);
+}
+Vector CollocationNlp::Interpolate(const CollocationNlp& coarse, const Vector& z,
+                                   const OcpMultipliers& multipliers,
+                                   OcpMultipliers* fine_multipliers) const {
+  return impl_->Interpolate(*coarse.impl_, z, multipliers, fine_multipliers);
 }
 Vector CollocationNlp::InitialGuess() { return impl_->InitialGuess(); }
 void CollocationNlp::Describe(const Vector& z, OcpResult* result) { impl_->Describe(z, result); }
