@@ -62,7 +62,7 @@ class CollocationNlp final : public Nlp {
   // >= 0 instead of c >= 0 at the check points; the check rows' multipliers (IPOPT's, one per
   // constraint; may be null) move to the minimum's row. Except pieces whose minimum at z lies
   // where an active constraint of the element has the opposite normal (the doorway's touching
-  // point): they keep the check points (collocation.cpp, OpposedToActivePiece).
+  // point): they keep the check points (element_minima.cpp, OpposedToActivePiece).
   void ImposeElementMinima(const Vector& z, Vector* multipliers);
   // The refinement (OcpOptions::collocation_refinement_stages): this transcription (more
   // stages, the same problem, N and N_fe) on the exact level with the pieces of `coarse` (on
@@ -70,7 +70,7 @@ class CollocationNlp final : public Nlp {
   void SetRefinedLevel(const CollocationNlp& coarse);
   // A solution z of `coarse` (and its IPOPT multipliers, if not empty) carried to this
   // transcription: the coarse collocation polynomials evaluated at this tableau's nodes, the
-  // multipliers as densities over the quadrature weights (collocation.cpp).
+  // multipliers as densities over the quadrature weights (collocation_refinement.cpp).
   Vector Interpolate(const CollocationNlp& coarse, const Vector& z,
                      const OcpMultipliers& multipliers, OcpMultipliers* fine_multipliers) const;
   // Largest |cross-complementarity product| (c summed over an element's points times Lambda
