@@ -70,7 +70,7 @@ class CollocationNlp final : public Nlp {
   void SetRefinedLevel(const CollocationNlp& coarse);
   // A solution z of `coarse` (and its IPOPT multipliers, if not empty) carried to this
   // transcription: the coarse collocation polynomials evaluated at this tableau's nodes, the
-  // multipliers as densities over the quadrature weights (collocation_refinement.cpp).
+  // multipliers where a row or bound exists in both (collocation_refinement.cpp).
   Vector Interpolate(const CollocationNlp& coarse, const Vector& z,
                      const OcpMultipliers& multipliers, OcpMultipliers* fine_multipliers) const;
   // Largest |cross-complementarity product| (c summed over an element's points times Lambda

@@ -285,7 +285,7 @@ TEST(CliTest, OcpSolvesWritesItsFilesAndNamesBadInput) {
   ExpectUsageError("ocp doorway --mesh-continuation 10,x", "--mesh-continuation: expected");
   ExpectUsageError("ocp doorway --refine-stages 3",
                    "collocation refinement stages must be 0 (no refinement) or in [stages + 1");
-  ExpectUsageError("ocp doorway --stages 4",
+  ExpectUsageError("ocp doorway --stages 5",
                    "collocation refinement stages must be 0 (no refinement) or in [stages + 1");
   const std::filesystem::path directory =
       std::filesystem::temp_directory_path() / "moreau_cli_test_ocp";

@@ -238,12 +238,13 @@ struct OcpOptions {
   /// once more on the transcription with S Radau IIA stages per element (order 2S - 1
   /// instead of 2s - 1; same N, N_fe, pieces and element minima), started from the solution
   /// interpolated onto it (the collocation polynomials at the new nodes, element lengths and
-  /// controls as they are, IPOPT's multipliers carried as densities). If it solves, the
-  /// result (decision, multipliers, trajectory) is that of the refined transcription, so a
-  /// warm start from it needs stages = S; if not, the s-stage solution is returned with its
-  /// status, the message says so and OcpResult::levels holds the refinement's outcome.
-  /// Reduces the discretization error of the NLP's trajectory against the re-simulation of
-  /// its controls (docs/ocp.md, "Doorway"). The shooting transcriptions ignore it.
+  /// controls as they are, IPOPT's multipliers where a row or bound exists in both). If it
+  /// solves, the result (decision, multipliers, trajectory) is that of the refined
+  /// transcription, so a warm start from it needs stages = S; if not, the s-stage solution is
+  /// returned with its status, the message says so and OcpResult::levels holds the
+  /// refinement's outcome. Reduces the discretization error of the NLP's trajectory against
+  /// the re-simulation of its controls (docs/ocp.md, "Doorway"). The shooting transcriptions
+  /// ignore it.
   int collocation_refinement_stages = 0;
   /// IPOPT's relative relaxation of variable bounds (bound_relax_factor); the solution may
   /// exceed a bound by this fraction, never more (it is returned as converged, not clipped).
