@@ -368,7 +368,8 @@ int RunOcpCommand(const OcpCommandSettings& settings) {
 
   const auto& states = problem.scene.state_names;
   const std::string refinement =
-      options.collocation_refinement_stages > 0
+      options.transcription == OcpTranscription::kCollocation &&
+              options.collocation_refinement_stages > 0
           ? ", refined to s = " + std::to_string(options.collocation_refinement_stages)
           : "";
   std::printf("problem      %s (%s, %s, N = %d, s = %d%s, N_fe = %d)\n", problem.name.c_str(),
@@ -417,8 +418,11 @@ int RunOcpCommand(const OcpCommandSettings& settings) {
     const OcpHomotopyLevel& p = level.parameters;
     if (p.smoothing == 0.0 && p.relaxation == 0.0 && p.complementarity == 0.0 &&
         p.parameters.empty()) {
-      std::printf("exact        level (before the last solve, s = %d): %s, %d iterations, %.3g s\n",
-                  level.stages, ToString(level.status).c_str(), level.iterations, level.seconds);
+      // Collocation levels carry their stages (the refinement has more).
+      const std::string stages =
+          level.stages > 0 ? ", s = " + std::to_string(level.stages) : std::string();
+      std::printf("exact        level (before the last solve%s): %s, %d iterations, %.3g s\n",
+                  stages.c_str(), ToString(level.status).c_str(), level.iterations, level.seconds);
       continue;
     }
     std::printf(
