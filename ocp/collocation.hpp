@@ -60,8 +60,19 @@ class CollocationNlp final : public Nlp {
   // On the exact level, with the same pieces (OcpOptions::collocation_element_minima): every
   // inactive piece's constraint has its minimum over the element's collocation polynomial
   // >= 0 instead of c >= 0 at the check points; the check rows' multipliers (IPOPT's, one per
-  // constraint; may be null) move to the minimum's row.
-  void ImposeElementMinima(Vector* multipliers);
+  // constraint; may be null) move to the minimum's row. Except pieces whose minimum at z lies
+  // where an active constraint of the element has the opposite normal (the doorway's touching
+  // point): they keep the check points (element_minima.cpp, OpposedToActivePiece).
+  void ImposeElementMinima(const Vector& z, Vector* multipliers);
+  // The refinement (OcpOptions::collocation_refinement_stages): this transcription (more
+  // stages, the same problem, N and N_fe) on the exact level with the pieces of `coarse` (on
+  // its exact level), and its element minima if they are imposed there.
+  void SetRefinedLevel(const CollocationNlp& coarse);
+  // A solution z of `coarse` (and its IPOPT multipliers, if not empty) carried to this
+  // transcription: the coarse collocation polynomials evaluated at this tableau's nodes, the
+  // multipliers where a row or bound exists in both (collocation_refinement.cpp).
+  Vector Interpolate(const CollocationNlp& coarse, const Vector& z,
+                     const OcpMultipliers& multipliers, OcpMultipliers* fine_multipliers) const;
   // Largest |cross-complementarity product| (c summed over an element's points times Lambda
   // summed over them) over elements and constraints at z.
   double ComplementarityResidual(const Vector& z);

@@ -106,6 +106,15 @@ void OcpOptions::Validate() const {
         "mesh continuation: interval counts must be >= 1 and increasing, got ",
         mesh_continuation[i], " at position ", i + 1);
   }
+  // The refinement is the collocation transcription's (shooting ignores it, as the other
+  // collocation options).
+  RequireArgument(transcription != OcpTranscription::kCollocation ||
+                      collocation_refinement_stages == 0 ||
+                      (collocation_refinement_stages > stages &&
+                       collocation_refinement_stages <= kMaxRadauStages),
+                  "collocation refinement stages must be 0 (no refinement) or in [stages + 1, ",
+                  kMaxRadauStages, "] = [", stages + 1, ", ", kMaxRadauStages, "], got ",
+                  collocation_refinement_stages);
   RequireArgument(std::isfinite(step_equilibration_weight) && step_equilibration_weight >= 0.0,
                   "step equilibration weight must be >= 0, got ", step_equilibration_weight);
   RequireArgument(std::isfinite(level_tolerance) && level_tolerance > 0.0,

@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <sstream>
 
 #include "collocation.hpp"
@@ -171,6 +172,7 @@ class OcpTnlp final : public Ipopt::TNLP {
       OcpProgress progress;
       progress.level = level_;
       progress.levels = levels_;
+      progress.stages = options_.stages;
       progress.parameters = parameters_;
       progress.iteration = iter;
       progress.objective = obj_value;
@@ -599,35 +601,77 @@ OcpResult SolveByCollocation(const OcpProblem& problem, const OcpOptions& option
   OcpMultipliers multipliers;
   CheckWarmStart(nlp, options, &z, &multipliers);
   result.stats.jacobian_nonzeros = static_cast<long>(nlp.JacobianStructure().size());
+  auto record = [&](int stages) {
+    result.levels.back().intervals = problem.intervals;
+    result.levels.back().stages = stages;
+  };
   for (int level = 0; level + 1 < num_levels; ++level) {
     const OcpHomotopyLevel& parameters = options.homotopy[static_cast<std::size_t>(level)];
     nlp.SetRelaxedLevel(parameters);
     RunLevel(&nlp, options, parameters, level, num_levels, false, &z, &multipliers, &result);
-    result.levels.back().intervals = problem.intervals;
+    record(options.stages);
   }
   nlp.SetExactLevel(z);
   // The exact level's bounds differ (multipliers fixed to zero on inactive pieces): the bound
   // multipliers carry over, IPOPT's push keeps the point where it is.
   RunLevel(&nlp, options, OcpHomotopyLevel{}, num_levels - 1, num_levels, true, &z, &multipliers,
            &result);
-  result.levels.back().intervals = problem.intervals;
+  record(options.stages);
   // Then the same pieces with every free constraint's minimum over each element >= 0, from that
   // solution: the check points leave corners between them that the optimum may cut, and its
   // controls then produce contacts the NLP does not have (docs/ocp.md, "Doorway"). From the
   // exact solution the corners are small; an earlier form of these rows, started from a
   // relaxed solution with corners down to c = -6.5e-2, did not converge in 1000 iterations.
+  const int rows = nlp.num_constraints();
   if (options.collocation_element_minima && result.status == OcpStatus::kSolved) {
-    const int rows = nlp.num_constraints();
-    nlp.ImposeElementMinima(&multipliers.constraints);
+    nlp.ImposeElementMinima(z, &multipliers.constraints);
     RunLevel(&nlp, options, OcpHomotopyLevel{}, num_levels - 1, num_levels, true, &z, &multipliers,
              &result);
-    result.levels.back().intervals = problem.intervals;
-    // The returned multipliers warm-start a new solve, which starts without the appended rows.
-    if (multipliers.constraints.size() > rows) multipliers.constraints.conservativeResize(rows);
+    record(options.stages);
+  }
+  // The refinement: the exact level once more with more stages, from this solution
+  // interpolated (docs/ocp.md, "Doorway": the s = 3 collocation error after contacts begin was
+  // most of the gap between the NLP's trajectory and the re-simulation of its controls).
+  ocp_internal::CollocationNlp* solved = &nlp;
+  std::unique_ptr<ocp_internal::CollocationNlp> refined;
+  int solved_rows = rows;  // the solved NLP's rows without the element minima
+  if (options.collocation_refinement_stages > 0 && result.status == OcpStatus::kSolved) {
+    OcpOptions refined_options = options;
+    refined_options.stages = options.collocation_refinement_stages;
+    refined_options.collocation_refinement_stages = 0;  // refined once
+    refined = std::make_unique<ocp_internal::CollocationNlp>(problem, refined_options);
+    solved_rows = refined->num_constraints();
+    refined->SetRefinedLevel(nlp);
+    OcpMultipliers refined_multipliers;
+    Vector refined_z = refined->Interpolate(nlp, z, multipliers, &refined_multipliers);
+    const OcpStatus coarse_status = result.status;
+    const std::string coarse_message = result.message;
+    const double coarse_objective = result.objective;
+    RunLevel(refined.get(), refined_options, OcpHomotopyLevel{}, num_levels - 1, num_levels, true,
+             &refined_z, &refined_multipliers, &result);
+    record(refined_options.stages);
+    if (result.status == OcpStatus::kSolved) {
+      z = refined_z;
+      multipliers = refined_multipliers;
+      solved = refined.get();
+    } else {
+      // The coarse solution stays the answer (solved); the failed refinement is in the levels.
+      result.message = coarse_message +
+                       "; the refinement to s = " + std::to_string(refined_options.stages) +
+                       " ended " + ToString(result.status) + " (" + result.levels.back().message +
+                       "), the s = " + std::to_string(options.stages) + " solution is returned";
+      result.status = coarse_status;
+      result.objective = coarse_objective;
+      solved_rows = rows;
+    }
+  }
+  // The returned multipliers warm-start a new solve, which starts without the appended rows.
+  if (multipliers.constraints.size() > solved_rows) {
+    multipliers.constraints.conservativeResize(solved_rows);
   }
   result.multipliers = multipliers;
-  nlp.Describe(z, &result);
-  result.complementarity_residual = nlp.ComplementarityResidual(z);
+  solved->Describe(z, &result);
+  result.complementarity_residual = solved->ComplementarityResidual(z);
   result.stats.cpu_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return result;

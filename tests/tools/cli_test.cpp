@@ -283,6 +283,10 @@ TEST(CliTest, OcpSolvesWritesItsFilesAndNamesBadInput) {
   ExpectUsageError("ocp doorway --homotopy 0:0:1e-3:width=1", "homotopy parameter 'width'");
   ExpectUsageError("ocp doorway --homotopy 0:0.1", "needs a complementarity relaxation > 0");
   ExpectUsageError("ocp doorway --mesh-continuation 10,x", "--mesh-continuation: expected");
+  ExpectUsageError("ocp doorway --refine-stages 3",
+                   "collocation refinement stages must be 0 (no refinement) or in [stages + 1");
+  ExpectUsageError("ocp doorway --stages 5",
+                   "collocation refinement stages must be 0 (no refinement) or in [stages + 1");
   const std::filesystem::path directory =
       std::filesystem::temp_directory_path() / "moreau_cli_test_ocp";
   std::filesystem::remove_all(directory);

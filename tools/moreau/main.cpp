@@ -380,6 +380,12 @@ int main(int argc, char** argv) {
                 "collocation transcription: stop after the exact level with c >= 0 at check "
                 "points only (default: then re-solve it with every free constraint's minimum "
                 "over each element >= 0)");
+  int ocp_refine_stages = 0;
+  auto* ocp_refine_stages_option = ocp->add_option(
+      "--refine-stages", ocp_refine_stages,
+      "collocation transcription: after the exact level, re-solve it once with this many Radau "
+      "IIA stages (s < S <= 7) from the interpolated solution; 0: no refinement (default: the "
+      "problem's)");
   ocp->add_option("--out", ocp_settings.out_directory,
                   "output directory (default: out/ocp/<problem>)");
   ocp->add_flag("--no-plot", no_plot, "do not write solution.png");
@@ -480,6 +486,10 @@ int main(int argc, char** argv) {
       if (no_verify) overrides.push_back([](OcpOptions* o) { o->verify = false; });
       if (ocp_no_element_minima) {
         overrides.push_back([](OcpOptions* o) { o->collocation_element_minima = false; });
+      }
+      if (ocp_refine_stages_option->count() > 0) {
+        overrides.push_back(
+            [=](OcpOptions* o) { o->collocation_refinement_stages = ocp_refine_stages; });
       }
       if (ocp_no_regularization) {
         overrides.push_back([](OcpOptions* o) { o->regularize_constraints = false; });

@@ -101,6 +101,7 @@ Json SummaryJson(const OcpProblem& problem, const OcpOptions& options, const Ocp
                       {"complementarity", level.parameters.complementarity},
                       {"parameters", parameters},
                       {"intervals", level.intervals},
+                      {"stages", level.stages},
                       {"status", ToString(level.status)},
                       {"message", level.message},
                       {"iterations", level.iterations},
@@ -123,6 +124,7 @@ Json SummaryJson(const OcpProblem& problem, const OcpOptions& options, const Ocp
         {"integrator", ToString(options.integrator)},
         {"intervals", problem.intervals},
         {"stages", options.stages},
+        {"refinement_stages", options.collocation_refinement_stages},
         {"finite_elements", options.finite_elements},
         {"tolerance", options.tolerance},
         {"level_tolerance", options.level_tolerance},
@@ -320,10 +322,17 @@ int RunOcpCommand(const OcpCommandSettings& settings) {
   const auto start = std::chrono::steady_clock::now();
   auto last = start;
   if (!settings.quiet) {
-    int reported_level = -1;
-    options.progress = [&, reported_level](const OcpProgress& progress) mutable {
+    int reported_level = -1, reported_stages = options.stages;
+    options.progress = [&, reported_level, reported_stages](const OcpProgress& progress) mutable {
       const auto now = std::chrono::steady_clock::now();
       const double elapsed = std::chrono::duration<double>(now - start).count();
+      if (progress.stages != reported_stages) {
+        // The collocation refinement: the exact level on a transcription with more stages.
+        reported_stages = progress.stages;
+        reported_level = progress.level;
+        std::fprintf(stderr, "[moreau ocp] refinement: the exact problem with s = %d\n",
+                     progress.stages);
+      }
       if (progress.level != reported_level && progress.levels > 1) {
         reported_level = progress.level;
         if (progress.level + 1 < progress.levels) {
@@ -358,9 +367,14 @@ int RunOcpCommand(const OcpCommandSettings& settings) {
   const std::string image = settings.plot ? WriteSolutionPlot(problem, result, directory) : "";
 
   const auto& states = problem.scene.state_names;
-  std::printf("problem      %s (%s, %s, N = %d, s = %d, N_fe = %d)\n", problem.name.c_str(),
+  const std::string refinement =
+      options.transcription == OcpTranscription::kCollocation &&
+              options.collocation_refinement_stages > 0
+          ? ", refined to s = " + std::to_string(options.collocation_refinement_stages)
+          : "";
+  std::printf("problem      %s (%s, %s, N = %d, s = %d%s, N_fe = %d)\n", problem.name.c_str(),
               ToString(options.transcription).c_str(), ToString(options.integrator).c_str(),
-              problem.intervals, options.stages, options.finite_elements);
+              problem.intervals, options.stages, refinement.c_str(), options.finite_elements);
   std::printf("status       %s%s%s\n", ToString(result.status).c_str(),
               result.message.empty() ? "" : ": ", result.message.c_str());
   std::printf("objective    %.15g\n", result.objective);
@@ -404,8 +418,11 @@ int RunOcpCommand(const OcpCommandSettings& settings) {
     const OcpHomotopyLevel& p = level.parameters;
     if (p.smoothing == 0.0 && p.relaxation == 0.0 && p.complementarity == 0.0 &&
         p.parameters.empty()) {
-      std::printf("exact        level (before the last solve): %s, %d iterations, %.3g s\n",
-                  ToString(level.status).c_str(), level.iterations, level.seconds);
+      // Collocation levels carry their stages (the refinement has more).
+      const std::string stages =
+          level.stages > 0 ? ", s = " + std::to_string(level.stages) : std::string();
+      std::printf("exact        level (before the last solve%s): %s, %d iterations, %.3g s\n",
+                  stages.c_str(), ToString(level.status).c_str(), level.iterations, level.seconds);
       continue;
     }
     std::printf(
@@ -414,6 +431,12 @@ int RunOcpCommand(const OcpCommandSettings& settings) {
         i + 1, level.parameters.smoothing, level.parameters.relaxation,
         level.parameters.complementarity, parameters.c_str(), mesh.c_str(),
         ToString(level.status).c_str(), level.iterations, level.seconds);
+  }
+  if (!result.levels.empty() && result.levels.back().stages > 0) {
+    // Collocation: the last solve (the exact level, its element minima or the refinement).
+    const OcpLevelResult& level = result.levels.back();
+    std::printf("final        level (s = %d): %s, %d iterations, %.3g s\n", level.stages,
+                ToString(level.status).c_str(), level.iterations, level.seconds);
   }
   std::printf(
       "ipopt        %d iterations, %ld interval integrations, %.3g s (verification %.3g s)\n",

@@ -176,6 +176,7 @@ struct OcpMultipliers {
 struct OcpProgress {
   int level = 0;   ///< 0-based; levels - 1 is the exact problem
   int levels = 1;  ///< homotopy levels + 1
+  int stages = 0;  ///< Radau IIA stages of the transcription solved (refinement: more)
   OcpHomotopyLevel parameters;
   int iteration = 0;  ///< IPOPT's iteration counter within the level
   double objective = 0.0;
@@ -232,6 +233,19 @@ struct OcpOptions {
   /// between the check points, and its controls then produce a contact the NLP does not have
   /// (docs/ocp.md, "Collocation transcription" and "Doorway").
   bool collocation_element_minima = true;
+  /// Collocation transcription: 0 (no refinement), or S with stages < S <= kMaxRadauStages:
+  /// after the exact level (and its element-minima solve) succeeds, solve the exact level
+  /// once more on the transcription with S Radau IIA stages per element (order 2S - 1
+  /// instead of 2s - 1; same N, N_fe, pieces and element minima), started from the solution
+  /// interpolated onto it (the collocation polynomials at the new nodes, element lengths and
+  /// controls as they are, IPOPT's multipliers where a row or bound exists in both). If it
+  /// solves, the result (decision, multipliers, trajectory) is that of the refined
+  /// transcription, so a warm start from it needs stages = S; if not, the s-stage solution is
+  /// returned with its status, the message says so and OcpResult::levels holds the
+  /// refinement's outcome. Reduces the discretization error of the NLP's trajectory against
+  /// the re-simulation of its controls (docs/ocp.md, "Doorway"). The shooting transcriptions
+  /// ignore it.
+  int collocation_refinement_stages = 0;
   /// IPOPT's relative relaxation of variable bounds (bound_relax_factor); the solution may
   /// exceed a bound by this fraction, never more (it is returned as converged, not clipped).
   double bound_relaxation = 1e-12;
@@ -282,6 +296,7 @@ struct OcpIteration {
 struct OcpLevelResult {
   OcpHomotopyLevel parameters;  ///< (0, 0, none) for the exact problem
   int intervals = 0;            ///< N of this level (mesh continuation)
+  int stages = 0;               ///< Radau IIA stages s of this level's transcription (refinement)
   OcpStatus status = OcpStatus::kSolverFailure;
   std::string message;  ///< IPOPT's return status
   int iterations = 0;
