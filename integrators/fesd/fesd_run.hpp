@@ -89,6 +89,7 @@ class FesdRun {
         group_(&system_, options.stages),
         filter_(&system_, options.constraint_filter, options.filter_safety),
         newton_(NewtonOptions(options)),
+        reduced_newton_(ReducedNewtonOptions(options)),
         tableau_(RadauIIA(options.stages)),
         s_(options.stages),
         nx_(scene.num_states()),
@@ -99,13 +100,19 @@ class FesdRun {
       smooth_ = std::make_unique<internal::SmoothCollocationSolver>(&system_, options.stages,
                                                                     options.newton.linear_solver);
     }
+    InitializeModeFields();
   }
+  void InitializeModeFields();
 
  public:
   FesdResult Run();
 
  private:
   static SemismoothNewtonOptions NewtonOptions(const FesdOptions& options);
+  // The same without the forced correction (min_iterations = 0): it checks single-mode
+  // solutions, whose stage states a converged Newton of their own produced and whose
+  // algebraic values are functions of them (no extrapolated round-off to remove).
+  static SemismoothNewtonOptions ReducedNewtonOptions(const FesdOptions& options);
 
   static LoweringOptions Lowering(const FesdOptions& options);
 
@@ -167,6 +174,18 @@ class FesdRun {
   Vector TrajectoryAlgebraic(const Vector& z) const;
 
   const Vector* last_w_ptr() const { return have_last_w_ ? &last_w_ : nullptr; }
+
+  // --- single-mode elements (FesdOptions::reduce_single_mode) -------------------------------
+  // The mode that the statuses keep active if the scene reduces (one Stewart switching
+  // effect, nothing else) and exactly one pair has b = lambda_k = 0 kept; -1 otherwise.
+  int SingleMode() const;
+  // Replaces the stage values of the element guess *w (one element of length h from y0) by a
+  // Radau IIA step of the active mode's field (its own lowered system, without algebraic
+  // unknowns) and algebraic values consistent with the stage states (ConsistentGuess, jump
+  // variables from z_guess_). Returns false, leaving *w alone, if the element does not reduce
+  // or that step does not converge. *iterations, *factorizations: the reduced solve's work.
+  bool SingleModeGuess(const Vector& y0, double h, Vector* w, int* iterations,
+                       long* factorizations);
 
   // A system without algebraic unknowns (no effects) and no sensitivities cannot switch: every
   // element is a plain Radau IIA step, solved by the same kernel as the smooth Radau IIA
@@ -339,6 +358,10 @@ class FesdRun {
   NearActiveFilter filter_;
   std::vector<double> excluded_min_;  // per element of the current solve (FilterCheck)
   SemismoothNewton newton_;
+  SemismoothNewton reduced_newton_;  // single-mode elements (ReducedNewtonOptions)
+  // The Newton that solved the system Record captures (its factorization at the solution
+  // serves LocalTransfer with sensitivities).
+  const SemismoothNewton* solved_by_ = &newton_;
   const RadauTableau& tableau_;
   int s_, nx_, ny_, nz_, np_;
   FesdResult result_;
@@ -357,6 +380,14 @@ class FesdRun {
   long factorizations_ = 0;
   Matrix sensitivity_;                                         // d(y, tau) / d(x0, p, u)
   std::unique_ptr<internal::SmoothCollocationSolver> smooth_;  // elements without pairs
+  // Single-mode elements: per Stewart mode (pair) its own lowered system and Radau IIA
+  // solver, built on first use; empty if the scene does not reduce.
+  struct ModeField {
+    std::unique_ptr<LoweredSystem> system;
+    std::unique_ptr<internal::SmoothCollocationSolver> solver;
+  };
+  std::vector<ModeField> mode_fields_;
+  Matrix mode_z_;  // stage increments of a single-mode solve (n_y x s)
   Matrix smooth_z_, last_z_matrix_, extrapolation_;
   double extrapolation_ratio_ = -1.0;
   // Adaptive steps and dense output.
