@@ -5,6 +5,7 @@
 //   build/release/bench/fesd_bench --benchmark_filter=Overhead --benchmark_repetitions=5
 //   build/release/bench/fesd_bench --benchmark_filter=ElementRatio   (issue 15, item 5)
 //   build/release/bench/fesd_bench --benchmark_filter=AdaptiveVsIda  (issue 16, per-step cost)
+//   build/release/bench/fesd_bench --benchmark_filter=SmoothElements (reduction on / off)
 #include <benchmark/benchmark.h>
 #include <time.h>
 
@@ -170,6 +171,49 @@ void BM_FesdElementRatio(benchmark::State& state) {
 }
 BENCHMARK(BM_FesdElementRatio)
     ->ArgsProduct({{0, 1}, {2, 3}})
+    ->ArgNames({"scene", "stages"})
+    ->Unit(benchmark::kMillisecond);
+
+// Smooth elements (FesdOptions::reduce_smooth_elements) on against off: per iteration one run
+// of the scene with each (h = 0.1, N_fe = 2), interleaved and timed in CPU time like
+// BM_FesdElementRatio. Counters: medians of the microseconds per element and of the ratio
+// on / off; the elements reduced per run.
+//   build/release/bench/fesd_bench --benchmark_filter=SmoothElements
+void BM_FesdSmoothElements(benchmark::State& state) {
+  const moreau::Scene scene = moreau::MakeScene(kScenes[state.range(0)]);
+  moreau::FesdOptions on;
+  on.stages = static_cast<int>(state.range(1));
+  on.step_size = 0.1;
+  on.finite_elements = 2;
+  on.record_trajectory = false;
+  moreau::FesdOptions off = on;
+  off.reduce_smooth_elements = false;
+  std::vector<double> on_us, off_us, ratios;
+  long reduced = 0;
+  for (auto _ : state) {
+    const double t0 = ThreadCpuSeconds();
+    const moreau::FesdResult a = moreau::SimulateFesd(scene, on);
+    const double t1 = ThreadCpuSeconds();
+    const moreau::FesdResult b = moreau::SimulateFesd(scene, off);
+    const double t2 = ThreadCpuSeconds();
+    if (a.status != moreau::FesdStatus::kSuccess || b.status != moreau::FesdStatus::kSuccess) {
+      state.SkipWithError("a run failed");
+      break;
+    }
+    reduced = a.stats.num_reduced_elements;
+    on_us.push_back(1e6 * (t1 - t0) / static_cast<double>(a.stats.num_elements));
+    off_us.push_back(1e6 * (t2 - t1) / static_cast<double>(b.stats.num_elements));
+    ratios.push_back(on_us.back() / off_us.back());
+  }
+  if (ratios.empty()) return;
+  state.SetLabel(kScenes[state.range(0)]);
+  state.counters["on_us_per_element"] = Median(on_us);
+  state.counters["off_us_per_element"] = Median(off_us);
+  state.counters["ratio"] = Median(ratios);
+  state.counters["reduced"] = static_cast<double>(reduced);
+}
+BENCHMARK(BM_FesdSmoothElements)
+    ->ArgsProduct({{0, 1, 2, 3, 4}, {2, 3}})
     ->ArgNames({"scene", "stages"})
     ->Unit(benchmark::kMillisecond);
 

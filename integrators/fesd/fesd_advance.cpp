@@ -59,12 +59,15 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
     trial_setup.y_start = y;
     group_.Configure(trial_setup);
     const Vector* previous = trial_w.empty() ? last_w_ptr() : &trial_w.back();
-    Vector guess = group_.element(0).InitialGuess(y, h_trial, previous,
-                                                  previous != nullptr ? h_trial : 0.0, z_guess_);
+    Vector guess;
     int reduced_iterations = 0;
     long reduced_factorizations = 0;
-    const bool reduced =
-        SingleModeGuess(y, h_trial, &guess, &reduced_iterations, &reduced_factorizations);
+    const bool reduced = SmoothElementGuess(y, h_trial, previous, &guess, &reduced_iterations,
+                                            &reduced_factorizations);
+    if (!reduced) {
+      guess = group_.element(0).InitialGuess(y, h_trial, previous,
+                                             previous != nullptr ? h_trial : 0.0, z_guess_);
+    }
     solved_by_ = reduced ? &reduced_newton_ : &newton_;
     SemismoothNewtonResult solved = (reduced ? reduced_newton_ : newton_).Solve(group_, guess);
     if (reduced) {
@@ -209,47 +212,75 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
   return true;
 }
 
-// --- single-mode elements -----------------------------------------------------------------
+// --- smooth elements ----------------------------------------------------------------------
 
-void FesdRun::InitializeModeFields() {
+void FesdRun::InitializeSmoothFields() {
   const Scene& scene = system_.scene();
-  if (!options_.reduce_single_mode || options_.switching_form != SwitchingForm::kStewart ||
-      filter_.enabled() || system_.time_freezing() || ny_ != nx_ + 1 || !scene.dynamics.empty() ||
-      scene.effects.size() != 1) {
+  if (!options_.reduce_smooth_elements || filter_.enabled() || system_.time_freezing() ||
+      ny_ != nx_ + 1 || scene.effects.empty()) {
     return;
   }
   const auto* switching = std::get_if<SwitchingSurfaces>(&scene.effects.front());
-  if (switching == nullptr || static_cast<int>(switching->modes.size()) != np_) return;
-  mode_fields_.resize(static_cast<std::size_t>(np_));  // built on first use
-}
-
-// Stewart's pair k: theta_k ⟂ lambda_k, b = lambda_k = 0 kept (a_zero false) iff mode k is
-// active; with one active mode, e^T theta = 1 and theta_j = 0 (j != k) give theta = e_k, so
-// x' = f_k(x) at every stage, and lambda, mu follow from the state (g - lambda - mu e = 0).
-int FesdRun::SingleMode() const {
-  if (mode_fields_.empty()) return -1;
-  int mode = -1;
-  for (int k = 0; k < np_; ++k) {
-    if (a_zero_[static_cast<std::size_t>(k)]) continue;
-    if (mode >= 0) return -1;  // a sliding mode: theta is not a unit vector
-    mode = k;
+  if (switching != nullptr) {
+    // Stewart's form, one switching effect and nothing else: a field per mode.
+    if (options_.switching_form != SwitchingForm::kStewart || !scene.dynamics.empty() ||
+        scene.effects.size() != 1 || static_cast<int>(switching->modes.size()) != np_) {
+      return;
+    }
+    reduction_ = Reduction::kStewartMode;
+    smooth_fields_.resize(static_cast<std::size_t>(np_));  // built on first use
+    return;
   }
-  return mode;
+  for (const Effect& effect : scene.effects) {
+    if (!std::holds_alternative<MovingSet>(effect)) return;
+  }
+  reduction_ = Reduction::kFreeMovingSets;  // one field: the scene's dynamics
+  smooth_fields_.resize(1);
 }
 
-bool FesdRun::SingleModeGuess(const Vector& y0, double h, Vector* w, int* iterations,
-                              long* factorizations) {
-  const int mode = SingleMode();
-  if (mode < 0) return false;
-  ModeField& field = mode_fields_[static_cast<std::size_t>(mode)];
+int FesdRun::SmoothField() const {
+  switch (reduction_) {
+    case Reduction::kNone:
+      return -1;
+    case Reduction::kStewartMode: {
+      // Stewart's pair k: theta_k ⟂ lambda_k, b = lambda_k = 0 kept (a_zero false) iff mode k
+      // is active; with one active mode, e^T theta = 1 and theta_j = 0 (j != k) give theta =
+      // e_k, so x' = f_k(x) at every stage, and lambda, mu follow from the state (g - lambda -
+      // mu e = 0).
+      int mode = -1;
+      for (int k = 0; k < np_; ++k) {
+        if (a_zero_[static_cast<std::size_t>(k)]) continue;
+        if (mode >= 0) return -1;  // a sliding mode: theta is not a unit vector
+        mode = k;
+      }
+      return mode;
+    }
+    case Reduction::kFreeMovingSets:
+      // Moving-set pair k: c_k ⟂ lambda_k; with b = lambda_k = 0 kept (a_zero false) for every
+      // constraint, x' = f(x) + P grad c lambda = f(x).
+      for (int k = 0; k < np_; ++k) {
+        if (a_zero_[static_cast<std::size_t>(k)]) return -1;  // a constraint is active
+      }
+      return 0;
+  }
+  return -1;
+}
+
+bool FesdRun::SmoothElementGuess(const Vector& y0, double h, const Vector* previous, Vector* w,
+                                 int* iterations, long* factorizations) {
+  const int index = SmoothField();
+  if (index < 0) return false;
+  FieldSolver& field = smooth_fields_[static_cast<std::size_t>(index)];
   if (field.solver == nullptr) {
     Scene smooth = system_.scene();
-    const auto& switching = std::get<SwitchingSurfaces>(smooth.effects.front());
-    smooth.dynamics = switching.modes[static_cast<std::size_t>(mode)];
+    if (reduction_ == Reduction::kStewartMode) {
+      const auto& switching = std::get<SwitchingSurfaces>(smooth.effects.front());
+      smooth.dynamics = switching.modes[static_cast<std::size_t>(index)];
+    }
     smooth.effects.clear();
     field.system = std::make_unique<LoweredSystem>(smooth, Lowering(options_));
     if (field.system->num_states() != ny_ || field.system->num_algebraic() != 0) {
-      mode_fields_.clear();  // another layout: never reduce
+      reduction_ = Reduction::kNone;  // another layout: never reduce
       return false;
     }
     field.solver = std::make_unique<internal::SmoothCollocationSolver>(
@@ -259,18 +290,21 @@ bool FesdRun::SingleModeGuess(const Vector& y0, double h, Vector* w, int* iterat
   field.system->SetParameters(system_.parameters());
   field.system->SetInputs(system_.inputs());
   const internal::CollocationStages& stages = group_.element(0);
-  mode_z_.resize(ny_, s_);
-  for (int i = 0; i < s_; ++i) mode_z_.col(i) = w->segment(stages.state_offset(i), ny_);
+  // Stage increments extrapolated as for the full element; algebraic values set below.
+  *w = stages.InitialGuess(y0, h, previous, previous != nullptr ? h : 0.0, z_guess_,
+                           /*algebraic=*/false);
+  smooth_field_z_.resize(ny_, s_);
+  for (int i = 0; i < s_; ++i) smooth_field_z_.col(i) = w->segment(stages.state_offset(i), ny_);
   internal::SmoothCollocationSolver::Stopping stopping;
   stopping.tolerance = options_.newton.tolerance;
   stopping.max_iterations = options_.newton.max_iterations;
   const long before = field.solver->num_factorizations();
-  const auto outcome = field.solver->Solve(h, y0, stopping, &mode_z_, iterations);
+  const auto outcome = field.solver->Solve(h, y0, stopping, &smooth_field_z_, iterations);
   *factorizations = field.solver->num_factorizations() - before;
   if (outcome != internal::SmoothCollocationSolver::Outcome::kConverged) return false;
   for (int i = 0; i < s_; ++i) {
-    w->segment(stages.state_offset(i), ny_) = mode_z_.col(i);
-    stage_y_ = y0 + mode_z_.col(i);
+    w->segment(stages.state_offset(i), ny_) = smooth_field_z_.col(i);
+    stage_y_ = y0 + smooth_field_z_.col(i);
     w->segment(stages.algebraic_offset(i), nz_) = ConsistentGuess(stage_y_, z_guess_);
   }
   return true;

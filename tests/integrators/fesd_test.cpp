@@ -411,32 +411,33 @@ TEST(FesdTest, WithoutEffectsFesdIsRadauIIA) {
   EXPECT_EQ(a.stats.num_elements, b.stats.num_steps);
 }
 
-// Single-mode elements (FesdOptions::reduce_single_mode) are Radau IIA steps of the active
-// mode's field, checked on the full element system: the run is the full solve's run up to
-// the Newton tolerance (1e-12 on the scaled residual, where the full solve stops too) and
-// round-off. Observed: <= 1e-15 on states and switch times; a tenth of the tolerance holds
-// with margin and would catch any element that solved another system.
+// Smooth elements (FesdOptions::reduce_smooth_elements) are Radau IIA steps of the field the
+// statuses leave (one Stewart mode; no active constraint), checked on the full element system: the
+// run is the full solve's run up to the Newton tolerance (1e-12 on the scaled residual, where the
+// full solve stops too) and round-off. Observed: <= 1e-15 on states and switch times; a tenth of
+// the tolerance holds with margin and would catch any element that solved another system.
 constexpr double kReducedAgreement = 1e-13;
 
-TEST(FesdTest, SingleModeElementsAgreeWithTheFullSolve) {
+TEST(FesdTest, SmoothElementsAgreeWithTheFullSolve) {
   // F1 crosses the circle; F2b enters a sliding mode (two active modes: not reduced) and F2c
-  // leaves one; F3 slides to the origin.
-  for (const char* name : {"F1", "F2a", "F2b", "F2c", "F3"}) {
+  // leaves one; F3 slides to the origin. S1-S4: moving sets, free before the first contact
+  // and after leaving, not reduced while in contact.
+  for (const char* name : {"F1", "F2a", "F2b", "F2c", "F3", "S1", "S2", "S3", "S4"}) {
     for (int stages : {1, 2, 3}) {
       const Scene scene = MakeScene(name);
       FesdOptions full;
       full.stages = stages;
       full.step_size = 0.1;
-      full.reduce_single_mode = false;
+      full.reduce_smooth_elements = false;
       FesdOptions reduced = full;
-      reduced.reduce_single_mode = true;
+      reduced.reduce_smooth_elements = true;
       const FesdResult a = SimulateFesd(scene, full);
       const FesdResult b = SimulateFesd(scene, reduced);
       const std::string label = std::string(name) + " s = " + std::to_string(stages);
       ExpectCertificates(a, full, label + " (full)");
       ExpectCertificates(b, reduced, label + " (reduced)");
       EXPECT_EQ(a.stats.num_reduced_elements, 0) << label;
-      // Every element before the first switch is in one mode and reduces.
+      // Every element before the first switch is in one mode, or free, and reduces.
       EXPECT_GT(b.stats.num_reduced_elements, 0) << label;
       ASSERT_EQ(a.events.size(), b.events.size()) << label;
       for (std::size_t k = 0; k < a.events.size(); ++k) {
@@ -456,17 +457,17 @@ TEST(FesdTest, SingleModeElementsAgreeWithTheFullSolve) {
   }
 }
 
-// With sensitivities, a single-mode element's transfer comes from the factorization at the
-// reduced solution: the same derivatives as the full solve's.
-TEST(FesdSensitivityTest, SingleModeElementsGiveTheFullSolvesDerivatives) {
+// With sensitivities, a smooth element's transfer comes from the factorization at the reduced
+// solution: the same derivatives as the full solve's.
+TEST(FesdSensitivityTest, SmoothElementsGiveTheFullSolvesDerivatives) {
   const Scene scene = MakeScene("F1");
   FesdOptions full;
   full.stages = 2;
   full.step_size = 0.1;
   full.sensitivities = true;
-  full.reduce_single_mode = false;
+  full.reduce_smooth_elements = false;
   FesdOptions reduced = full;
-  reduced.reduce_single_mode = true;
+  reduced.reduce_smooth_elements = true;
   const FesdResult a = SimulateFesd(scene, full);
   const FesdResult b = SimulateFesd(scene, reduced);
   ASSERT_EQ(a.status, FesdStatus::kSuccess) << a.message;
