@@ -272,12 +272,22 @@ bool FesdRun::SmoothElementGuess(const Vector& y0, double h, const Vector* previ
   if (index < 0) return false;
   FieldSolver& field = smooth_fields_[static_cast<std::size_t>(index)];
   if (field.solver == nullptr) {
-    Scene smooth = system_.scene();
-    if (reduction_ == Reduction::kStewartMode) {
-      const auto& switching = std::get<SwitchingSurfaces>(smooth.effects.front());
-      smooth.dynamics = switching.modes[static_cast<std::size_t>(index)];
-    }
-    smooth.effects.clear();
+    // The scene without its effects, built member by member: copying it whole would clone
+    // every effect's functions only to drop them (SmoothFunction copies are deep).
+    const Scene& scene = system_.scene();
+    Scene smooth;
+    smooth.name = scene.name;
+    smooth.state_names = scene.state_names;
+    smooth.initial_state = scene.initial_state;
+    smooth.initial_time = scene.initial_time;
+    smooth.final_time = scene.final_time;
+    smooth.parameters = scene.parameters;
+    smooth.inputs = scene.inputs;
+    smooth.time_scale_input = scene.time_scale_input;
+    smooth.dynamics = reduction_ == Reduction::kStewartMode
+                          ? std::get<SwitchingSurfaces>(scene.effects.front())
+                                .modes[static_cast<std::size_t>(index)]
+                          : scene.dynamics;
     field.system = std::make_unique<LoweredSystem>(smooth, Lowering(options_));
     if (field.system->num_states() != ny_ || field.system->num_algebraic() != 0) {
       reduction_ = Reduction::kNone;  // another layout: never reduce
