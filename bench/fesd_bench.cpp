@@ -5,6 +5,8 @@
 //   build/release/bench/fesd_bench --benchmark_filter=Overhead --benchmark_repetitions=5
 //   build/release/bench/fesd_bench --benchmark_filter=ElementRatio   (issue 15, item 5)
 //   build/release/bench/fesd_bench --benchmark_filter=AdaptiveVsIda  (issue 16, per-step cost)
+//   build/release/bench/fesd_bench --benchmark_filter=SmoothElements (reduction on / off)
+//   build/release/bench/fesd_bench --benchmark_filter=RunCost        (fixed and per-element cost)
 #include <benchmark/benchmark.h>
 #include <time.h>
 
@@ -170,6 +172,96 @@ void BM_FesdElementRatio(benchmark::State& state) {
 }
 BENCHMARK(BM_FesdElementRatio)
     ->ArgsProduct({{0, 1}, {2, 3}})
+    ->ArgNames({"scene", "stages"})
+    ->Unit(benchmark::kMillisecond);
+
+// Where a whole run's cost goes: F1 (and its smooth part with Radau IIA, steps of 0.05) over
+// horizons of 0.05, 0.5 and pi/2 (2, 10 and 32 FESD elements; the switch at t = 1 lies in the
+// last), interleaved and timed in CPU time like BM_FesdElementRatio. The 2-element run is
+// mostly the fixed cost of a run (lowering, status decision at t0, workspaces); the
+// difference between the 10- and 2-element runs over 8 is the cost of an element without a
+// switch. Counters: medians of the microseconds per run.
+//   build/release/bench/fesd_bench --benchmark_filter=RunCost
+void BM_FesdRunCost(benchmark::State& state) {
+  const double horizons[] = {0.05, 0.5, 0.0};  // 0: the scene's own (pi/2)
+  moreau::Scene scene = moreau::MakeScene("F1");
+  if (horizons[state.range(0)] > 0.0) scene.final_time = horizons[state.range(0)];
+  const moreau::Scene smooth = SmoothPart(scene);
+  moreau::FesdOptions fesd;
+  fesd.stages = static_cast<int>(state.range(1));
+  fesd.step_size = 0.1;
+  fesd.finite_elements = 2;
+  fesd.record_trajectory = false;
+  moreau::RadauOptions radau;
+  radau.stages = fesd.stages;
+  radau.step_size = fesd.step_size / fesd.finite_elements;
+  radau.record_trajectory = false;
+  std::vector<double> fesd_us, radau_us;
+  long elements = 0;
+  for (auto _ : state) {
+    const double t0 = ThreadCpuSeconds();
+    const moreau::FesdResult a = moreau::SimulateFesd(scene, fesd);
+    const double t1 = ThreadCpuSeconds();
+    const moreau::RadauResult b = moreau::SimulateRadau(smooth, radau);
+    const double t2 = ThreadCpuSeconds();
+    if (a.status != moreau::FesdStatus::kSuccess || b.stats.num_steps == 0) {
+      state.SkipWithError("a run failed");
+      break;
+    }
+    elements = a.stats.num_elements;
+    fesd_us.push_back(1e6 * (t1 - t0));
+    radau_us.push_back(1e6 * (t2 - t1));
+  }
+  if (fesd_us.empty()) return;
+  state.counters["elements"] = static_cast<double>(elements);
+  state.counters["fesd_us_per_run"] = Median(fesd_us);
+  state.counters["radau_us_per_run"] = Median(radau_us);
+}
+BENCHMARK(BM_FesdRunCost)
+    ->ArgsProduct({{0, 1, 2}, {2, 3}})
+    ->ArgNames({"horizon", "stages"})
+    ->Unit(benchmark::kMillisecond);
+
+// Smooth elements (FesdOptions::reduce_smooth_elements) on against off: per iteration one run
+// of the scene with each (h = 0.1, N_fe = 2), interleaved and timed in CPU time like
+// BM_FesdElementRatio. Counters: medians of the microseconds per element and of the ratio
+// on / off; the elements reduced per run.
+//   build/release/bench/fesd_bench --benchmark_filter=SmoothElements
+void BM_FesdSmoothElements(benchmark::State& state) {
+  const moreau::Scene scene = moreau::MakeScene(kScenes[state.range(0)]);
+  moreau::FesdOptions on;
+  on.stages = static_cast<int>(state.range(1));
+  on.step_size = 0.1;
+  on.finite_elements = 2;
+  on.record_trajectory = false;
+  moreau::FesdOptions off = on;
+  off.reduce_smooth_elements = false;
+  std::vector<double> on_us, off_us, ratios;
+  long reduced = 0;
+  for (auto _ : state) {
+    const double t0 = ThreadCpuSeconds();
+    const moreau::FesdResult a = moreau::SimulateFesd(scene, on);
+    const double t1 = ThreadCpuSeconds();
+    const moreau::FesdResult b = moreau::SimulateFesd(scene, off);
+    const double t2 = ThreadCpuSeconds();
+    if (a.status != moreau::FesdStatus::kSuccess || b.status != moreau::FesdStatus::kSuccess) {
+      state.SkipWithError("a run failed");
+      break;
+    }
+    reduced = a.stats.num_reduced_elements;
+    on_us.push_back(1e6 * (t1 - t0) / static_cast<double>(a.stats.num_elements));
+    off_us.push_back(1e6 * (t2 - t1) / static_cast<double>(b.stats.num_elements));
+    ratios.push_back(on_us.back() / off_us.back());
+  }
+  if (ratios.empty()) return;
+  state.SetLabel(kScenes[state.range(0)]);
+  state.counters["on_us_per_element"] = Median(on_us);
+  state.counters["off_us_per_element"] = Median(off_us);
+  state.counters["ratio"] = Median(ratios);
+  state.counters["reduced"] = static_cast<double>(reduced);
+}
+BENCHMARK(BM_FesdSmoothElements)
+    ->ArgsProduct({{0, 1, 2, 3, 4}, {2, 3}})
     ->ArgNames({"scene", "stages"})
     ->Unit(benchmark::kMillisecond);
 

@@ -155,7 +155,8 @@ Vector CollocationStages::EndState(const ConstVectorRef& y0, const ConstVectorRe
 }
 
 Vector CollocationStages::InitialGuess(const ConstVectorRef& y0, double h, const Vector* previous,
-                                       double previous_h, const Vector& z_previous) const {
+                                       double previous_h, const Vector& z_previous,
+                                       bool algebraic) const {
   Vector w = Vector::Zero(unknowns());
   if (previous != nullptr && previous_h > 0.0) {
     // Collocation polynomial of the previous step: u(theta) = y_prev + sum_j w_j(theta) Z_j.
@@ -189,6 +190,7 @@ Vector CollocationStages::InitialGuess(const ConstVectorRef& y0, double h, const
       for (int i = 0; i < s_; ++i) w[state_offset(i) + clock] = h * tableau_.c[i] * start.F[clock];
     }
   }
+  if (!algebraic) return w;
   for (int i = 0; i < s_; ++i) {
     guess_y_ = y0 + w.segment(state_offset(i), ny_);
     w.segment(algebraic_offset(i), nz_) = system_->InitialAlgebraicGuess(guess_y_, &z_previous);

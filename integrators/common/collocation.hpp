@@ -81,9 +81,10 @@ class CollocationStages {
   // collocation polynomial (`previous`, its w and length h) or zero; algebraic values at
   // stage i from LoweredSystem::InitialAlgebraicGuess at the guessed stage state (so that a
   // stage predicted beyond a switching surface starts in its new mode), keeping z_previous
-  // where the state does not decide.
+  // where the state does not decide. Without `algebraic` those stay zero (a caller that sets
+  // them itself).
   Vector InitialGuess(const ConstVectorRef& y0, double h, const Vector* previous, double previous_h,
-                      const Vector& z_previous) const;
+                      const Vector& z_previous, bool algebraic = true) const;
 
  private:
   LoweredSystem* system_;

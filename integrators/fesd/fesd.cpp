@@ -97,6 +97,7 @@ FesdStats& FesdStats::operator+=(const FesdStats& other) {
   frozen_time += other.frozen_time;
   num_filter_rechecks += other.num_filter_rechecks;
   max_working_pairs = std::max(max_working_pairs, other.max_working_pairs);
+  num_reduced_elements += other.num_reduced_elements;
   cpu_seconds += other.cpu_seconds;
   return *this;
 }
@@ -185,6 +186,12 @@ FesdResult FesdRun::Run() {
 SemismoothNewtonOptions FesdRun::NewtonOptions(const FesdOptions& options) {
   SemismoothNewtonOptions newton = options.newton;
   newton.factorize_at_solution = options.sensitivities;
+  return newton;
+}
+
+SemismoothNewtonOptions FesdRun::ReducedNewtonOptions(const FesdOptions& options) {
+  SemismoothNewtonOptions newton = NewtonOptions(options);
+  newton.min_iterations = 0;
   return newton;
 }
 

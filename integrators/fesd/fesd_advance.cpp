@@ -3,6 +3,7 @@
 #include <cmath>
 #include <limits>
 #include <sstream>
+#include <variant>
 
 #include "fesd_run.hpp"
 #include "moreau/complementarity/ncp_function.hpp"
@@ -58,9 +59,23 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
     trial_setup.y_start = y;
     group_.Configure(trial_setup);
     const Vector* previous = trial_w.empty() ? last_w_ptr() : &trial_w.back();
-    const Vector guess = group_.element(0).InitialGuess(
-        y, h_trial, previous, previous != nullptr ? h_trial : 0.0, z_guess_);
-    const SemismoothNewtonResult solved = newton_.Solve(group_, guess);
+    Vector guess;
+    int reduced_iterations = 0;
+    long reduced_factorizations = 0;
+    const bool reduced = SmoothElementGuess(y, h_trial, previous, &guess, &reduced_iterations,
+                                            &reduced_factorizations);
+    if (!reduced) {
+      guess = group_.element(0).InitialGuess(y, h_trial, previous,
+                                             previous != nullptr ? h_trial : 0.0, z_guess_);
+    }
+    solved_by_ = reduced ? &reduced_newton_ : &newton_;
+    SemismoothNewtonResult solved = (reduced ? reduced_newton_ : newton_).Solve(group_, guess);
+    if (reduced) {
+      // The full element system held at the reduced solution (or its Newton went on from it).
+      if (solved.converged() && solved.stats.iterations == 0) ++result_.stats.num_reduced_elements;
+      solved.stats.iterations += reduced_iterations;
+      solved.stats.factorizations += reduced_factorizations;
+    }
     CountNewton(solved);
     if (!solved.converged()) {
       // A fixed-status element that does not converge: look for a switch inside it.
@@ -120,6 +135,7 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
     setup.indicator_power = powers;
     group_.Configure(setup);
     const Vector guess = GroupGuess(trial_w, y_start, h_trial, m, h_guess, v_end);
+    solved_by_ = &newton_;
     const SemismoothNewtonResult solved = newton_.Solve(group_, guess);
     CountNewton(solved);
     ++result_.stats.num_groups;
@@ -193,6 +209,114 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
            " within the next " + std::to_string(rest) +
            " but no group of equal elements ending on it converged in " +
            std::to_string(options_.max_event_retries) + " retries");
+  return true;
+}
+
+// --- smooth elements ----------------------------------------------------------------------
+
+void FesdRun::InitializeSmoothFields() {
+  const Scene& scene = system_.scene();
+  if (!options_.reduce_smooth_elements || filter_.enabled() || system_.time_freezing() ||
+      ny_ != nx_ + 1 || scene.effects.empty()) {
+    return;
+  }
+  const auto* switching = std::get_if<SwitchingSurfaces>(&scene.effects.front());
+  if (switching != nullptr) {
+    // Stewart's form, one switching effect and nothing else: a field per mode.
+    if (options_.switching_form != SwitchingForm::kStewart || !scene.dynamics.empty() ||
+        scene.effects.size() != 1 || static_cast<int>(switching->modes.size()) != np_) {
+      return;
+    }
+    reduction_ = Reduction::kStewartMode;
+    smooth_fields_.resize(static_cast<std::size_t>(np_));  // built on first use
+    return;
+  }
+  for (const Effect& effect : scene.effects) {
+    if (!std::holds_alternative<MovingSet>(effect)) return;
+  }
+  reduction_ = Reduction::kFreeMovingSets;  // one field: the scene's dynamics
+  smooth_fields_.resize(1);
+}
+
+int FesdRun::SmoothField() const {
+  switch (reduction_) {
+    case Reduction::kNone:
+      return -1;
+    case Reduction::kStewartMode: {
+      // Stewart's pair k: theta_k ⟂ lambda_k, b = lambda_k = 0 kept (a_zero false) iff mode k
+      // is active; with one active mode, e^T theta = 1 and theta_j = 0 (j != k) give theta =
+      // e_k, so x' = f_k(x) at every stage, and lambda, mu follow from the state (g - lambda -
+      // mu e = 0).
+      int mode = -1;
+      for (int k = 0; k < np_; ++k) {
+        if (a_zero_[static_cast<std::size_t>(k)]) continue;
+        if (mode >= 0) return -1;  // a sliding mode: theta is not a unit vector
+        mode = k;
+      }
+      return mode;
+    }
+    case Reduction::kFreeMovingSets:
+      // Moving-set pair k: c_k ⟂ lambda_k; with b = lambda_k = 0 kept (a_zero false) for every
+      // constraint, x' = f(x) + P grad c lambda = f(x).
+      for (int k = 0; k < np_; ++k) {
+        if (a_zero_[static_cast<std::size_t>(k)]) return -1;  // a constraint is active
+      }
+      return 0;
+  }
+  return -1;
+}
+
+bool FesdRun::SmoothElementGuess(const Vector& y0, double h, const Vector* previous, Vector* w,
+                                 int* iterations, long* factorizations) {
+  const int index = SmoothField();
+  if (index < 0) return false;
+  FieldSolver& field = smooth_fields_[static_cast<std::size_t>(index)];
+  if (field.solver == nullptr) {
+    // The scene without its effects, built member by member: copying it whole would clone
+    // every effect's functions only to drop them (SmoothFunction copies are deep).
+    const Scene& scene = system_.scene();
+    Scene smooth;
+    smooth.name = scene.name;
+    smooth.state_names = scene.state_names;
+    smooth.initial_state = scene.initial_state;
+    smooth.initial_time = scene.initial_time;
+    smooth.final_time = scene.final_time;
+    smooth.parameters = scene.parameters;
+    smooth.inputs = scene.inputs;
+    smooth.time_scale_input = scene.time_scale_input;
+    smooth.dynamics = reduction_ == Reduction::kStewartMode
+                          ? std::get<SwitchingSurfaces>(scene.effects.front())
+                                .modes[static_cast<std::size_t>(index)]
+                          : scene.dynamics;
+    field.system = std::make_unique<LoweredSystem>(smooth, Lowering(options_));
+    if (field.system->num_states() != ny_ || field.system->num_algebraic() != 0) {
+      reduction_ = Reduction::kNone;  // another layout: never reduce
+      return false;
+    }
+    field.solver = std::make_unique<internal::SmoothCollocationSolver>(
+        field.system.get(), s_, options_.newton.linear_solver);
+  }
+  // The run may have changed parameters (FesdIntegrator) and inputs (control segments).
+  field.system->SetParameters(system_.parameters());
+  field.system->SetInputs(system_.inputs());
+  const internal::CollocationStages& stages = group_.element(0);
+  // Stage increments extrapolated as for the full element; algebraic values set below.
+  *w = stages.InitialGuess(y0, h, previous, previous != nullptr ? h : 0.0, z_guess_,
+                           /*algebraic=*/false);
+  smooth_field_z_.resize(ny_, s_);
+  for (int i = 0; i < s_; ++i) smooth_field_z_.col(i) = w->segment(stages.state_offset(i), ny_);
+  internal::SmoothCollocationSolver::Stopping stopping;
+  stopping.tolerance = options_.newton.tolerance;
+  stopping.max_iterations = options_.newton.max_iterations;
+  const long before = field.solver->num_factorizations();
+  const auto outcome = field.solver->Solve(h, y0, stopping, &smooth_field_z_, iterations);
+  *factorizations = field.solver->num_factorizations() - before;
+  if (outcome != internal::SmoothCollocationSolver::Outcome::kConverged) return false;
+  for (int i = 0; i < s_; ++i) {
+    w->segment(stages.state_offset(i), ny_) = smooth_field_z_.col(i);
+    stage_y_ = y0 + smooth_field_z_.col(i);
+    w->segment(stages.algebraic_offset(i), nz_) = ConsistentGuess(stage_y_, z_guess_);
+  }
   return true;
 }
 

@@ -48,6 +48,9 @@ IntegratorEntry FesdEntry() {
                "a switch right after a step's start does not use up an element (shooting)"),
       BindBool("sensitivities", &O::sensitivities,
                "dx(T)/dx(0), dx(T)/dp, dx(T)/du through switches (IFT on every group)"),
+      BindBool("reduce_smooth_elements", &O::reduce_smooth_elements,
+               "elements whose statuses leave a smooth field (one Stewart mode, no active "
+               "constraint) solved as Radau IIA steps of it, then checked on the full system"),
       BindBool("record_stages", &O::record_stages, "record every collocation stage point"),
       BindBool("record_trajectory", &O::record_trajectory,
                "record element ends (false: initial and final points only)"),
@@ -77,6 +80,8 @@ IntegratorEntry FesdEntry() {
       BindStat("frozen_time", &S::frozen_time, "numerical time with physical time frozen (relays)"),
       BindStat("num_filter_rechecks", &S::num_filter_rechecks,
                "steps solved again: a constraint left out by the filter was not positive"),
+      BindStat("num_reduced_elements", &S::num_reduced_elements,
+               "elements solved as a Radau IIA step of a smooth field"),
       BindStat("max_working_pairs", &S::max_working_pairs,
                "most complementarity pairs in an element system (near-active filter)"),
       BindStat("cpu_seconds", &S::cpu_seconds, "thread CPU time"),

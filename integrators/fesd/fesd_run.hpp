@@ -89,6 +89,7 @@ class FesdRun {
         group_(&system_, options.stages),
         filter_(&system_, options.constraint_filter, options.filter_safety),
         newton_(NewtonOptions(options)),
+        reduced_newton_(ReducedNewtonOptions(options)),
         tableau_(RadauIIA(options.stages)),
         s_(options.stages),
         nx_(scene.num_states()),
@@ -99,6 +100,7 @@ class FesdRun {
       smooth_ = std::make_unique<internal::SmoothCollocationSolver>(&system_, options.stages,
                                                                     options.newton.linear_solver);
     }
+    InitializeSmoothFields();
   }
 
  public:
@@ -106,6 +108,10 @@ class FesdRun {
 
  private:
   static SemismoothNewtonOptions NewtonOptions(const FesdOptions& options);
+  // The same without the forced correction (min_iterations = 0): it checks smooth-element
+  // solutions, whose stage states a converged Newton of their own produced and whose
+  // algebraic values are functions of them (no extrapolated round-off to remove).
+  static SemismoothNewtonOptions ReducedNewtonOptions(const FesdOptions& options);
 
   static LoweringOptions Lowering(const FesdOptions& options);
 
@@ -167,6 +173,24 @@ class FesdRun {
   Vector TrajectoryAlgebraic(const Vector& z) const;
 
   const Vector* last_w_ptr() const { return have_last_w_ ? &last_w_ : nullptr; }
+
+  // --- smooth elements (FesdOptions::reduce_smooth_elements) ------------------------------
+  // Which statuses leave a smooth field x' = f(x) (InitializeSmoothFields decides per scene):
+  // Stewart's form of one switching effect with exactly one active mode (b = lambda_k = 0
+  // kept for one pair only), or moving sets with no active constraint (b = lambda = 0 kept
+  // for every pair).
+  enum class Reduction { kNone, kStewartMode, kFreeMovingSets };
+  void InitializeSmoothFields();
+  // The field the current statuses leave (index into smooth_fields_: the mode, or 0), or -1.
+  int SmoothField() const;
+  // The guess *w of one element of length h from y0 (previous: the last element's unknowns
+  // for the extrapolation, or null) as a Radau IIA step of that field (its own lowered system,
+  // without algebraic unknowns) with algebraic values consistent with the stage states
+  // (ConsistentGuess, jump variables from z_guess_). Returns false if the statuses leave no
+  // smooth field or that step does not converge (*w is then not a guess).
+  // *iterations, *factorizations: the reduced solve's work.
+  bool SmoothElementGuess(const Vector& y0, double h, const Vector* previous, Vector* w,
+                          int* iterations, long* factorizations);
 
   // A system without algebraic unknowns (no effects) and no sensitivities cannot switch: every
   // element is a plain Radau IIA step, solved by the same kernel as the smooth Radau IIA
@@ -339,6 +363,10 @@ class FesdRun {
   NearActiveFilter filter_;
   std::vector<double> excluded_min_;  // per element of the current solve (FilterCheck)
   SemismoothNewton newton_;
+  SemismoothNewton reduced_newton_;  // smooth elements (ReducedNewtonOptions)
+  // The Newton that solved the system Record captures (its factorization at the solution
+  // serves LocalTransfer with sensitivities).
+  const SemismoothNewton* solved_by_ = &newton_;
   const RadauTableau& tableau_;
   int s_, nx_, ny_, nz_, np_;
   FesdResult result_;
@@ -357,6 +385,15 @@ class FesdRun {
   long factorizations_ = 0;
   Matrix sensitivity_;                                         // d(y, tau) / d(x0, p, u)
   std::unique_ptr<internal::SmoothCollocationSolver> smooth_;  // elements without pairs
+  // Smooth elements: per field its own lowered system and Radau IIA solver, built on first
+  // use; empty if the scene does not reduce.
+  struct FieldSolver {
+    std::unique_ptr<LoweredSystem> system;
+    std::unique_ptr<internal::SmoothCollocationSolver> solver;
+  };
+  Reduction reduction_ = Reduction::kNone;
+  std::vector<FieldSolver> smooth_fields_;
+  Matrix smooth_field_z_;  // stage increments of a smooth-element solve (n_y x s)
   Matrix smooth_z_, last_z_matrix_, extrapolation_;
   double extrapolation_ratio_ = -1.0;
   // Adaptive steps and dense output.

@@ -83,7 +83,7 @@ Transfer FesdRun::LocalTransfer(const Vector& w, int group_elements, int remaini
                            : Vector(-blocks.h_fixed / remaining);
   Matrix rhs(blocks.y_start.rows(), ny_ + 1 + np + nu);
   rhs << blocks.y_start, d_tau, blocks.p, blocks.u;
-  const LinearSolver* solver = newton_.last_jacobian_solver();
+  const LinearSolver* solver = solved_by_->last_jacobian_solver();
   MOREAU_ASSERT(solver != nullptr, "no factorized Jacobian for sensitivities");
   solver->SolveMatrix(rhs);
   const Matrix dw = -rhs;

@@ -103,7 +103,7 @@ void DerivativeMatrix::Assign(const SparseMatrix& m) {
   cols_ = static_cast<int>(m.cols());
   if (sparse_) {
     sparse_matrix_ = m;
-    sparse_matrix_.makeCompressed();
+    sparse_matrix_->makeCompressed();
     entries_.clear();
   } else {
     dense_ = Matrix(m);
@@ -122,9 +122,10 @@ void DerivativeMatrix::Scale(double factor) {
 
 void DerivativeMatrix::Finalize() {
   if (!sparse_ || finalized_) return;
-  sparse_matrix_.resize(rows_, cols_);
-  sparse_matrix_.setFromTriplets(entries_.begin(), entries_.end());
-  sparse_matrix_.makeCompressed();
+  if (!sparse_matrix_) sparse_matrix_.emplace();
+  sparse_matrix_->resize(rows_, cols_);
+  sparse_matrix_->setFromTriplets(entries_.begin(), entries_.end());
+  sparse_matrix_->makeCompressed();
   finalized_ = true;
 }
 
@@ -140,13 +141,18 @@ Matrix& DerivativeMatrix::MutableDense() {
 
 const SparseMatrix& DerivativeMatrix::sparse() const {
   MOREAU_ASSERT(sparse_ && finalized_, "sparse() of a dense or unfinished derivative matrix");
-  return sparse_matrix_;
+  return StoredSparse();
+}
+
+const SparseMatrix& DerivativeMatrix::StoredSparse() const {
+  static const SparseMatrix kEmpty;
+  return sparse_matrix_ ? *sparse_matrix_ : kEmpty;
 }
 
 Matrix DerivativeMatrix::ToDense() const {
   if (!sparse_) return dense_;
   MOREAU_ASSERT(finalized_, "ToDense of an unfinished derivative matrix");
-  return Matrix(sparse_matrix_);
+  return Matrix(StoredSparse());
 }
 
 void DerivativeMatrix::MultiplyAdd(const ConstVectorRef& x, VectorRef y, double scale) const {
@@ -183,7 +189,7 @@ Eigen::RowVectorXd DerivativeMatrix::Row(int row) const {
 
 double DerivativeMatrix::NonZeros() const {
   if (!sparse_) return static_cast<double>(rows_) * cols_;
-  return finalized_ ? static_cast<double>(sparse_matrix_.nonZeros())
+  return finalized_ ? static_cast<double>(StoredSparse().nonZeros())
                     : static_cast<double>(entries_.size());
 }
 

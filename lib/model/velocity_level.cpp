@@ -809,6 +809,16 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
     return decision;
   }
   for (int k : monotone) roles[static_cast<std::size_t>(k)] = PairRole::kComplementary;
+  // Without monotone candidates every trial decides every pair: its problem is a system of
+  // equations, and with a linear velocity level a linear one, which Newton solves in one step
+  // (a second removes round-off). A trial that has not converged after kLinearTrialIterations
+  // is singular or inconsistent (Stewart's sliding trial at a transversal crossing whose fields
+  // have equal normal components: 23 iterations to stagnation before), and is not a
+  // continuation.
+  constexpr int kLinearTrialIterations = 3;
+  SemismoothNewtonOptions trial_options = VelocityNewtonOptions(sparse_);
+  if (linear && monotone.empty()) trial_options.max_iterations = kLinearTrialIterations;
+  SemismoothNewton trial_newton(trial_options);
 
   // Enumerate: every candidate keeps either its jump side at zero (the continuous side may
   // leave zero) or its continuous side's rate at zero (it stays at zero).
@@ -846,7 +856,7 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
     if (!admitted) continue;
     system.SetRoles(trial);
     system.Reset(y, guess);
-    const SemismoothNewtonResult result = newton.Solve(system, guess);
+    const SemismoothNewtonResult result = trial_newton.Solve(system, guess);
     if (!result.converged()) continue;
     // The free side of every candidate must be nonnegative.
     std::vector<PairRole> check = trial;

@@ -411,6 +411,74 @@ TEST(FesdTest, WithoutEffectsFesdIsRadauIIA) {
   EXPECT_EQ(a.stats.num_elements, b.stats.num_steps);
 }
 
+// Smooth elements (FesdOptions::reduce_smooth_elements) are Radau IIA steps of the field the
+// statuses leave (one Stewart mode; no active constraint), checked on the full element system: the
+// run is the full solve's run up to the Newton tolerance (1e-12 on the scaled residual, where the
+// full solve stops too) and round-off. Observed: <= 1e-15 on states and switch times; a tenth of
+// the tolerance holds with margin and would catch any element that solved another system.
+constexpr double kReducedAgreement = 1e-13;
+
+TEST(FesdTest, SmoothElementsAgreeWithTheFullSolve) {
+  // F1 crosses the circle; F2b enters a sliding mode (two active modes: not reduced) and F2c
+  // leaves one; F3 slides to the origin. S1-S4: moving sets, free before the first contact
+  // and after leaving, not reduced while in contact.
+  for (const char* name : {"F1", "F2a", "F2b", "F2c", "F3", "S1", "S2", "S3", "S4"}) {
+    for (int stages : {1, 2, 3}) {
+      const Scene scene = MakeScene(name);
+      FesdOptions full;
+      full.stages = stages;
+      full.step_size = 0.1;
+      full.reduce_smooth_elements = false;
+      FesdOptions reduced = full;
+      reduced.reduce_smooth_elements = true;
+      const FesdResult a = SimulateFesd(scene, full);
+      const FesdResult b = SimulateFesd(scene, reduced);
+      const std::string label = std::string(name) + " s = " + std::to_string(stages);
+      ExpectCertificates(a, full, label + " (full)");
+      ExpectCertificates(b, reduced, label + " (reduced)");
+      EXPECT_EQ(a.stats.num_reduced_elements, 0) << label;
+      // Every element before the first switch is in one mode, or free, and reduces.
+      EXPECT_GT(b.stats.num_reduced_elements, 0) << label;
+      ASSERT_EQ(a.events.size(), b.events.size()) << label;
+      for (std::size_t k = 0; k < a.events.size(); ++k) {
+        EXPECT_EQ(a.events[k].kind, b.events[k].kind) << label << " event " << k;
+        EXPECT_NEAR(a.events[k].t, b.events[k].t, kReducedAgreement) << label << " event " << k;
+      }
+      ASSERT_EQ(a.elements.size(), b.elements.size()) << label;
+      ASSERT_EQ(a.trajectory.size(), b.trajectory.size()) << label;
+      for (std::size_t k = 0; k < a.trajectory.size(); ++k) {
+        EXPECT_LE((a.trajectory.x[k] - b.trajectory.x[k]).lpNorm<Eigen::Infinity>(),
+                  kReducedAgreement)
+            << label << " t = " << a.trajectory.t[k];
+      }
+      EXPECT_LE((a.final_state - b.final_state).lpNorm<Eigen::Infinity>(), kReducedAgreement)
+          << label;
+    }
+  }
+}
+
+// With sensitivities, a smooth element's transfer comes from the factorization at the reduced
+// solution: the same derivatives as the full solve's.
+TEST(FesdSensitivityTest, SmoothElementsGiveTheFullSolvesDerivatives) {
+  const Scene scene = MakeScene("F1");
+  FesdOptions full;
+  full.stages = 2;
+  full.step_size = 0.1;
+  full.sensitivities = true;
+  full.reduce_smooth_elements = false;
+  FesdOptions reduced = full;
+  reduced.reduce_smooth_elements = true;
+  const FesdResult a = SimulateFesd(scene, full);
+  const FesdResult b = SimulateFesd(scene, reduced);
+  ASSERT_EQ(a.status, FesdStatus::kSuccess) << a.message;
+  ASSERT_EQ(b.status, FesdStatus::kSuccess) << b.message;
+  EXPECT_GT(b.stats.num_reduced_elements, 0);
+  // Derivatives up to ~57 (dx/domega over the run): 1e-13 relative to that (observed 6e-14).
+  const double scale = std::max(1.0, a.sensitivities.lowered.lpNorm<Eigen::Infinity>());
+  EXPECT_LE((a.sensitivities.lowered - b.sensitivities.lowered).lpNorm<Eigen::Infinity>(),
+            kReducedAgreement * scale);
+}
+
 TEST(FesdTest, RefusesUnsupportedEffectsAndBadOptions) {
   Scene scene = testing::S1().Make();
   PathConstraints dai;

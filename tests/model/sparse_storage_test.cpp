@@ -65,6 +65,36 @@ std::vector<Scene> Scenes() {
   return scenes;
 }
 
+// The compressed matrix is created on first sparse use (DerivativeMatrix holds none while
+// dense): storages switch both ways, copies carry it, and an empty sparse matrix reads as zero.
+TEST(SparseStorage, DerivativeMatrixSwitchesStorageAndCopies) {
+  DerivativeMatrix m;
+  m.SetZero(2, 3, false);
+  m.Add(1, 2, 4.0);
+  EXPECT_EQ(m.ToDense()(1, 2), 4.0);
+  m.SetZero(2, 3, true);
+  m.Add(0, 1, 1.5);
+  m.Add(0, 1, 0.5);  // duplicates are summed by Finalize
+  m.Finalize();
+  ASSERT_TRUE(m.is_sparse());
+  EXPECT_EQ(m.ToDense()(0, 1), 2.0);
+  EXPECT_EQ(m.ToDense()(1, 2), 0.0);
+  EXPECT_EQ(m.NonZeros(), 1.0);
+  const DerivativeMatrix copy = m;
+  EXPECT_EQ(copy.sparse().nonZeros(), 1);
+  EXPECT_EQ(copy.ToDense(), m.ToDense());
+  m.SetZero(2, 3, false);
+  EXPECT_EQ(m.ToDense(), Matrix::Zero(2, 3));
+  EXPECT_EQ(copy.ToDense()(0, 1), 2.0);  // the copy owns its storage
+  DerivativeMatrix empty;
+  empty.SetZero(3, 2, true);
+  empty.Finalize();
+  EXPECT_EQ(empty.sparse().rows(), 3);
+  EXPECT_EQ(empty.ToDense(), Matrix::Zero(3, 2));
+  const double visited = empty.Visit([](const auto& storage) { return storage.norm(); });
+  EXPECT_EQ(visited, 0.0);
+}
+
 TEST(SparseStorage, EvaluationsEqualDenseOnEveryCatalogScene) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> uniform(-0.5, 0.5);

@@ -117,6 +117,16 @@ struct FesdOptions {
   double filter_safety = 4.0;
   /// Compute dx(T)/dx(0), dx(T)/dp, dx(T)/du (FesdResult::sensitivities).
   bool sensitivities = false;
+  /// Smooth elements: in an element whose statuses leave a smooth vector field (Stewart's form
+  /// of one SwitchingSurfaces effect with exactly one active mode, no other effects or
+  /// dynamics; or moving sets only, with no active constraint), the element equations are
+  /// exactly a Radau IIA step of that field (theta = e_k and lambda, mu functions of the state;
+  /// or lambda = 0). The trial element is first solved that way (n_y s unknowns, the field
+  /// only), its algebraic stage values are reconstructed from the stage states, and the full
+  /// element system must then hold to the Newton tolerance (else its Newton continues from
+  /// there): results agree with the full solve to that tolerance; switch detection,
+  /// certificates and sensitivities are unchanged.
+  bool reduce_smooth_elements = true;
   /// Step-size control by the local error estimate (see the file comment and
   /// docs/fesd-formulation.md, section 10) instead of fixed steps H.
   bool adaptive = false;
@@ -220,6 +230,9 @@ struct FesdStats {
   /// at a stage, and the largest number of pairs in an element system.
   long num_filter_rechecks = 0;
   long max_working_pairs = 0;
+  /// Elements solved as a Radau IIA step of a smooth field (FesdOptions::reduce_smooth_elements)
+  /// whose full element system then held without a Newton iteration of its own.
+  long num_reduced_elements = 0;
   double cpu_seconds = 0.0;
 
   FesdStats& operator+=(const FesdStats& other);

@@ -13,6 +13,7 @@
 /// which the producer calls once all contributions are in. Capacity is kept across
 /// SetZero calls, so a steady sequence of evaluations does not allocate.
 
+#include <optional>
 #include <vector>
 
 #include "moreau/core/types.hpp"
@@ -65,7 +66,7 @@ class DerivativeMatrix {
   /// f(m) with m the dense Matrix or the SparseMatrix: code written once for both storages.
   template <class F>
   decltype(auto) Visit(F&& f) const {
-    return sparse_ ? f(sparse_matrix_) : f(dense_);
+    return sparse_ ? f(StoredSparse()) : f(dense_);
   }
   /// y += scale * M x.
   void MultiplyAdd(const ConstVectorRef& x, VectorRef y, double scale = 1.0) const;
@@ -87,12 +88,17 @@ class DerivativeMatrix {
 
  private:
   void CheckEntry(int row, int col) const;  // aborts unless 0 <= row < rows, 0 <= col < cols
+  // The compressed matrix, or an empty one before the first sparse Finalize or Assign.
+  const SparseMatrix& StoredSparse() const;
   int rows_ = 0, cols_ = 0;
   bool sparse_ = false;
   bool finalized_ = true;
   Matrix dense_;
   std::vector<Entry> entries_;
-  SparseMatrix sparse_matrix_;
+  // Created on first sparse use: Eigen's SparseMatrix allocates even when empty, and
+  // evaluations hold dozens of dense derivative matrices (PointEvaluation,
+  // VelocityLevelEvaluation), each constructed per run.
+  std::optional<SparseMatrix> sparse_matrix_;
 };
 
 }  // namespace moreau
