@@ -134,18 +134,30 @@ moreau::Scene SmoothPart(const moreau::Scene& scene) {
 //   build/release/bench/fesd_bench --benchmark_filter=ElementRatio
 const char* const kRatioScenes[] = {"F1", "S3"};
 
+// The options of BM_FesdElementRatio and BM_FesdRunCost: FESD with h = 0.1 and N_fe = 2 beside
+// Radau IIA with steps of 0.05 (the FESD elements' nominal length), s stages both.
+struct PairedOptions {
+  moreau::FesdOptions fesd;
+  moreau::RadauOptions radau;
+};
+PairedOptions ElementRatioOptions(int stages) {
+  PairedOptions options;
+  options.fesd.stages = stages;
+  options.fesd.step_size = 0.1;
+  options.fesd.finite_elements = 2;
+  options.fesd.record_trajectory = false;
+  options.radau.stages = stages;
+  options.radau.step_size = options.fesd.step_size / options.fesd.finite_elements;
+  options.radau.record_trajectory = false;
+  return options;
+}
+
 void BM_FesdElementRatio(benchmark::State& state) {
   const moreau::Scene scene = moreau::MakeScene(kRatioScenes[state.range(0)]);
   const moreau::Scene smooth = SmoothPart(scene);
-  moreau::FesdOptions fesd;
-  fesd.stages = static_cast<int>(state.range(1));
-  fesd.step_size = 0.1;
-  fesd.finite_elements = 2;
-  fesd.record_trajectory = false;
-  moreau::RadauOptions radau;
-  radau.stages = fesd.stages;
-  radau.step_size = fesd.step_size / fesd.finite_elements;
-  radau.record_trajectory = false;
+  const PairedOptions options = ElementRatioOptions(static_cast<int>(state.range(1)));
+  const moreau::FesdOptions& fesd = options.fesd;
+  const moreau::RadauOptions& radau = options.radau;
   std::vector<double> fesd_us, radau_us, ratios;
   for (auto _ : state) {
     const double t0 = ThreadCpuSeconds();
@@ -187,15 +199,9 @@ void BM_FesdRunCost(benchmark::State& state) {
   moreau::Scene scene = moreau::MakeScene("F1");
   if (horizons[state.range(0)] > 0.0) scene.final_time = horizons[state.range(0)];
   const moreau::Scene smooth = SmoothPart(scene);
-  moreau::FesdOptions fesd;
-  fesd.stages = static_cast<int>(state.range(1));
-  fesd.step_size = 0.1;
-  fesd.finite_elements = 2;
-  fesd.record_trajectory = false;
-  moreau::RadauOptions radau;
-  radau.stages = fesd.stages;
-  radau.step_size = fesd.step_size / fesd.finite_elements;
-  radau.record_trajectory = false;
+  const PairedOptions options = ElementRatioOptions(static_cast<int>(state.range(1)));
+  const moreau::FesdOptions& fesd = options.fesd;
+  const moreau::RadauOptions& radau = options.radau;
   std::vector<double> fesd_us, radau_us;
   long elements = 0;
   for (auto _ : state) {
