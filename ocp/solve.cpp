@@ -601,6 +601,7 @@ OcpResult SolveByCollocation(const OcpProblem& problem, const OcpOptions& option
   OcpMultipliers multipliers;
   CheckWarmStart(nlp, options, &z, &multipliers);
   result.stats.jacobian_nonzeros = static_cast<long>(nlp.JacobianStructure().size());
+  result.stats.hessian_nonzeros = static_cast<long>(nlp.HessianStructure().size());
   auto record = [&](int stages) {
     result.levels.back().intervals = problem.intervals;
     result.levels.back().stages = stages;

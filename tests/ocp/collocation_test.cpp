@@ -290,6 +290,14 @@ TEST(OcpCollocation, DoorwaySolvesOnTheExactLevel) {
             kResimulationsAgree);
   EXPECT_LE(result.resimulated_state_difference, kNlpAgainstResimulation);
   EXPECT_LE(result.fesd_resimulated_state_difference, kNlpAgainstResimulation);
+  // The statistics describe the transcription IPOPT was given (hessian_nonzeros read 0 for
+  // collocation before it was reported).
+  const CollocationNlp transcription(MakeOcpProblem("doorway"), options);
+  EXPECT_EQ(result.stats.jacobian_nonzeros,
+            static_cast<long>(transcription.JacobianStructure().size()));
+  EXPECT_EQ(result.stats.hessian_nonzeros,
+            static_cast<long>(transcription.HessianStructure().size()));
+  EXPECT_GT(result.stats.hessian_nonzeros, 0);
 }
 
 // The refinement's starting point: the coarse solution carried to s + 1 stages keeps the
