@@ -152,25 +152,42 @@ PairedOptions ElementRatioOptions(int stages) {
   return options;
 }
 
+// One FESD run of `scene` and one Radau IIA run of `smooth`, back to back so that both see the
+// same machine load, each timed in thread CPU time. ok is false if either run failed.
+struct PairedRun {
+  bool ok = false;
+  double fesd_seconds = 0.0, radau_seconds = 0.0;
+  long fesd_elements = 0, radau_steps = 0;
+};
+PairedRun RunPair(const moreau::Scene& scene, const moreau::Scene& smooth,
+                  const PairedOptions& options) {
+  PairedRun run;
+  const double t0 = ThreadCpuSeconds();
+  const moreau::FesdResult a = moreau::SimulateFesd(scene, options.fesd);
+  const double t1 = ThreadCpuSeconds();
+  const moreau::RadauResult b = moreau::SimulateRadau(smooth, options.radau);
+  const double t2 = ThreadCpuSeconds();
+  run.ok = a.status == moreau::FesdStatus::kSuccess && b.stats.num_steps > 0;
+  run.fesd_seconds = t1 - t0;
+  run.radau_seconds = t2 - t1;
+  run.fesd_elements = a.stats.num_elements;
+  run.radau_steps = b.stats.num_steps;
+  return run;
+}
+
 void BM_FesdElementRatio(benchmark::State& state) {
   const moreau::Scene scene = moreau::MakeScene(kRatioScenes[state.range(0)]);
   const moreau::Scene smooth = SmoothPart(scene);
   const PairedOptions options = ElementRatioOptions(static_cast<int>(state.range(1)));
-  const moreau::FesdOptions& fesd = options.fesd;
-  const moreau::RadauOptions& radau = options.radau;
   std::vector<double> fesd_us, radau_us, ratios;
   for (auto _ : state) {
-    const double t0 = ThreadCpuSeconds();
-    const moreau::FesdResult a = moreau::SimulateFesd(scene, fesd);
-    const double t1 = ThreadCpuSeconds();
-    const moreau::RadauResult b = moreau::SimulateRadau(smooth, radau);
-    const double t2 = ThreadCpuSeconds();
-    if (a.status != moreau::FesdStatus::kSuccess || b.stats.num_steps == 0) {
+    const PairedRun run = RunPair(scene, smooth, options);
+    if (!run.ok) {
       state.SkipWithError("a run failed");
       break;
     }
-    const double per_fesd = 1e6 * (t1 - t0) / static_cast<double>(a.stats.num_elements);
-    const double per_radau = 1e6 * (t2 - t1) / static_cast<double>(b.stats.num_steps);
+    const double per_fesd = 1e6 * run.fesd_seconds / static_cast<double>(run.fesd_elements);
+    const double per_radau = 1e6 * run.radau_seconds / static_cast<double>(run.radau_steps);
     fesd_us.push_back(per_fesd);
     radau_us.push_back(per_radau);
     ratios.push_back(per_fesd / per_radau);
@@ -200,23 +217,17 @@ void BM_FesdRunCost(benchmark::State& state) {
   if (horizons[state.range(0)] > 0.0) scene.final_time = horizons[state.range(0)];
   const moreau::Scene smooth = SmoothPart(scene);
   const PairedOptions options = ElementRatioOptions(static_cast<int>(state.range(1)));
-  const moreau::FesdOptions& fesd = options.fesd;
-  const moreau::RadauOptions& radau = options.radau;
   std::vector<double> fesd_us, radau_us;
   long elements = 0;
   for (auto _ : state) {
-    const double t0 = ThreadCpuSeconds();
-    const moreau::FesdResult a = moreau::SimulateFesd(scene, fesd);
-    const double t1 = ThreadCpuSeconds();
-    const moreau::RadauResult b = moreau::SimulateRadau(smooth, radau);
-    const double t2 = ThreadCpuSeconds();
-    if (a.status != moreau::FesdStatus::kSuccess || b.stats.num_steps == 0) {
+    const PairedRun run = RunPair(scene, smooth, options);
+    if (!run.ok) {
       state.SkipWithError("a run failed");
       break;
     }
-    elements = a.stats.num_elements;
-    fesd_us.push_back(1e6 * (t1 - t0));
-    radau_us.push_back(1e6 * (t2 - t1));
+    elements = run.fesd_elements;
+    fesd_us.push_back(1e6 * run.fesd_seconds);
+    radau_us.push_back(1e6 * run.radau_seconds);
   }
   if (fesd_us.empty()) return;
   state.counters["elements"] = static_cast<double>(elements);
