@@ -129,11 +129,7 @@ void CollocationNlp::Impl::BuildBounds() {
   const int nz = nf_ + intervals_ * IntervalSize();
   variable_lower_ = Vector::Constant(nz, -kInfinity);
   variable_upper_ = Vector::Constant(nz, kInfinity);
-  for (int i = 0; i < nf_; ++i) {
-    const auto& free = problem_.free_initial_states[static_cast<std::size_t>(i)];
-    variable_lower_[i] = std::max(free.lower, -kInfinity);
-    variable_upper_[i] = std::min(free.upper, kInfinity);
-  }
+  BoundFreeInitialStates(problem_, &variable_lower_, &variable_upper_);
   const double nominal = interval_length_ / elements_;
   for (int k = 0; k < intervals_; ++k) {
     for (int j = 0; j < nd_; ++j) {
@@ -377,10 +373,7 @@ auto CollocationNlp::Impl::SetExactPieces(const std::vector<bool>& active) -> in
 // --- initial guess --------------------------------------------------------------------------
 auto CollocationNlp::Impl::InitialGuess() -> Vector {
   Vector z = Vector::Zero(variable_lower_.size());
-  for (int i = 0; i < nf_; ++i) {
-    const auto& free = problem_.free_initial_states[static_cast<std::size_t>(i)];
-    z[i] = std::clamp(problem_.scene.initial_state[free.state], free.lower, free.upper);
-  }
+  GuessFreeInitialStates(problem_, &z);
   const int nc = static_cast<int>(problem_.controls.size());
   Scene scene = augmented_.scene;
   scene.initial_state = InitialState(z);

@@ -22,7 +22,7 @@ namespace moreau::ocp_internal {
 
 class CollocationNlp::Impl {
  public:
-  static constexpr double kInfinity = 1e20;  // IPOPT's default "no bound"
+  static constexpr double kInfinity = kNoBound;
   using RowMajorMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
   // Pinned ends of the element minima (LocateMinima): the search starts this far inside (c_m
   // at the end is zero only to the solver's tolerance, and c_m / theta magnifies that residual

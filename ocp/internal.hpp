@@ -27,6 +27,29 @@ struct AugmentedScene {
 
 AugmentedScene Augment(const OcpProblem& problem);
 
+// IPOPT's default "no bound" (nlp_lower_bound_inf / nlp_upper_bound_inf).
+inline constexpr double kNoBound = 1e20;
+
+// The free initial states come first among the variables of both transcriptions. Their
+// bounds, written into the first entries of *lower and *upper (infinite bounds as kNoBound).
+inline void BoundFreeInitialStates(const OcpProblem& problem, Vector* lower, Vector* upper) {
+  for (std::size_t i = 0; i < problem.free_initial_states.size(); ++i) {
+    const auto& free = problem.free_initial_states[i];
+    (*lower)[static_cast<Eigen::Index>(i)] = std::max(free.lower, -kNoBound);
+    (*upper)[static_cast<Eigen::Index>(i)] = std::min(free.upper, kNoBound);
+  }
+}
+
+// Their starting values, written into the first entries of *z: the scene's initial state
+// clamped to the bounds.
+inline void GuessFreeInitialStates(const OcpProblem& problem, Vector* z) {
+  for (std::size_t i = 0; i < problem.free_initial_states.size(); ++i) {
+    const auto& free = problem.free_initial_states[i];
+    (*z)[static_cast<Eigen::Index>(i)] =
+        std::clamp(problem.scene.initial_state[free.state], free.lower, free.upper);
+  }
+}
+
 // The pattern of a symmetric Hessian assembled from dense blocks, each over a list of
 // variables (Block::columns): *structure is the union of the blocks' lower triangles, sorted
 // by (row, column) without duplicates, as IPOPT takes it. Each block's Block::position (n * n

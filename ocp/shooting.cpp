@@ -13,7 +13,7 @@
 namespace moreau {
 
 namespace {
-constexpr double kInfinity = 1e20;  // IPOPT's default "no bound"
+constexpr double kInfinity = ocp_internal::kNoBound;
 using RowMajorMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 }  // namespace
 
@@ -69,11 +69,7 @@ class ShootingNlp::Impl {
     const int nz = nf_ + intervals_ * nd_ + (multiple_ ? intervals_ * ny_ : 0);
     variable_lower_ = Vector::Constant(nz, -kInfinity);
     variable_upper_ = Vector::Constant(nz, kInfinity);
-    for (int i = 0; i < nf_; ++i) {
-      const auto& free = problem_.free_initial_states[static_cast<std::size_t>(i)];
-      variable_lower_[i] = std::max(free.lower, -kInfinity);
-      variable_upper_[i] = std::min(free.upper, kInfinity);
-    }
+    ocp_internal::BoundFreeInitialStates(problem_, &variable_lower_, &variable_upper_);
     for (int k = 0; k < intervals_; ++k) {
       for (int j = 0; j < nd_; ++j) {
         const InputSpec& input =
@@ -714,10 +710,7 @@ class ShootingNlp::Impl {
 
   Vector InitialGuess() {
     Vector z = Vector::Zero(num_variables());
-    for (int i = 0; i < nf_; ++i) {
-      const auto& free = problem_.free_initial_states[static_cast<std::size_t>(i)];
-      z[i] = std::clamp(problem_.scene.initial_state[free.state], free.lower, free.upper);
-    }
+    ocp_internal::GuessFreeInitialStates(problem_, &z);
     const int nc = static_cast<int>(problem_.controls.size());
     for (int k = 0; k < intervals_; ++k) {
       for (int j = 0; j < nd_; ++j) {
