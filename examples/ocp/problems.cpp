@@ -183,7 +183,7 @@ OcpOptions WaveRiderOptions() {
 // the exact level (and its element minima) the refinement to s = 5 stages: the s = 3
 // collocation error where contacts begin left the NLP's x(T) 2.15e-6 from the re-simulation of
 // its controls; s = 4 leaves 5.7e-8 (IDA: a graze at t = 6.85 it resolves as a short contact)
-// and 1.2e-9 (FESD) in 10 more iterations, s = 5 4.4e-11 and 5.2e-11 in 9.
+// and 1.2e-9 (FESD) in 10 more iterations, s = 5 5.6e-11 and 5.2e-11 in 9.
 OcpOptions DoorwayOptions() {
   OcpOptions options;
   options.transcription = OcpTranscription::kCollocation;
