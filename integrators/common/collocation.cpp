@@ -41,6 +41,7 @@ double CollocationStages::EstimatedStartNonzeros() const {
 
 void CollocationStages::Evaluate(const ConstVectorRef& y0, const ConstVectorRef& w,
                                  Derivatives derivatives) {
+  derivatives_ = derivatives;
   for (int i = 0; i < s_; ++i) {
     const auto k = static_cast<std::size_t>(i);
     stage_y_[k] = y0 + w.segment(state_offset(i), ny_);

@@ -48,6 +48,13 @@ class CollocationStages {
   // Evaluates all stages at Y_i = y0 + Z_i, z_i taken from w.
   void Evaluate(const ConstVectorRef& y0, const ConstVectorRef& w, Derivatives derivatives);
   const PointEvaluation& stage(int i) const { return stages_[static_cast<std::size_t>(i)]; }
+  // The derivatives the last Evaluate computed (kNone: stage(i) holds values only, and its
+  // derivative blocks are not those of the stage).
+  Derivatives derivatives() const { return derivatives_; }
+  // Stage i's evaluation if it has derivatives with respect to y and z, else null.
+  const PointEvaluation* stage_with_derivatives(int i) const {
+    return derivatives_ == Derivatives::kNone ? nullptr : &stage(i);
+  }
   // The point (Y_i, z_i) of stage i at the last Evaluate.
   const Vector& stage_state(int i) const { return stage_y_[static_cast<std::size_t>(i)]; }
   const Vector& stage_algebraic(int i) const { return stage_z_[static_cast<std::size_t>(i)]; }
@@ -92,6 +99,7 @@ class CollocationStages {
   int s_, ny_, nz_, ng_, np_;
   std::vector<PointEvaluation> stages_;
   std::vector<Vector> stage_y_, stage_z_;
+  Derivatives derivatives_ = Derivatives::kNone;
   // Extrapolation weights for the last step-length ratio (column i: stage i of the new step).
   mutable double cached_ratio_ = -1.0;
   mutable Matrix extrapolation_;

@@ -192,6 +192,10 @@ SemismoothNewtonOptions FesdRun::NewtonOptions(const FesdOptions& options) {
 SemismoothNewtonOptions FesdRun::ReducedNewtonOptions(const FesdOptions& options) {
   SemismoothNewtonOptions newton = NewtonOptions(options);
   newton.min_iterations = 0;
+  // The reduced solution usually holds: check it on values, derivatives only if Newton must
+  // go on (or for sensitivities, factorize_at_solution). Whatever reads the stage data after
+  // a solve sees which it has (CollocationStages::derivatives()).
+  newton.defer_initial_jacobian = true;
   return newton;
 }
 

@@ -131,8 +131,7 @@ void FesdRun::Restore(const Snapshot& s) {
   result_.message.clear();
 }
 
-Violation FesdRun::JumpStageViolation(const CollocationStages& stages, const Vector& y0,
-                                      const ConstVectorRef& w_e, const Vector& scales,
+Violation FesdRun::JumpStageViolation(const CollocationStages& stages, const Vector& scales,
                                       int element) const {
   Violation first;
   // Screen: the stage values of the jump sides approximate the consistent ones to O(h^s);
@@ -152,8 +151,7 @@ Violation FesdRun::JumpStageViolation(const CollocationStages& stages, const Vec
   Vector previous = Vector::Constant(np_, std::numeric_limits<double>::quiet_NaN());
   double previous_c = 0.0;
   for (int i = 0; i < s_ && !first.found; ++i) {
-    const Vector y = y0 + w_e.segment(stages.state_offset(i), ny_);
-    const Vector free = ConsistentFreeSides(y, stages.stage(i), stages.Algebraic(w_e, i));
+    const Vector free = ConsistentFreeSides(stages, i);
     for (int k = 0; k < np_; ++k) {
       if (!FreeSideIsJump(k) || !(free[k] < -options_.event_tolerance * scales[k])) continue;
       double fraction = tableau_.c[i];

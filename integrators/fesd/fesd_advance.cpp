@@ -49,7 +49,8 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
   std::vector<SolveRecord> records;
   std::vector<Vector> trial_w;
   Vector y = y_start;
-  Vector v_end = v_;
+  EndVelocity v_end;  // the velocity level at the end of the last checked element
+  v_end.v = v_;
   Violation violation;
   std::string trial_failure;  // why the trial pass suspected a switch, if not by signs
   GroupSetup trial_setup;     // one element of fixed length (its vectors reused across elements)
@@ -92,7 +93,7 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
     }
     violation = StageViolation(group_.element(0), scales, e);
     if (!violation.found && check_jump_stages_) {
-      violation = JumpStageViolation(group_.element(0), y, solved.solution, scales, e);
+      violation = JumpStageViolation(group_.element(0), scales, e);
     }
     const Vector y_next = group_.EndState(solved.solution);
     if (!violation.found) violation = EndViolation(group_.element(0), y_next, scales, e, &v_end);
@@ -111,7 +112,8 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
     last_h_ = h_trial;
     *remaining = 0;
     tau_ = step_end;  // exact step end
-    v_ = v_end;
+    ResolveVelocity(&v_end);
+    v_ = v_end.v;
     z_guess_ = z_last_;
     return DecideAtBoundary();
   }
@@ -120,6 +122,7 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
   // group of equal length ending on it (equilibration); if the switch is not confirmed the
   // group covers the rest of the step.
   const int e = violation.element;
+  ResolveVelocity(&v_end);  // the group's guess
   int m = (violation.fraction >= 0.5 || e == 0) ? e + 1 : e;
   double h_guess = (e + violation.fraction) * h_trial / m;
   for (int attempt = 0; attempt <= options_.max_event_retries; ++attempt) {
@@ -134,7 +137,7 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
     setup.indicator_weights = scales.cwiseInverse();
     setup.indicator_power = powers;
     group_.Configure(setup);
-    const Vector guess = GroupGuess(trial_w, y_start, h_trial, m, h_guess, v_end);
+    const Vector guess = GroupGuess(trial_w, y_start, h_trial, m, h_guess, v_end.v);
     solved_by_ = &newton_;
     const SemismoothNewtonResult solved = newton_.Solve(group_, guess);
     CountNewton(solved);
@@ -153,13 +156,12 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
     // Cross complementarity inside the group: no continuous free side negative at a stage,
     // no indicator negative at an interior element boundary.
     Violation inner;
-    Vector v_inner = w.segment(group_.v_offset(), nz_);
+    EndVelocity v_inner;
+    v_inner.v = w.segment(group_.v_offset(), nz_);
     for (int k = 0; k < m && !inner.found; ++k) {
       inner = StageViolation(group_.element(k), scales, k);
       if (!inner.found && check_jump_stages_) {
-        inner = JumpStageViolation(group_.element(k), group_.ElementStart(w, k),
-                                   w.segment(group_.element_offset(k), group_.element_size()),
-                                   scales, k);
+        inner = JumpStageViolation(group_.element(k), scales, k);
       }
       if (!inner.found && k + 1 < m) {
         inner = EndViolation(group_.element(k), group_.ElementStart(w, k + 1), scales, k, &v_inner);
@@ -507,36 +509,62 @@ Violation FesdRun::StageViolation(const internal::CollocationStages& stages, con
   return first;
 }
 
-// Event indicators at the end state y of an element (velocity-level values solved from v,
-// which is updated): the first negative one beyond tolerance is a switch in the element.
-Violation FesdRun::EndViolation(const internal::CollocationStages& stages, const Vector& y,
-                                const Vector& scales, int element, Vector* v) const {
-  Violation violation;
+void FesdRun::ResolveVelocity(EndVelocity* end) const {
+  if (!end->deferred) return;
+  end->deferred = false;
+  // The solve EndViolation would have made there (the last stage's algebraic values as the
+  // starting point), evaluating the system at (y, z) itself: the stage data may be gone.
   Vector solved;
+  if (system_.SolveVelocityLevel(end->y, a_zero_, end->z, &solved)) end->v = solved;
+}
+
+// Event indicators at the end state y of an element (velocity-level values solved from v,
+// which is updated, or deferred): the first negative one beyond tolerance is a switch in the
+// element.
+Violation FesdRun::EndViolation(const internal::CollocationStages& stages, const Vector& y,
+                                const Vector& scales, int element, EndVelocity* end_v) const {
+  Violation violation;
   if (np_ == 0) return violation;
-  // y is the last stage's state (Radau IIA: c_s = 1): solved from that stage's evaluation
-  // (a linear velocity level needs no evaluation of its own; a nonlinear one is solved by
-  // Newton from the stage's algebraic values). That is the solve the element's certificates
-  // make at its last stage (ConsistentFreeSides), which therefore take it from end_level_.
   const int last = s_ - 1;
   end_level_.valid = false;
   const bool at_stage = y.size() == stages.stage_state(last).size() &&
                         (y.array() == stages.stage_state(last).array()).all();
   const Vector& z_last = stages.stage_algebraic(last);
-  if (!(at_stage
-            ? system_.SolveVelocityLevel(y, a_zero_, z_last, z_last, stages.stage(last), &solved)
-            : system_.SolveVelocityLevel(y, a_zero_, *v, &solved))) {
-    return violation;
-  }
-  *v = solved;
   IndicatorEvaluation& end = indicators_;
-  system_.EvaluateEventIndicators(y, solved, a_zero_, Derivatives::kNone, &end);
-  if (at_stage) {
-    end_level_.valid = true;
-    end_level_.a_zero = a_zero_;
-    end_level_.y = y;
-    end_level_.z = z_last;
-    end_level_.indicators = end.values;
+  closed_free_.resize(np_);
+  if (at_stage && JumpFreeSidesInClosedForm(&closed_free_)) {
+    // Continuous sides from y, jump sides in closed form (end_v->v only fills the argument):
+    // the velocity level itself is solved only where it is used (ResolveVelocity).
+    system_.EvaluateEventIndicators(y, end_v->v, a_zero_, Derivatives::kNone, &end);
+    for (int k = 0; k < np_; ++k) {
+      if (FreeSideIsJump(k)) end.values[k] = closed_free_[k];
+    }
+    end_v->deferred = true;
+    end_v->y = y;
+    end_v->z = z_last;
+  } else {
+    // y is the last stage's state (Radau IIA: c_s = 1): solved from that stage's evaluation
+    // where it has derivatives (a linear velocity level needs no evaluation of its own; a
+    // nonlinear one is solved by Newton from the stage's algebraic values). That is the solve
+    // the element's certificates make at its last stage (ConsistentFreeSides), which
+    // therefore take it from end_level_.
+    Vector solved;
+    const PointEvaluation* point = at_stage ? stages.stage_with_derivatives(last) : nullptr;
+    const bool ok =
+        point != nullptr
+            ? system_.SolveVelocityLevel(y, a_zero_, z_last, z_last, *point, &solved)
+            : system_.SolveVelocityLevel(y, a_zero_, at_stage ? z_last : end_v->v, &solved);
+    if (!ok) return violation;
+    end_v->v = solved;
+    end_v->deferred = false;
+    system_.EvaluateEventIndicators(y, solved, a_zero_, Derivatives::kNone, &end);
+    if (at_stage) {
+      end_level_.valid = true;
+      end_level_.a_zero = a_zero_;
+      end_level_.y = y;
+      end_level_.z = z_last;
+      end_level_.indicators = end.values;
+    }
   }
   for (int k = 0; k < np_ && !violation.found; ++k) {
     if (end.values[k] < -options_.event_tolerance * scales[k]) {

@@ -35,7 +35,7 @@ SolveRecord FesdRun::Record(const Vector& w, double h, bool ends_at_switch,
     element.ends_at_switch = ends_at_switch && e + 1 == m;
     element.newton_iterations = static_cast<int>(solved.stats.iterations);
     element.newton_residual = solved.residual_norm;
-    Certificates(stages, y0, w_e, a_previous, b_previous, &element);
+    Certificates(stages, a_previous, b_previous, &element);
     if (filter_.enabled() && static_cast<std::size_t>(e) < excluded_min_.size()) {
       // Constraints left out by the near-active filter (lambda = 0): |min(c, 0)| at the
       // stages, so that the certificates cover every declared constraint.
@@ -121,17 +121,19 @@ void FesdRun::Commit(const SolveRecord& record) {
   if (progress_) progress_(y_[system_.clock_index()]);
 }
 
-// Free side of every pair at a stage state: continuous sides from the stage values, jump
-// sides consistent with the stage state (velocity level), see FreeSideIsJump.
-Vector FesdRun::ConsistentFreeSides(const Vector& y, const PointEvaluation& stage,
-                                    const Vector& z) const {
+// Free side of every pair at stage i: continuous sides from the stage values, jump sides
+// consistent with the stage state, see FreeSideIsJump.
+Vector FesdRun::ConsistentFreeSides(const internal::CollocationStages& stages, int i) const {
   Vector free;
-  ConsistentFreeSides(y, stage, z, &free);
+  ConsistentFreeSides(stages, i, &free);
   return free;
 }
 
-void FesdRun::ConsistentFreeSides(const Vector& y, const PointEvaluation& stage, const Vector& z,
+void FesdRun::ConsistentFreeSides(const internal::CollocationStages& stages, int i,
                                   Vector* free_out) const {
+  const PointEvaluation& stage = stages.stage(i);
+  const Vector& y = stages.stage_state(i);
+  const Vector& z = stages.stage_algebraic(i);
   Vector& free = *free_out;
   free.resize(np_);
   bool jump = false;
@@ -140,6 +142,8 @@ void FesdRun::ConsistentFreeSides(const Vector& y, const PointEvaluation& stage,
     jump |= FreeSideIsJump(k);
   }
   if (!jump) return;
+  // Smooth-field statuses: the consistent values without a velocity-level solve.
+  if (JumpFreeSidesInClosedForm(&free)) return;
   if (end_level_.valid && end_level_.a_zero == a_zero_ && y.size() == end_level_.y.size() &&
       z.size() == end_level_.z.size() && (y.array() == end_level_.y.array()).all() &&
       (z.array() == end_level_.z.array()).all()) {
@@ -150,8 +154,13 @@ void FesdRun::ConsistentFreeSides(const Vector& y, const PointEvaluation& stage,
     return;
   }
   Vector& v = stage_v_;
-  // From the stage's evaluation: a linear velocity level needs no evaluation of its own.
-  if (!system_.SolveVelocityLevel(y, a_zero_, z, z, stage, &v)) {
+  // From the stage's evaluation where it has derivatives (a linear velocity level then needs
+  // no evaluation of its own); otherwise the solve evaluates the system at (y, z) itself.
+  const PointEvaluation* with_derivatives = stages.stage_with_derivatives(i);
+  const bool solved = with_derivatives != nullptr
+                          ? system_.SolveVelocityLevel(y, a_zero_, z, z, *with_derivatives, &v)
+                          : system_.SolveVelocityLevel(y, a_zero_, z, &v);
+  if (!solved) {
     free.setConstant(-std::numeric_limits<double>::infinity());  // no consistent value
     return;
   }
@@ -162,19 +171,25 @@ void FesdRun::ConsistentFreeSides(const Vector& y, const PointEvaluation& stage,
   }
 }
 
+bool FesdRun::JumpFreeSidesInClosedForm(Vector* free) const {
+  const int field = SmoothField();
+  if (field < 0) return false;
+  if (reduction_ == Reduction::kStewartMode) {
+    // Pair `field` is mode k = field's theta_k ⟂ lambda_k with lambda_k = 0 kept.
+    MOREAU_ASSERT(FreeSideIsJump(field), "Stewart mode pair without a jump free side");
+    (*free)[field] = 1.0;
+  }
+  return true;
+}
+
 // Certificates of an element (see FesdElement): the enforced side of every pair at the
 // stages and at the start boundary (its continuous side) against the consistent free sides.
-void FesdRun::Certificates(const internal::CollocationStages& stages, const Vector& y0,
-                           const ConstVectorRef& w_e, const Vector& a0, const Vector& b0,
-                           FesdElement* element) const {
+void FesdRun::Certificates(const internal::CollocationStages& stages, const Vector& a0,
+                           const Vector& b0, FesdElement* element) const {
   double cross = 0.0, stage_residual = 0.0;
   std::vector<Vector>& free = free_sides_;
   free.resize(static_cast<std::size_t>(s_));
-  for (int i = 0; i < s_; ++i) {
-    stage_y_ = y0 + w_e.segment(stages.state_offset(i), ny_);
-    ConsistentFreeSides(stage_y_, stages.stage(i), stages.Algebraic(w_e, i),
-                        &free[static_cast<std::size_t>(i)]);
-  }
+  for (int i = 0; i < s_; ++i) ConsistentFreeSides(stages, i, &free[static_cast<std::size_t>(i)]);
   for (int k = 0; k < np_; ++k) {
     const bool a_zero = a_zero_[static_cast<std::size_t>(k)];
     const ContinuousSide side = system_.pairs()[static_cast<std::size_t>(k)].continuous;

@@ -110,7 +110,8 @@ class FesdRun {
   static SemismoothNewtonOptions NewtonOptions(const FesdOptions& options);
   // The same without the forced correction (min_iterations = 0): it checks smooth-element
   // solutions, whose stage states a converged Newton of their own produced and whose
-  // algebraic values are functions of them (no extrapolated round-off to remove).
+  // algebraic values are functions of them (no extrapolated round-off to remove). The check
+  // evaluates values only (defer_initial_jacobian).
   static SemismoothNewtonOptions ReducedNewtonOptions(const FesdOptions& options);
 
   static LoweringOptions Lowering(const FesdOptions& options);
@@ -235,17 +236,39 @@ class FesdRun {
   Violation StageViolation(const internal::CollocationStages& stages, const Vector& scales,
                            int element) const;
 
-  // Event indicators at the end state y of an element (velocity-level values solved from v,
-  // which is updated): the first negative one beyond tolerance is a switch in the element.
+  // The velocity level at an element end as EndViolation leaves it: solved (v), or deferred
+  // where the statuses give the event indicators in closed form (JumpFreeSidesInClosedForm):
+  // then v is unchanged and (y, z), the end state and the last stage's algebraic values, say
+  // where ResolveVelocity solves it when it is used (group guesses, the next step's start).
+  struct EndVelocity {
+    Vector v;
+    bool deferred = false;
+    Vector y, z;
+  };
+  // Solves a deferred velocity level (v is kept if that solve fails, as EndViolation keeps it).
+  void ResolveVelocity(EndVelocity* end) const;
+
+  // Event indicators at the end state y of an element (velocity-level values solved from
+  // end->v, which is updated, or deferred, see EndVelocity): the first negative one beyond
+  // tolerance is a switch in the element.
   Violation EndViolation(const internal::CollocationStages& stages, const Vector& y,
-                         const Vector& scales, int element, Vector* v) const;
+                         const Vector& scales, int element, EndVelocity* end) const;
+
+  // Statuses that leave a smooth field (SmoothField() >= 0) fix the consistent value of every
+  // jump free side without a velocity-level solve. Stewart's form with one active mode k
+  // (reduction kStewartMode): the velocity-level rows on values, theta_j = 0 kept for j != k
+  // and e^T theta = 1, alone give theta = e_k, so pair k's free side theta_k is 1 and every
+  // other free side (lambda_j) is continuous. Moving sets without an active constraint
+  // (kFreeMovingSets): every jump side (lambda) is kept at zero, no free side is a jump. Sets
+  // the jump entries of *free (n_pairs) and returns true, or returns false (no smooth field).
+  bool JumpFreeSidesInClosedForm(Vector* free) const;
 
   // Adaptive steps (and replays): the first stage at which a jump free side, evaluated
   // consistently from the stage state (velocity level, ConsistentFreeSides), is negative
   // beyond tolerance. Long elements can hold two roots of a multiplier or theta, which the
   // check at element ends misses (fesd_adaptive.cpp).
-  Violation JumpStageViolation(const internal::CollocationStages& stages, const Vector& y0,
-                               const ConstVectorRef& w_e, const Vector& scales, int element) const;
+  Violation JumpStageViolation(const internal::CollocationStages& stages, const Vector& scales,
+                               int element) const;
 
   // Crossing fraction of pair k between the second-to-last stage and a negative end value.
   double EndCrossing(const internal::CollocationStages& stages, int k, double end_value) const;
@@ -261,16 +284,17 @@ class FesdRun {
 
   void Commit(const SolveRecord& record);
 
-  // Free side of every pair at a stage state: continuous sides from the stage values, jump
-  // sides consistent with the stage state (velocity level), see FreeSideIsJump.
-  Vector ConsistentFreeSides(const Vector& y, const PointEvaluation& stage, const Vector& z) const;
-  void ConsistentFreeSides(const Vector& y, const PointEvaluation& stage, const Vector& z,
+  // Free side of every pair at stage i: continuous sides from the stage values, jump sides
+  // consistent with the stage state (closed form where JumpFreeSidesInClosedForm gives them,
+  // else the velocity level at the stage state, solved from the stage's evaluation if it has
+  // derivatives), see FreeSideIsJump.
+  Vector ConsistentFreeSides(const internal::CollocationStages& stages, int i) const;
+  void ConsistentFreeSides(const internal::CollocationStages& stages, int i,
                            Vector* free) const;  // the same into *free (no allocation)
 
   // Certificates of an element (see FesdElement): the enforced side of every pair at the
   // stages and at the start boundary (its continuous side) against the consistent free sides.
-  void Certificates(const internal::CollocationStages& stages, const Vector& y0,
-                    const ConstVectorRef& w_e, const Vector& a0, const Vector& b0,
+  void Certificates(const internal::CollocationStages& stages, const Vector& a0, const Vector& b0,
                     FesdElement* element) const;
 
   // --- sensitivities ------------------------------------------------------------------------
@@ -411,6 +435,7 @@ class FesdRun {
   mutable IndicatorEvaluation indicators_;
   mutable std::vector<Vector> free_sides_;
   mutable Vector stage_y_, stage_v_;  // a stage state and its consistent velocity level
+  mutable Vector closed_free_;        // JumpFreeSidesInClosedForm's scratch
   // The consistent velocity level and indicators that EndViolation solved at an element's end
   // state, which is its last stage (c_s = 1), from that stage's evaluation and algebraic
   // values: the element's certificates need the same solve there (ConsistentFreeSides with the

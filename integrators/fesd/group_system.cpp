@@ -116,6 +116,7 @@ bool GroupSystem::Evaluate(const Vector& w, bool with_jacobian, Vector* r, Vecto
   const double h = H(w);
   if (!(h > 0.0) || !std::isfinite(h)) return false;  // element lengths must stay positive
   std::vector<CollocationStages>& target = with_jacobian ? elements_ : value_elements_;
+  last_with_jacobian_ = with_jacobian;
   if (with_jacobian) h_jacobian_ = h;
   EvaluateAll(w, with_jacobian ? Derivatives::kStates : Derivatives::kNone, &target);
   r->resize(num_equations());
@@ -237,6 +238,7 @@ void GroupSystem::ResidualScale(const Vector& /*w*/, Vector* scale) {
 
 void GroupSystem::EvaluateForSensitivities(const Vector& w) {
   EvaluateAll(w, Derivatives::kAll, &elements_);
+  last_with_jacobian_ = true;
   if (!setup_.with_event) return;
   const Vector y_end = EndState(w);
   const auto v = w.segment(v_offset(), nz_);

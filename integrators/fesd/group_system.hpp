@@ -57,8 +57,13 @@ class GroupSystem final : public MixedComplementaritySystem {
   void ResidualScale(const Vector& w, Vector* scale) override;
   double EstimatedJacobianNonzeros() const override;
 
-  // Stage data of element e from the last with-Jacobian evaluation.
-  const CollocationStages& element(int e) const { return elements_[static_cast<std::size_t>(e)]; }
+  // Stage data of element e at the last evaluated point (a solve's solution: Newton's last
+  // evaluation is at the iterate it returns). After a values-only evaluation (a guess that
+  // Newton accepted without derivatives, SemismoothNewtonOptions::defer_initial_jacobian) the
+  // stages hold values only: CollocationStages::derivatives() says which.
+  const CollocationStages& element(int e) const {
+    return (last_with_jacobian_ ? elements_ : value_elements_)[static_cast<std::size_t>(e)];
+  }
   // The smallest scaled indicator at the last with-Jacobian evaluation and its pair.
   double event_indicator() const { return event_b_; }
   int event_pair() const { return event_pair_; }
@@ -82,7 +87,8 @@ class GroupSystem final : public MixedComplementaritySystem {
   int element_size_ = 0, element_rows_ = 0;
   GroupSetup setup_;
   std::vector<CollocationStages> elements_;        // with-Jacobian evaluations
-  std::vector<CollocationStages> value_elements_;  // values-only (line search)
+  std::vector<CollocationStages> value_elements_;  // values-only (line search, deferred)
+  bool last_with_jacobian_ = true;                 // which of the two the last Evaluate set
   Vector da_status_, db_status_;                   // status rows: (1, 0) or (0, 1)
   Vector pair_a_, pair_b_;                         // scratch: stage pair sides
   // Scales of the velocity-level rows: 1 / max(1, |row at v = 0|) at y_start for the rows of

@@ -194,7 +194,16 @@ SemismoothNewtonResult SemismoothNewton::Solve(MixedComplementaritySystem& syste
   };
 
   Point& current = ws.current;
-  evaluate(initial_guess, true, options_.ncp_function, &current);
+  const bool defer = options_.defer_initial_jacobian && options_.min_iterations == 0 &&
+                     !options_.factorize_at_solution;
+  evaluate(initial_guess, !defer, options_.ncp_function, &current);
+  if (defer && current.valid && current.norm <= options_.tolerance) {
+    history.push_back(current.norm);
+    return finish(NewtonStatus::kConverged, current, "");
+  }
+  // The first Newton step needs the derivatives at the guess (the values again, too: the
+  // system's derivatives belong to its last evaluation with them).
+  if (defer && current.valid) evaluate(initial_guess, true, options_.ncp_function, &current);
   if (!current.valid) {
     return finish(NewtonStatus::kNonFinite, current,
                   "the residual at the initial point is not finite or not defined");

@@ -188,6 +188,30 @@ TEST(SemismoothNewtonTest, KojimaShindoFromSeveralStarts) {
   }
 }
 
+// defer_initial_jacobian: a guess that is a solution is accepted on values alone (no
+// derivatives evaluated); any other guess gives exactly the iterates of the plain solve.
+TEST(SemismoothNewtonTest, DeferredInitialJacobianOnlySkipsDerivativesAtASolution) {
+  SemismoothNewtonOptions deferred_options;
+  deferred_options.defer_initial_jacobian = true;
+  SemismoothNewton plain, deferred(deferred_options);
+  const Vector solution{{std::sqrt(6.0) / 2, 0.0, 0.0, 0.5}};  // to round-off
+  KojimaShindo at_solution;
+  const SemismoothNewtonResult accepted = deferred.Solve(at_solution, solution);
+  ASSERT_TRUE(accepted.converged()) << accepted.message;
+  EXPECT_EQ(accepted.stats.iterations, 0);
+  EXPECT_EQ(accepted.stats.jacobian_evaluations, 0);
+  EXPECT_EQ(accepted.solution, solution);
+  for (const Vector& start : {Vector{{0.0, 0.0, 0.0, 0.0}}, Vector{{2.0, 0.5, 0.1, 1.0}}}) {
+    KojimaShindo a, b;
+    const SemismoothNewtonResult expected = plain.Solve(a, start);
+    const SemismoothNewtonResult result = deferred.Solve(b, start);
+    ASSERT_TRUE(expected.converged() && result.converged()) << expected.message << result.message;
+    EXPECT_EQ(result.solution, expected.solution);  // bitwise: the same iterates
+    EXPECT_EQ(result.residual_history, expected.residual_history);
+    EXPECT_EQ(result.stats.residual_evaluations, expected.stats.residual_evaluations + 1);
+  }
+}
+
 TEST(SemismoothNewtonTest, MinMapSolvesTheSameProblems) {
   SemismoothNewtonOptions options;
   options.ncp_function = NcpFunctionKind::kMin;

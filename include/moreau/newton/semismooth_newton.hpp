@@ -91,6 +91,12 @@ struct SemismoothNewtonOptions {
   /// On convergence, factorize the generalized Jacobian at the solution (one more
   /// factorization) so that last_jacobian_solver() serves sensitivity computations.
   bool factorize_at_solution = false;
+  /// Evaluate the initial guess without derivatives first (for guesses that usually are
+  /// solutions already): if it meets the tolerance the solve returns at once and the system's
+  /// last evaluation, at the solution, is values-only; otherwise the guess is evaluated again
+  /// with derivatives and the iteration proceeds as without this option (same iterates). Has
+  /// no effect with min_iterations > 0 or factorize_at_solution (both need the derivatives).
+  bool defer_initial_jacobian = false;
 
   /// Throws std::invalid_argument naming the first out-of-range option.
   void Validate() const;
