@@ -161,7 +161,7 @@ FesdResult FesdRun::Run() {
   // Statuses at the initial state: the slow solution if x0 lies on a switching surface or
   // on the boundary of a moving set.
   if (Decide(y_[system_.clock_index()], nullptr)) {
-    z_guess_ = ConsistentGuess(y_, v_);
+    z_guess_ = ConsistentGuess(y_, v());
     PointEvaluation initial;
     system_.Evaluate(y_, z_guess_, Derivatives::kNone, &initial);
     boundary_a_ = initial.A;

@@ -62,7 +62,7 @@ std::string Text(double value) {
 FesdRun::Snapshot FesdRun::Save() const {
   Snapshot s;
   s.y = y_;
-  s.v = v_;
+  s.velocity = velocity_;
   s.z_guess = z_guess_;
   s.z_last = z_last_;
   s.boundary_a = boundary_a_;
@@ -96,7 +96,7 @@ void FesdRun::Restore(const Snapshot& s) {
     group_.Resize();
   }
   y_ = s.y;
-  v_ = s.v;
+  velocity_ = s.velocity;
   z_guess_ = s.z_guess;
   z_last_ = s.z_last;
   boundary_a_ = s.boundary_a;
@@ -328,7 +328,7 @@ void FesdRun::IntegrateAdaptive(bool clock_targets) {
 // starts with kQuietStart of the horizon instead, and the step grows from there.
 double FesdRun::StartingStep(double span) {
   constexpr double kQuietStart = 1e-3;
-  const Vector z0 = ConsistentGuess(y_, v_);
+  const Vector z0 = ConsistentGuess(y_, v());
   PointEvaluation point;
   system_.Evaluate(y_, z0, Derivatives::kNone, &point);
   const Vector f0 = point.F;
@@ -344,7 +344,7 @@ double FesdRun::StartingStep(double span) {
   double h0 = (d0 < 1e-5 || d1 < 1e-5) ? kQuietStart * span : 0.01 * d0 / d1;
   h0 = std::min(h0, span);
   const Vector y1 = y_ + h0 * f0;
-  system_.Evaluate(y1, ConsistentGuess(y1, v_), Derivatives::kNone, &point);
+  system_.Evaluate(y1, ConsistentGuess(y1, v()), Derivatives::kNone, &point);
   const double d2 = point.F.allFinite() ? norm(point.F - f0) / h0 : 0.0;
   const double p = 2.0 * s_ - 1.0;
   const double h1 = std::max(d1, d2) <= 1e-15 ? std::max(kQuietStart * span, h0 * 1e-3)

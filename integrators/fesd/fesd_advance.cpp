@@ -35,7 +35,7 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
   // Indicator scales, and the pairs that start at zero (just switched): their indicators
   // are divided by tau^2 so that h -> 0 is not a root (zero-length elements are excluded).
   IndicatorEvaluation& start = indicators_;
-  system_.EvaluateEventIndicators(y_start, v_, a_zero_, Derivatives::kNone, &start);
+  IndicatorsAt(y_start, velocity_, &start);
   Vector scales(np_);
   std::vector<int> powers(static_cast<std::size_t>(np_), 0);
   for (int k = 0; k < np_; ++k) {
@@ -49,8 +49,7 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
   std::vector<SolveRecord> records;
   std::vector<Vector> trial_w;
   Vector y = y_start;
-  EndVelocity v_end;  // the velocity level at the end of the last checked element
-  v_end.v = v_;
+  EndVelocity v_end = velocity_;  // the velocity level at the end of the last checked element
   Violation violation;
   std::string trial_failure;  // why the trial pass suspected a switch, if not by signs
   GroupSetup trial_setup;     // one element of fixed length (its vectors reused across elements)
@@ -111,9 +110,8 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
     have_last_w_ = true;
     last_h_ = h_trial;
     *remaining = 0;
-    tau_ = step_end;  // exact step end
-    ResolveVelocity(&v_end);
-    v_ = v_end.v;
+    tau_ = step_end;    // exact step end
+    velocity_ = v_end;  // solved where it is read (v())
     z_guess_ = z_last_;
     return DecideAtBoundary();
   }
@@ -189,7 +187,7 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
     last_w_ = w.segment(group_.element_offset(m - 1), group_.element_size());
     have_last_w_ = true;
     last_h_ = h;
-    v_ = w.segment(group_.v_offset(), nz_);
+    set_v(w.segment(group_.v_offset(), nz_));
     if (!switched) {
       *remaining = 0;
       tau_ = step_end;
@@ -202,7 +200,7 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
     if (!early) *remaining = std::max(1, *remaining - m);
     const std::vector<bool> previous = a_zero_;
     if (!Decide(y_[system_.clock_index()], &previous)) return true;
-    z_guess_ = ConsistentGuess(y_, v_);
+    z_guess_ = ConsistentGuess(y_, v());
     have_last_w_ = false;  // no extrapolation across a switch
     return true;
   }
@@ -336,7 +334,9 @@ void FesdRun::AdoptLayout(const LoweredSystem::WorkingLayout& previous) {
   auto remap = [&](Vector* z) {
     if (z->size() == previous.num_algebraic) *z = system_.RemapAlgebraic(*z, previous, 0.0);
   };
-  remap(&v_);
+  // No deferred velocity level with the filter (no smooth fields, InitializeSmoothFields).
+  MOREAU_ASSERT(!velocity_.deferred, "deferred velocity level in a filtered run");
+  remap(&velocity_.v);
   remap(&z_guess_);
   remap(&z_last_);
   // Constraints joining the set are inactive (c > 0, lambda = 0).
@@ -518,6 +518,19 @@ void FesdRun::ResolveVelocity(EndVelocity* end) const {
   if (system_.SolveVelocityLevel(end->y, a_zero_, end->z, &solved)) end->v = solved;
 }
 
+void FesdRun::IndicatorsAt(const Vector& y, const EndVelocity& velocity,
+                           IndicatorEvaluation* out) const {
+  system_.EvaluateEventIndicators(y, velocity.v, a_zero_, Derivatives::kNone, out);
+  if (!velocity.deferred) return;
+  // Deferred only where the jump sides have a closed form (EndViolation).
+  closed_free_.resize(np_);
+  const bool closed = JumpFreeSidesInClosedForm(&closed_free_);
+  MOREAU_ASSERT(closed, "deferred velocity level without closed-form jump sides");
+  for (int k = 0; k < np_; ++k) {
+    if (FreeSideIsJump(k)) out->values[k] = closed_free_[k];
+  }
+}
+
 // Event indicators at the end state y of an element (velocity-level values solved from v,
 // which is updated, or deferred): the first negative one beyond tolerance is a switch in the
 // element.
@@ -535,13 +548,10 @@ Violation FesdRun::EndViolation(const internal::CollocationStages& stages, const
   if (at_stage && JumpFreeSidesInClosedForm(&closed_free_)) {
     // Continuous sides from y, jump sides in closed form (end_v->v only fills the argument):
     // the velocity level itself is solved only where it is used (ResolveVelocity).
-    system_.EvaluateEventIndicators(y, end_v->v, a_zero_, Derivatives::kNone, &end);
-    for (int k = 0; k < np_; ++k) {
-      if (FreeSideIsJump(k)) end.values[k] = closed_free_[k];
-    }
     end_v->deferred = true;
     end_v->y = y;
     end_v->z = z_last;
+    IndicatorsAt(y, *end_v, &end);
   } else {
     // y is the last stage's state (Radau IIA: c_s = 1): solved from that stage's evaluation
     // where it has derivatives (a linear velocity level needs no evaluation of its own; a

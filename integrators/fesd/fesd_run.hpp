@@ -247,6 +247,9 @@ class FesdRun {
   };
   // Solves a deferred velocity level (v is kept if that solve fails, as EndViolation keeps it).
   void ResolveVelocity(EndVelocity* end) const;
+  // Event indicators at y (the state `velocity` belongs to) with the statuses a_zero_: jump
+  // sides from velocity.v, or in closed form if it is deferred.
+  void IndicatorsAt(const Vector& y, const EndVelocity& velocity, IndicatorEvaluation* out) const;
 
   // Event indicators at the end state y of an element (velocity-level values solved from
   // end->v, which is updated, or deferred, see EndVelocity): the first negative one beyond
@@ -317,7 +320,8 @@ class FesdRun {
 
   // Everything an attempted step may change, to roll it back (work counters stay).
   struct Snapshot {
-    Vector y, v, z_guess, z_last, boundary_a, boundary_b, last_w;
+    Vector y, z_guess, z_last, boundary_a, boundary_b, last_w;
+    EndVelocity velocity;
     double tau = 0.0, last_h = 0.0;
     bool have_last_w = false;
     std::vector<bool> a_zero;
@@ -397,7 +401,19 @@ class FesdRun {
   Vector y_;
   double tau_ = 0.0;
   std::vector<bool> a_zero_;
-  Vector v_;
+  // The velocity level at y_ with the statuses a_zero_: solved, or deferred (EndVelocity: the
+  // trial pass ended with indicators in closed form) until something reads it through v().
+  // Every change of a_zero_ sets it anew (Decide), so a deferred one keeps its statuses.
+  // Indicators at y_ need only its jump entries (StartIndicators: closed form when deferred).
+  mutable EndVelocity velocity_;
+  const Vector& v() const {
+    ResolveVelocity(&velocity_);
+    return velocity_.v;
+  }
+  void set_v(const Vector& v) {
+    velocity_.v = v;
+    velocity_.deferred = false;
+  }
   Vector z_guess_;  // algebraic guess for the next element
   Vector z_last_;
   Vector boundary_a_, boundary_b_;  // pair sides at the last stage of the previous element

@@ -38,7 +38,7 @@ void FesdRun::ApplySaltation(const std::vector<bool>& before, const Vector& v_be
   }
   PointEvaluation before_switch, after_switch;
   system_.Evaluate(y_, ConsistentGuess(y_, v_before), Derivatives::kNone, &before_switch);
-  system_.Evaluate(y_, ConsistentGuess(y_, v_), Derivatives::kNone, &after_switch);
+  system_.Evaluate(y_, ConsistentGuess(y_, v()), Derivatives::kNone, &after_switch);
   const double rate = g_y.dot(before_switch.F);
   // A grazing switch (zero rate) has no derivative; leave the transfers as they are.
   if (std::fabs(rate) <= 1e-12 * (1.0 + g_y.norm() * before_switch.F.norm())) return;

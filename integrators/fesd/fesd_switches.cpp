@@ -40,7 +40,7 @@ bool FesdRun::Decide(double t, const std::vector<bool>* previous) {
     }
   }
   a_zero_ = decision.a_zero;
-  v_ = decision.v;
+  set_v(decision.v);
   return true;
 }
 
@@ -49,17 +49,17 @@ bool FesdRun::Decide(double t, const std::vector<bool>* previous) {
 bool FesdRun::DecideAtBoundary() {
   if (np_ == 0) return false;
   IndicatorEvaluation& end = indicators_;
-  system_.EvaluateEventIndicators(y_, v_, a_zero_, Derivatives::kNone, &end);
+  IndicatorsAt(y_, velocity_, &end);
   Vector scaled(np_);
   for (int k = 0; k < np_; ++k) scaled[k] = end.values[k] / std::max(1.0, std::fabs(end.values[k]));
   Eigen::Index first = 0;
   if (scaled.minCoeff(&first) > options_.event_tolerance) return false;
   const std::vector<bool> previous = a_zero_;
-  const Vector v_before = v_;
+  const Vector v_before = v();
   if (!Decide(y_[system_.clock_index()], &previous)) return true;
   if (previous != a_zero_) {
     ++result_.stats.num_switches;
-    z_guess_ = ConsistentGuess(y_, v_);
+    z_guess_ = ConsistentGuess(y_, v());
     have_last_w_ = false;
     if (options_.sensitivities) ApplySaltation(previous, v_before, static_cast<int>(first));
   }
@@ -68,18 +68,18 @@ bool FesdRun::DecideAtBoundary() {
 
 bool FesdRun::DecideAtBreakpoint() {
   if (np_ == 0) return true;
-  Vector v;
-  bool consistent = system_.SolveVelocityLevel(y_, a_zero_, v_, &v);
+  Vector solved;
+  bool consistent = system_.SolveVelocityLevel(y_, a_zero_, v(), &solved);
   if (consistent) {
     IndicatorEvaluation indicators;
-    system_.EvaluateEventIndicators(y_, v, a_zero_, Derivatives::kNone, &indicators);
+    system_.EvaluateEventIndicators(y_, solved, a_zero_, Derivatives::kNone, &indicators);
     for (int k = 0; k < np_; ++k) {
       consistent &= indicators.values[k] >
                     options_.event_tolerance * std::max(1.0, std::fabs(indicators.values[k]));
     }
   }
   if (consistent) {
-    v_ = v;
+    set_v(solved);
     return true;
   }
   const std::vector<bool> previous = a_zero_;
@@ -87,7 +87,7 @@ bool FesdRun::DecideAtBreakpoint() {
   if (previous == a_zero_) return true;
   ++result_.stats.num_switches;
   // Continuous values and the start boundary of the next element under the new statuses.
-  z_guess_ = ConsistentGuess(y_, v_);
+  z_guess_ = ConsistentGuess(y_, v());
   have_last_w_ = false;
   PointEvaluation point;
   system_.Evaluate(y_, z_guess_, Derivatives::kNone, &point);
