@@ -237,13 +237,17 @@ void RequireSupportedEffects(const Scene& scene, const std::string& name) {
     if (list.empty()) return std::string("; no integrator supports this scene's effects together");
     return "; " + what + ": " + list;
   };
-  RequireArgument(scene.time_scale_input < 0 || spec.supports_time_scale, spec.title,
-                  " does not support the speed of time of scene '", scene.name,
-                  "' (time_scale_input)", alternatives("integrators that do"));
+  // The messages are built only on failure (alternatives() asks every integrator).
+  if (!(scene.time_scale_input < 0 || spec.supports_time_scale)) {
+    ThrowInvalidArgument(spec.title, " does not support the speed of time of scene '", scene.name,
+                         "' (time_scale_input)", alternatives("integrators that do"));
+  }
   for (const Effect& effect : scene.effects) {
-    RequireArgument(internal::Supports(spec, effect), spec.title, " does not support the ",
-                    EffectKind(effect), " '", EffectName(effect), "' of scene '", scene.name, "'",
-                    alternatives("integrators that support the scene"));
+    if (!internal::Supports(spec, effect)) {
+      ThrowInvalidArgument(spec.title, " does not support the ", EffectKind(effect), " '",
+                           EffectName(effect), "' of scene '", scene.name, "'",
+                           alternatives("integrators that support the scene"));
+    }
   }
 }
 

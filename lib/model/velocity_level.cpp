@@ -750,6 +750,25 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
     }
   }
   decision.candidates = static_cast<int>(candidates.size());
+  if (candidates.empty()) {
+    // No pair is zero on its continuous side: the signs decide every status, and the
+    // enumeration below would make one trial, the velocity level of these fixed statuses.
+    // SolveVelocityLevel solves that same problem from the same guess with its kept solver
+    // and workspace; should it fail, the enumeration decides as before.
+    for (int k = 0; k < num_pairs_; ++k) {
+      decision.a_zero[static_cast<std::size_t>(k)] =
+          roles[static_cast<std::size_t>(k)] == PairRole::kAZero;
+    }
+    bool admitted = true;
+    for (const auto& block : blocks_) {
+      const auto first = roles.begin() + block->layout.pair_offset;
+      admitted &= block->AdmitsRoles(std::vector<PairRole>(first, first + block->num_pairs()));
+    }
+    if (admitted && SolveVelocityLevel(y, decision.a_zero, guess, &decision.v)) {
+      decision.solved = true;
+      return decision;
+    }
+  }
   const int nx = scene_.num_states();
   SemismoothNewton newton(VelocityNewtonOptions(sparse_));
   // Row of each complementary pair among the a, b rows of a velocity-level evaluation (they
