@@ -129,11 +129,11 @@ const std::vector<IntegratorEntry>& Entries() {
 }
 
 const IntegratorEntry& FindEntry(const std::string& name) {
-  std::string valid = "auto";
   for (const IntegratorEntry& entry : Entries()) {
     if (entry.spec.name == name) return entry;
-    valid += ", " + entry.spec.name;
   }
+  std::string valid = "auto";
+  for (const IntegratorEntry& entry : Entries()) valid += ", " + entry.spec.name;
   ThrowInvalidArgument("unknown integrator '", name, "'; available: ", valid);
 }
 

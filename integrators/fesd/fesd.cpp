@@ -303,7 +303,7 @@ FesdResult FesdRun::Finish(std::chrono::steady_clock::time_point start) {
   result_.stats.num_factorizations = factorizations_;
   result_.stats.cpu_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  return result_;
+  return std::move(result_);
 }
 
 void FesdRun::Fail(FesdStatus status, double t, const std::string& reason) {

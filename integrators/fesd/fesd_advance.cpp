@@ -105,7 +105,7 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
   }
 
   if (!violation.found) {
-    for (const SolveRecord& record : records) Commit(record);
+    for (SolveRecord& record : records) Commit(std::move(record));
     last_w_ = trial_w.back();
     have_last_w_ = true;
     last_h_ = h_trial;

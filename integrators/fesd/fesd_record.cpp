@@ -24,7 +24,10 @@ SolveRecord FesdRun::Record(const Vector& w, double h, bool ends_at_switch,
   record.frozen = system_.TimeFrozen(a_zero_);
   if (options_.sensitivities) record.transfer = LocalTransfer(w, m, remaining);
   Vector y0 = setup.y_start;
-  Vector a_previous = a0, b_previous = b0;
+  // Boundary values of each element: a0, b0, then the last stage of the element before.
+  const Vector* a_previous = &a0;
+  const Vector* b_previous = &b0;
+  record.elements.reserve(static_cast<std::size_t>(m));
   for (int e = 0; e < m; ++e) {
     const internal::CollocationStages& stages = group_.element(e);
     const auto w_e = w.segment(group_.element_offset(e), group_.element_size());
@@ -35,7 +38,7 @@ SolveRecord FesdRun::Record(const Vector& w, double h, bool ends_at_switch,
     element.ends_at_switch = ends_at_switch && e + 1 == m;
     element.newton_iterations = static_cast<int>(solved.stats.iterations);
     element.newton_residual = solved.residual_norm;
-    Certificates(stages, a_previous, b_previous, &element);
+    Certificates(stages, *a_previous, *b_previous, &element);
     if (filter_.enabled() && static_cast<std::size_t>(e) < excluded_min_.size()) {
       // Constraints left out by the near-active filter (lambda = 0): |min(c, 0)| at the
       // stages, so that the certificates cover every declared constraint.
@@ -59,15 +62,18 @@ SolveRecord FesdRun::Record(const Vector& w, double h, bool ends_at_switch,
       record.polynomials.push_back(std::move(polynomial));
     }
     if (options_.record_stages && !record.frozen) {
+      Trajectory& points = record.stage_points;
       for (int i = 0; i < s_; ++i) {
-        const Vector yi = y0 + w_e.segment(stages.state_offset(i), ny_);
-        record.stage_points.Append(yi[system_.clock_index()], yi.head(nx_),
-                                   TrajectoryAlgebraic(stages.Algebraic(w_e, i)), h);
+        const Vector& yi = stages.stage_state(i);  // y0 + Z_i
+        points.t.push_back(yi[system_.clock_index()]);
+        points.x.emplace_back(yi.head(nx_));
+        points.algebraic.push_back(TrajectoryAlgebraic(stages.Algebraic(w_e, i)));
+        points.step.push_back(h);
       }
     }
-    y0 = stages.EndState(y0, w_e);
-    a_previous = stages.stage(s_ - 1).A;
-    b_previous = stages.stage(s_ - 1).B;
+    y0 += w_e.segment(stages.state_offset(s_ - 1), ny_);  // the element's end state
+    a_previous = &stages.stage(s_ - 1).A;
+    b_previous = &stages.stage(s_ - 1).B;
     record.z_last = stages.Algebraic(w_e, s_ - 1);
     if (options_.record_trajectory && e + 1 < m) {
       record.ends.push_back(y0);
@@ -75,13 +81,13 @@ SolveRecord FesdRun::Record(const Vector& w, double h, bool ends_at_switch,
     }
     record.length += h;
   }
-  record.y_end = y0;
-  record.a_last = a_previous;
-  record.b_last = b_previous;
+  record.y_end = std::move(y0);
+  record.a_last = *a_previous;
+  record.b_last = *b_previous;
   return record;
 }
 
-void FesdRun::Commit(const SolveRecord& record) {
+void FesdRun::Commit(SolveRecord&& record) {
   for (std::size_t e = 0; e < record.elements.size(); ++e) {
     if (!record.polynomials.empty()) OnCommittedElement(record.polynomials[e]);
     FesdElement element = record.elements[e];
@@ -109,9 +115,12 @@ void FesdRun::Commit(const SolveRecord& record) {
       }
     }
   }
+  Trajectory& stages = result_.stage_trajectory;
   for (std::size_t i = 0; i < record.stage_points.size(); ++i) {
-    result_.stage_trajectory.Append(record.stage_points.t[i], record.stage_points.x[i],
-                                    record.stage_points.algebraic[i], record.stage_points.step[i]);
+    stages.t.push_back(record.stage_points.t[i]);
+    stages.x.push_back(std::move(record.stage_points.x[i]));
+    stages.algebraic.push_back(std::move(record.stage_points.algebraic[i]));
+    stages.step.push_back(record.stage_points.step[i]);
   }
   y_ = record.y_end;
   z_last_ = record.z_last;

@@ -133,6 +133,7 @@ class FesdRun {
   // it up to the Newton tolerance times the step length).
   static constexpr double kClockTolerance = 1e-11;
 
+  // Completes the result and moves it out (the run is over: Run() is called once).
   FesdResult Finish(std::chrono::steady_clock::time_point start);
 
   void Fail(FesdStatus status, double t, const std::string& reason);
@@ -285,7 +286,8 @@ class FesdRun {
                      const SemismoothNewtonResult& solved, int remaining, const Vector& a0,
                      const Vector& b0);
 
-  void Commit(const SolveRecord& record);
+  // Takes the record's contents (stage points, trajectories) by move.
+  void Commit(SolveRecord&& record);
 
   // Free side of every pair at stage i: continuous sides from the stage values, jump sides
   // consistent with the stage state (closed form where JumpFreeSidesInClosedForm gives them,
