@@ -216,10 +216,33 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
 
 void FesdRun::InitializeSmoothFields() {
   const Scene& scene = system_.scene();
-  if (!options_.reduce_smooth_elements || filter_.enabled() || system_.time_freezing() ||
-      ny_ != nx_ + 1 || scene.effects.empty()) {
+  if (!options_.reduce_smooth_elements || filter_.enabled() || scene.effects.empty()) return;
+  if (system_.time_freezing()) {
+    // Relays only (their state derivative depends on z through theta alone); each relay's
+    // theta unknowns found by name (docs/lowering.md: "<relay>.theta_<region>").
+    for (const Effect& effect : scene.effects) {
+      if (!std::holds_alternative<HysteresisRelay>(effect)) return;
+    }
+    const char* const regions[] = {"mode_A", "to_A", "to_B", "mode_B"};
+    const std::vector<std::string>& names = system_.algebraic_names();
+    std::vector<std::array<int, 4>> theta;
+    for (const std::string& relay : system_.relay_names()) {
+      std::array<int, 4> indices{};
+      for (int k = 0; k < 4; ++k) {
+        const auto found = std::find(names.begin(), names.end(), relay + ".theta_" + regions[k]);
+        if (found == names.end()) return;
+        indices[static_cast<std::size_t>(k)] = static_cast<int>(found - names.begin());
+      }
+      theta.push_back(indices);
+    }
+    // The pairs are (theta, lambda) of the regions, relay by relay (lower_hysteresis.cpp).
+    if (np_ != 4 * static_cast<int>(theta.size())) return;
+    relay_theta_ = std::move(theta);
+    reduction_ = Reduction::kRelayModes;
+    smooth_fields_.resize(1);  // the field of the lowered system itself, built on first use
     return;
   }
+  if (ny_ != nx_ + 1) return;
   const auto* switching = std::get_if<SwitchingSurfaces>(&scene.effects.front());
   if (switching != nullptr) {
     // Stewart's form, one switching effect and nothing else: a field per mode.
@@ -238,7 +261,7 @@ void FesdRun::InitializeSmoothFields() {
   smooth_fields_.resize(1);
 }
 
-int FesdRun::SmoothField() const {
+int FesdRun::SmoothField(const std::vector<bool>& a_zero) const {
   switch (reduction_) {
     case Reduction::kNone:
       return -1;
@@ -249,7 +272,7 @@ int FesdRun::SmoothField() const {
       // mu e = 0).
       int mode = -1;
       for (int k = 0; k < np_; ++k) {
-        if (a_zero_[static_cast<std::size_t>(k)]) continue;
+        if (a_zero[static_cast<std::size_t>(k)]) continue;
         if (mode >= 0) return -1;  // a sliding mode: theta is not a unit vector
         mode = k;
       }
@@ -259,18 +282,54 @@ int FesdRun::SmoothField() const {
       // Moving-set pair k: c_k ⟂ lambda_k; with b = lambda_k = 0 kept (a_zero false) for every
       // constraint, x' = f(x) + P grad c lambda = f(x).
       for (int k = 0; k < np_; ++k) {
-        if (a_zero_[static_cast<std::size_t>(k)]) return -1;  // a constraint is active
+        if (a_zero[static_cast<std::size_t>(k)]) return -1;  // a constraint is active
       }
       return 0;
+    case Reduction::kRelayModes:
+      return RelayTheta(a_zero, nullptr) ? 0 : -1;
   }
   return -1;
 }
 
-bool FesdRun::SmoothElementGuess(const Vector& y0, double h, const Vector* previous, Vector* w,
-                                 int* iterations, long* factorizations) {
-  const int index = SmoothField();
-  if (index < 0) return false;
+bool FesdRun::RelayTheta(const std::vector<bool>& a_zero, Vector* z) const {
+  for (std::size_t i = 0; i < relay_theta_.size(); ++i) {
+    // Active regions of relay i (pair 4 i + k: b = lambda_k = 0 kept iff a_zero is false).
+    std::array<bool, 4> active{};
+    int count = 0;
+    for (std::size_t k = 0; k < 4; ++k) {
+      active[k] = !a_zero[4 * i + k];
+      count += active[k] ? 1 : 0;
+    }
+    std::array<double, 4> theta{};
+    if (count == 1) {
+      for (std::size_t k = 0; k < 4; ++k) theta[k] = active[k] ? 1.0 : 0.0;
+    } else if (count == 2 && ((active[0] && active[1]) || (active[2] && active[3]))) {
+      for (std::size_t k = 0; k < 4; ++k) theta[k] = active[k] ? 0.5 : 0.0;
+    } else {
+      return false;
+    }
+    if (z == nullptr) continue;
+    for (std::size_t k = 0; k < 4; ++k) (*z)[relay_theta_[i][k]] = theta[k];
+  }
+  return true;
+}
+
+internal::SmoothCollocationSolver* FesdRun::SmoothFieldSolver(const std::vector<bool>& a_zero) {
+  const int index = SmoothField(a_zero);
+  if (index < 0) return nullptr;
   FieldSolver& field = smooth_fields_[static_cast<std::size_t>(index)];
+  if (reduction_ == Reduction::kRelayModes) {
+    // The lowered system itself with theta held at its constant values (RelayTheta); the
+    // other algebraic unknowns do not enter F.
+    if (field.solver == nullptr) {
+      field.solver = std::make_unique<internal::SmoothCollocationSolver>(
+          &system_, s_, options_.newton.linear_solver);
+    }
+    relay_field_z_.setZero(nz_);
+    RelayTheta(a_zero, &relay_field_z_);
+    field.solver->SetFixedAlgebraic(relay_field_z_);
+    return field.solver.get();
+  }
   if (field.solver == nullptr) {
     // The scene without its effects, built member by member: copying it whole would clone
     // every effect's functions only to drop them (SmoothFunction copies are deep).
@@ -291,7 +350,7 @@ bool FesdRun::SmoothElementGuess(const Vector& y0, double h, const Vector* previ
     field.system = std::make_unique<LoweredSystem>(smooth, Lowering(options_));
     if (field.system->num_states() != ny_ || field.system->num_algebraic() != 0) {
       reduction_ = Reduction::kNone;  // another layout: never reduce
-      return false;
+      return nullptr;
     }
     field.solver = std::make_unique<internal::SmoothCollocationSolver>(
         field.system.get(), s_, options_.newton.linear_solver);
@@ -299,6 +358,13 @@ bool FesdRun::SmoothElementGuess(const Vector& y0, double h, const Vector* previ
   // The run may have changed parameters (FesdIntegrator) and inputs (control segments).
   field.system->SetParameters(system_.parameters());
   field.system->SetInputs(system_.inputs());
+  return field.solver.get();
+}
+
+bool FesdRun::SmoothElementGuess(const Vector& y0, double h, const Vector* previous, Vector* w,
+                                 int* iterations, long* factorizations) {
+  internal::SmoothCollocationSolver* solver = SmoothFieldSolver(a_zero_);
+  if (solver == nullptr) return false;
   const internal::CollocationStages& stages = group_.element(0);
   // Stage increments extrapolated as for the full element; algebraic values set below.
   *w = stages.InitialGuess(y0, h, previous, previous != nullptr ? h : 0.0, z_guess_,
@@ -308,9 +374,9 @@ bool FesdRun::SmoothElementGuess(const Vector& y0, double h, const Vector* previ
   internal::SmoothCollocationSolver::Stopping stopping;
   stopping.tolerance = options_.newton.tolerance;
   stopping.max_iterations = options_.newton.max_iterations;
-  const long before = field.solver->num_factorizations();
-  const auto outcome = field.solver->Solve(h, y0, stopping, &smooth_field_z_, iterations);
-  *factorizations = field.solver->num_factorizations() - before;
+  const long before = solver->num_factorizations();
+  const auto outcome = solver->Solve(h, y0, stopping, &smooth_field_z_, iterations);
+  *factorizations = solver->num_factorizations() - before;
   if (outcome != internal::SmoothCollocationSolver::Outcome::kConverged) return false;
   for (int i = 0; i < s_; ++i) {
     w->segment(stages.state_offset(i), ny_) = smooth_field_z_.col(i);

@@ -9,6 +9,7 @@
 //   fesd_adaptive.cpp      adaptive steps: the step loop, error estimate, rejection, retries
 //   dense_output.cpp       values at requested output times from the collocation polynomials
 
+#include <array>
 #include <chrono>
 #include <memory>
 #include <optional>
@@ -177,12 +178,26 @@ class FesdRun {
   // --- smooth elements (FesdOptions::reduce_smooth_elements) ------------------------------
   // Which statuses leave a smooth field x' = f(x) (InitializeSmoothFields decides per scene):
   // Stewart's form of one switching effect with exactly one active mode (b = lambda_k = 0
-  // kept for one pair only), or moving sets with no active constraint (b = lambda = 0 kept
-  // for every pair).
-  enum class Reduction { kNone, kStewartMode, kFreeMovingSets };
+  // kept for one pair only), moving sets with no active constraint (b = lambda = 0 kept
+  // for every pair), or hysteresis relays by time-freezing (and nothing else) with every
+  // relay in one region or sliding on a memory boundary (theta constant, see RelayTheta).
+  enum class Reduction { kNone, kStewartMode, kFreeMovingSets, kRelayModes };
   void InitializeSmoothFields();
-  // The field the current statuses leave (index into smooth_fields_: the mode, or 0), or -1.
-  int SmoothField() const;
+  // The field statuses leave (index into smooth_fields_: the mode, or 0), or -1.
+  int SmoothField() const { return SmoothField(a_zero_); }
+  int SmoothField(const std::vector<bool>& a_zero) const;
+  // Relays (Reduction::kRelayModes): theta of every relay under the statuses a_zero, written
+  // into *z at the theta unknowns (other entries untouched). Per relay, with the regions
+  // mode_A, to_A, to_B, mode_B of docs/lowering.md: one active region k gives theta = e_k
+  // (e^T theta = 1, theta_j = 0 for j != k); the active pairs {mode_A, to_A} (sliding on
+  // w = 0) or {to_B, mode_B} (on w = 1) give theta = 1/2 on both (w' = a (theta_1 - theta_2
+  // + theta_3 - theta_4) = 0 keeps w on the boundary, e^T theta = 1). The state derivative
+  // of a relay-only system depends on z through theta alone (docs/lowering.md), so y' =
+  // F(y, z) is then a smooth field. Returns false for any other status pattern.
+  bool RelayTheta(const std::vector<bool>& a_zero, Vector* z) const;
+  // The Radau IIA solver of the field the statuses a_zero leave, with the run's parameters
+  // and inputs (and, for relays, theta) set, or null if they leave none.
+  internal::SmoothCollocationSolver* SmoothFieldSolver(const std::vector<bool>& a_zero);
   // The guess *w of one element of length h from y0 (previous: the last element's unknowns
   // for the extrapolation, or null) as a Radau IIA step of that field (its own lowered system,
   // without algebraic unknowns) with algebraic values consistent with the stage states
@@ -393,6 +408,10 @@ class FesdRun {
   };
   Reduction reduction_ = Reduction::kNone;
   std::vector<FieldSolver> smooth_fields_;
+  // kRelayModes: per relay the indices in z of theta for its regions mode_A, to_A, to_B,
+  // mode_B, and the fixed algebraic values of the field (RelayTheta).
+  std::vector<std::array<int, 4>> relay_theta_;
+  Vector relay_field_z_;
   Matrix smooth_field_z_;  // stage increments of a smooth-element solve (n_y x s)
   Matrix smooth_z_, last_z_matrix_, extrapolation_;
   double extrapolation_ratio_ = -1.0;
