@@ -162,7 +162,7 @@ Violation FesdRun::JumpStageViolation(const CollocationStages& stages, const Vec
             previous_c + (tableau_.c[i] - previous_c) * previous[k] / (previous[k] - free[k]);
       }
       fraction = std::clamp(fraction, 1e-3, 1.0);
-      if (!first.found || fraction < first.fraction) first = {true, element, fraction};
+      if (!first.found || fraction < first.fraction) first = {true, element, fraction, k};
     }
     previous = free;
     previous_c = tableau_.c[i];

@@ -134,9 +134,27 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
     setup.indicator_weights = scales.cwiseInverse();
     setup.indicator_power = powers;
     group_.Configure(setup);
-    const Vector guess = GroupGuess(trial_w, y_start, h_trial, m, h_guess, v_end);
-    solved_by_ = &newton_;
-    const SemismoothNewtonResult solved = newton_.Solve(group_, guess);
+    // First attempt: the reduced switch group where the statuses leave a smooth field, checked
+    // on the full group system (its Newton continues from there if it does not hold).
+    Vector guess;
+    int reduced_iterations = 0;
+    long reduced_factorizations = 0;
+    const int pair = violation.pair;
+    const bool reduced =
+        attempt == 0 && pair >= 0 &&
+        ReducedSwitchGuess(trial_w, y_start, h_trial, m, h_guess, pair,
+                           setup.indicator_weights[pair], powers[static_cast<std::size_t>(pair)],
+                           &guess, &reduced_iterations, &reduced_factorizations);
+    if (!reduced) guess = GroupGuess(trial_w, y_start, h_trial, m, h_guess, v_end);
+    solved_by_ = reduced ? &reduced_newton_ : &newton_;
+    SemismoothNewtonResult solved = (reduced ? reduced_newton_ : newton_).Solve(group_, guess);
+    if (reduced) {
+      if (solved.converged() && solved.stats.iterations == 0) {
+        result_.stats.num_reduced_elements += m;
+      }
+      solved.stats.iterations += reduced_iterations;
+      solved.stats.factorizations += reduced_factorizations;
+    }
     CountNewton(solved);
     ++result_.stats.num_groups;
     if (!solved.converged()) {
@@ -511,6 +529,132 @@ void FesdRun::ExtrapolatedIncrements(double h, Matrix* z) {
   z->noalias() = last_z_matrix_ * extrapolation_;
 }
 
+bool FesdRun::ReducedSwitchGuess(const std::vector<Vector>& trial_w, const Vector& y_start,
+                                 double h_trial, int m, double h_guess, int pair, double weight,
+                                 int power, Vector* w, int* iterations, long* factorizations) {
+  // The scaled indicator is driven to round-off, where the full group solve's forced Newton
+  // correction takes its event row, so that the two agree to round-off and not only to the
+  // Newton tolerance (switch times, and the fixed-step results, would otherwise move by up to
+  // 1e-12). Where the iteration stalls (the step in h at round-off) the indicator must still be
+  // below this fraction of the Newton tolerance: the event row (Fischer-Burmeister of a positive
+  // length slack and the indicator, about the indicator itself there) then holds in the full
+  // check with margin.
+  constexpr double kIndicatorRoundoff = 16.0 * std::numeric_limits<double>::epsilon();
+  constexpr double kIndicatorFraction = 0.1;
+  // Indicator evaluations (each m Radau IIA steps of the field) before giving up.
+  constexpr int kMaxEvaluations = 10;
+  // Relays only. Elsewhere (one Stewart mode, free moving sets) the reduced group is as valid,
+  // but the full group solve it replaces stops at its tolerance (F1, s = 2: the switch at pi
+  // off by 2.8e-13, the reduced group's by 4e-16), so the fixed-step results would move by that
+  // much (FesdTest.SmoothElementsAgreeWithTheFullSolve holds them to 1e-13 of the full solve).
+  if (reduction_ != Reduction::kRelayModes) return false;
+  internal::SmoothCollocationSolver* solver = SmoothFieldSolver(a_zero_);
+  if (solver == nullptr || m > static_cast<int>(trial_w.size())) return false;
+  const internal::CollocationStages& stages = group_.element(0);
+  internal::SmoothCollocationSolver::Stopping stopping;
+  stopping.tolerance = options_.newton.tolerance;
+  stopping.max_iterations = options_.newton.max_iterations;
+  const long factorizations_before = solver->num_factorizations();
+  // Stage increments of the m elements, for the length z_h (first guess: the trial elements).
+  std::vector<Matrix> z(static_cast<std::size_t>(m), Matrix(ny_, s_));
+  for (int e = 0; e < m; ++e) {
+    for (int i = 0; i < s_; ++i) {
+      z[static_cast<std::size_t>(e)].col(i) =
+          trial_w[static_cast<std::size_t>(e)].segment(stages.state_offset(i), ny_);
+    }
+  }
+  double z_h = h_trial;
+  Vector v = v_, solved_v, y_end;
+  IndicatorEvaluation& indicator = indicators_;
+  // A continuous free side is a function of the state (the velocity level does not enter it
+  // for the blocks at hand, and where it would, the last iterate is checked with it below):
+  // the iteration then evaluates it at v_ without solving the velocity level.
+  bool solve_level = FreeSideIsJump(pair);
+  // Scaled indicator at the end state y_end (velocity level from v, which is updated).
+  auto scaled_indicator = [&](double h) {
+    if (solve_level) {
+      if (!system_.SolveVelocityLevel(y_end, a_zero_, v, &solved_v)) {
+        return std::numeric_limits<double>::quiet_NaN();
+      }
+      v = solved_v;
+    }
+    system_.EvaluateEventIndicators(y_end, v, a_zero_, Derivatives::kNone, &indicator);
+    return weight * indicator.values[pair] / std::pow(h / h_trial, power);
+  };
+  // The m elements of length h from y_start (increments rescaled from z_h as a guess).
+  auto solve = [&](double h) {
+    y_end = y_start;
+    for (int e = 0; e < m; ++e) {
+      Matrix& ze = z[static_cast<std::size_t>(e)];
+      ze *= h / z_h;
+      int its = 0;
+      const auto outcome = solver->Solve(h, y_end, stopping, &ze, &its);
+      *iterations += its;
+      if (outcome != internal::SmoothCollocationSolver::Outcome::kConverged) {
+        z_h = h;
+        return std::numeric_limits<double>::quiet_NaN();
+      }
+      y_end += ze.col(s_ - 1);
+    }
+    z_h = h;
+    return scaled_indicator(h);
+  };
+  *iterations = 0;
+  // h_trial: the trial elements themselves (the same equations from the same start).
+  y_end = y_start;
+  for (int e = 0; e < m; ++e) y_end += z[static_cast<std::size_t>(e)].col(s_ - 1);
+  double a = h_trial, fa = scaled_indicator(h_trial);
+  double b = h_guess, fb = solve(h_guess);
+  const double tolerance = kIndicatorFraction * options_.newton.tolerance;
+  bool found = false;
+  for (int evaluation = 1; evaluation <= kMaxEvaluations; ++evaluation) {
+    if (!std::isfinite(fa) || !std::isfinite(fb)) break;
+    const double c = fa != fb ? b - fb * (b - a) / (fb - fa) : b;
+    const bool stalled = std::fabs(c - b) <= 4.0 * std::numeric_limits<double>::epsilon() * b;
+    if (std::fabs(fb) <= kIndicatorRoundoff || stalled) {
+      if (std::fabs(fb) > tolerance) break;
+      if (solve_level) {
+        found = true;
+        break;
+      }
+      // The root with the consistent velocity level at the end state (the group's v_end).
+      solve_level = true;
+      fb = scaled_indicator(b);
+      continue;
+    }
+    if (!(c > 0.0 && c <= group_.setup().h_max)) break;
+    const bool bracket = (fa < 0.0) != (fb < 0.0);
+    const double fc = solve(c);
+    if (bracket && (fc < 0.0) == (fb < 0.0)) {
+      fa *= 0.5;  // Illinois: the retained end's value halved
+    } else {
+      a = b;
+      fa = fb;
+    }
+    b = c;
+    fb = fc;
+  }
+  *factorizations = solver->num_factorizations() - factorizations_before;
+  if (!found) return false;
+  if (z_h != b) solve(b);  // z holds the last evaluation's elements
+  // The group's unknowns at h = b.
+  w->setZero(group_.num_unknowns());
+  Vector y0 = y_start;
+  for (int e = 0; e < m; ++e) {
+    const Matrix& ze = z[static_cast<std::size_t>(e)];
+    auto element = w->segment(group_.element_offset(e), group_.element_size());
+    for (int i = 0; i < s_; ++i) {
+      element.segment(stages.state_offset(i), ny_) = ze.col(i);
+      stage_y_ = y0 + ze.col(i);
+      element.segment(stages.algebraic_offset(i), nz_) = ConsistentGuess(stage_y_, z_guess_);
+    }
+    y0 += ze.col(s_ - 1);
+  }
+  w->segment(group_.v_offset(), nz_) = v;
+  (*w)[group_.h_index()] = b;
+  return true;
+}
+
 // Guess of a group of m elements of length h_guess from the trial elements.
 Vector FesdRun::GroupGuess(const std::vector<Vector>& trial_w, const Vector& y_start,
                            double h_trial, int m, double h_guess, const Vector& v_end) {
@@ -563,7 +707,7 @@ Violation FesdRun::StageViolation(const internal::CollocationStages& stages, con
               previous_c + (tableau_.c[i] - previous_c) * previous_value / (previous_value - free);
         }
         fraction = std::clamp(fraction, 1e-3, 1.0);
-        if (!first.found || fraction < first.fraction) first = {true, element, fraction};
+        if (!first.found || fraction < first.fraction) first = {true, element, fraction, k};
         break;
       }
       previous_value = free;
@@ -606,7 +750,8 @@ Violation FesdRun::EndViolation(const internal::CollocationStages& stages, const
   }
   for (int k = 0; k < np_ && !violation.found; ++k) {
     if (end.values[k] < -options_.event_tolerance * scales[k]) {
-      violation = {true, element, FreeSideIsJump(k) ? 1.0 : EndCrossing(stages, k, end.values[k])};
+      violation = {true, element, FreeSideIsJump(k) ? 1.0 : EndCrossing(stages, k, end.values[k]),
+                   k};
     }
   }
   return violation;

@@ -27,11 +27,12 @@ namespace moreau::internal {
 
 // Where a free side first turned negative in a solved element: the fraction of the element at
 // which it crossed zero (linear interpolation between the last nonnegative sample and the first
-// negative one).
+// negative one), and its pair (-1 if unknown: an element that did not converge).
 struct Violation {
   bool found = false;
   int element = 0;
   double fraction = 1.0;
+  int pair = -1;
 };
 
 // The local transfer of one solved element or group: [dy_end; dtau_end] as a linear map of
@@ -234,6 +235,19 @@ class FesdRun {
   // dtau_s = -(diota)/(diota/dtau), diota/dtau = iota_y F_-, and the state at the boundary by
   // (F_- - F_+) dtau_s, F_-/F_+ the fields before and after the switch.
   void ApplySaltation(const std::vector<bool>& before, const Vector& v_before, int k);
+
+  // Reduced switch group (smooth elements, docs/fesd-formulation.md section 5): where the
+  // statuses leave a smooth field (hysteresis relays, Reduction::kRelayModes), the group of m equal
+  // elements that ends on the switch of `pair` is solved as m Radau IIA steps of that field whose
+  // common length h is the root of the pair's scaled indicator at the end state (as in the event
+  // equation: w_k iota_k(y_end, v_end) / tau^{p_k}, v_end the velocity level at y_end), found by
+  // the Illinois method from h_trial (the trial elements' end, no solve) and h_guess. *w receives
+  // the group's unknowns (stage states, algebraic values consistent with them, v_end, h), the guess
+  // that the full group system is then checked at. Returns false if the statuses leave no smooth
+  // field or the iteration fails (the full group solve then starts from GroupGuess).
+  bool ReducedSwitchGuess(const std::vector<Vector>& trial_w, const Vector& y_start, double h_trial,
+                          int m, double h_guess, int pair, double weight, int power, Vector* w,
+                          int* iterations, long* factorizations);
 
   // Guess of a group of m elements of length h_guess from the trial elements.
   Vector GroupGuess(const std::vector<Vector>& trial_w, const Vector& y_start, double h_trial,
