@@ -440,7 +440,7 @@ namespace {
 // Velocity-level problem as a mixed complementarity system in v (roles fixed).
 //
 // With `linear` (systems affine in the algebraic unknowns, LoweredBlock::AffineInAlgebraic:
-// Stewart, one-surface Heaviside, moving sets; no time-freezing) the rows are exactly
+// Stewart, one-surface Heaviside, moving sets, one relay by time-freezing) the rows are exactly
 // E(v) = M(y) v + q(y), and so are the pair sides a(v), b(v). The lowered system is then
 // evaluated once, at the solve's initial point v0, and every value Newton asks for is
 // E(v0) + M (v - v0), the values at v = 0 for the row scales included. Newton takes the same
@@ -674,9 +674,13 @@ class VelocitySolver {
 }  // namespace internal
 
 bool LoweredSystem::VelocityLevelIsLinear() const {
-  if (clock_rate_block_ >= 0) return false;  // time-freezing multiplies F by a rate P(z)
   for (const auto& block : blocks_) {
     if (!block->AffineInAlgebraic()) return false;
+    // Time-freezing multiplies the physical-time blocks' F by the clock rate P(z), affine in z
+    // if its block says so: the product is affine only where those blocks do not depend on z.
+    if (clock_rate_block_ >= 0 && block->ScaledByClockRate() && block->num_algebraic() > 0) {
+      return false;
+    }
   }
   return true;
 }
