@@ -142,7 +142,7 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
     const int pair = violation.pair;
     const bool reduced =
         attempt == 0 && pair >= 0 &&
-        ReducedSwitchGuess(trial_w, y_start, h_trial, m, h_guess, pair,
+        ReducedSwitchGuess(trial_w, y_start, h_trial, e, m, h_guess, pair,
                            setup.indicator_weights[pair], powers[static_cast<std::size_t>(pair)],
                            &guess, &reduced_iterations, &reduced_factorizations);
     if (!reduced) guess = GroupGuess(trial_w, y_start, h_trial, m, h_guess, v_end);
@@ -530,16 +530,14 @@ void FesdRun::ExtrapolatedIncrements(double h, Matrix* z) {
 }
 
 bool FesdRun::ReducedSwitchGuess(const std::vector<Vector>& trial_w, const Vector& y_start,
-                                 double h_trial, int m, double h_guess, int pair, double weight,
-                                 int power, Vector* w, int* iterations, long* factorizations) {
-  // The scaled indicator is driven to round-off, where the full group solve's forced Newton
-  // correction takes its event row, so that the two agree to round-off and not only to the
-  // Newton tolerance (switch times, and the fixed-step results, would otherwise move by up to
-  // 1e-12). Where the iteration stalls (the step in h at round-off) the indicator must still be
-  // below this fraction of the Newton tolerance: the event row (Fischer-Burmeister of a positive
-  // length slack and the indicator, about the indicator itself there) then holds in the full
-  // check with margin.
-  constexpr double kIndicatorRoundoff = 16.0 * std::numeric_limits<double>::epsilon();
+                                 double h_trial, int element, int m, double h_guess, int pair,
+                                 double weight, int power, Vector* w, int* iterations,
+                                 long* factorizations) {
+  // The scaled indicator is driven below this fraction of the Newton tolerance: the event row
+  // (Fischer-Burmeister of a positive length slack and the indicator, about the indicator
+  // itself there) then holds in the full check with margin, and the switch is located at least
+  // as accurately as by the full group solve, which stops when its residual (the event row
+  // included) is below the tolerance.
   constexpr double kIndicatorFraction = 0.1;
   // Indicator evaluations (each m Radau IIA steps of the field) before giving up.
   constexpr int kMaxEvaluations = 10;
@@ -582,11 +580,19 @@ bool FesdRun::ReducedSwitchGuess(const std::vector<Vector>& trial_w, const Vecto
     return weight * indicator.values[pair] / std::pow(h / h_trial, power);
   };
   // The m elements of length h from y_start (increments rescaled from z_h as a guess).
+  // Increments for the length h from those for z_h: the collocation polynomial of each
+  // element evaluated at the new stage times c_i h / z_h (a guess accurate to the change in h
+  // times the element's local error, where rescaling the increments is accurate to first order
+  // only; the secant steps change h by ever less).
+  Matrix rescale(s_, s_);
   auto solve = [&](double h) {
+    for (int i = 0; i < s_; ++i) {
+      rescale.col(i) = tableau_.InterpolationWeights(tableau_.c[i] * h / z_h);
+    }
     y_end = y_start;
     for (int e = 0; e < m; ++e) {
       Matrix& ze = z[static_cast<std::size_t>(e)];
-      ze *= h / z_h;
+      ze = ze * rescale;
       int its = 0;
       const auto outcome = solver->Solve(h, y_end, stopping, &ze, &its);
       *iterations += its;
@@ -604,15 +610,12 @@ bool FesdRun::ReducedSwitchGuess(const std::vector<Vector>& trial_w, const Vecto
   y_end = y_start;
   for (int e = 0; e < m; ++e) y_end += z[static_cast<std::size_t>(e)].col(s_ - 1);
   double a = h_trial, fa = scaled_indicator(h_trial);
-  double b = h_guess, fb = solve(h_guess);
+  double b = CrossingGuess(trial_w, y_start, h_trial, element, pair, m, h_guess), fb = solve(b);
   const double tolerance = kIndicatorFraction * options_.newton.tolerance;
   bool found = false;
   for (int evaluation = 1; evaluation <= kMaxEvaluations; ++evaluation) {
     if (!std::isfinite(fa) || !std::isfinite(fb)) break;
-    const double c = fa != fb ? b - fb * (b - a) / (fb - fa) : b;
-    const bool stalled = std::fabs(c - b) <= 4.0 * std::numeric_limits<double>::epsilon() * b;
-    if (std::fabs(fb) <= kIndicatorRoundoff || stalled) {
-      if (std::fabs(fb) > tolerance) break;
+    if (std::fabs(fb) <= tolerance) {
       if (solve_level) {
         found = true;
         break;
@@ -622,6 +625,8 @@ bool FesdRun::ReducedSwitchGuess(const std::vector<Vector>& trial_w, const Vecto
       fb = scaled_indicator(b);
       continue;
     }
+    if (fa == fb) break;
+    const double c = b - fb * (b - a) / (fb - fa);
     if (!(c > 0.0 && c <= group_.setup().h_max)) break;
     const bool bracket = (fa < 0.0) != (fb < 0.0);
     const double fc = solve(c);
@@ -642,17 +647,62 @@ bool FesdRun::ReducedSwitchGuess(const std::vector<Vector>& trial_w, const Vecto
   Vector y0 = y_start;
   for (int e = 0; e < m; ++e) {
     const Matrix& ze = z[static_cast<std::size_t>(e)];
-    auto element = w->segment(group_.element_offset(e), group_.element_size());
+    auto unknowns = w->segment(group_.element_offset(e), group_.element_size());
     for (int i = 0; i < s_; ++i) {
-      element.segment(stages.state_offset(i), ny_) = ze.col(i);
+      unknowns.segment(stages.state_offset(i), ny_) = ze.col(i);
       stage_y_ = y0 + ze.col(i);
-      element.segment(stages.algebraic_offset(i), nz_) = ConsistentGuess(stage_y_, z_guess_);
+      unknowns.segment(stages.algebraic_offset(i), nz_) = ConsistentGuess(stage_y_, z_guess_);
     }
     y0 += ze.col(s_ - 1);
   }
   w->segment(group_.v_offset(), nz_) = v;
   (*w)[group_.h_index()] = b;
   return true;
+}
+
+double FesdRun::CrossingGuess(const std::vector<Vector>& trial_w, const Vector& y_start,
+                              double h_trial, int element, int pair, int m, double h_guess) {
+  // Bisection steps on the interpolant (no system evaluations): 2^-40 of a gap.
+  constexpr int kBisections = 40;
+  if (FreeSideIsJump(pair) || element >= static_cast<int>(trial_w.size())) return h_guess;
+  const internal::CollocationStages& stages = group_.element(0);
+  const Vector& w = trial_w[static_cast<std::size_t>(element)];
+  Vector y0 = y_start;
+  for (int e = 0; e < element; ++e) {
+    y0 += trial_w[static_cast<std::size_t>(e)].segment(stages.state_offset(s_ - 1), ny_);
+  }
+  std::vector<double> nodes = {0.0}, values;
+  IndicatorEvaluation& at = indicators_;
+  system_.EvaluateEventIndicators(y0, v_, a_zero_, Derivatives::kNone, &at);
+  values.push_back(at.values[pair]);
+  for (int i = 0; i < s_; ++i) {
+    stage_y_ = y0 + w.segment(stages.state_offset(i), ny_);
+    system_.EvaluateEventIndicators(stage_y_, v_, a_zero_, Derivatives::kNone, &at);
+    nodes.push_back(tableau_.c[i]);
+    values.push_back(at.values[pair]);
+  }
+  auto interpolant = [&](double theta) {
+    double sum = 0.0;
+    for (std::size_t j = 0; j < nodes.size(); ++j) {
+      double basis = 1.0;
+      for (std::size_t l = 0; l < nodes.size(); ++l) {
+        if (l != j) basis *= (theta - nodes[l]) / (nodes[j] - nodes[l]);
+      }
+      sum += basis * values[j];
+    }
+    return sum;
+  };
+  for (std::size_t j = 1; j < nodes.size(); ++j) {
+    if (!(values[j - 1] >= 0.0 && values[j] < 0.0)) continue;
+    double low = nodes[j - 1], high = nodes[j];
+    for (int k = 0; k < kBisections; ++k) {
+      const double middle = 0.5 * (low + high);
+      (interpolant(middle) >= 0.0 ? low : high) = middle;
+    }
+    const double h = (element + 0.5 * (low + high)) * h_trial / m;
+    return h > 0.0 && h <= group_.setup().h_max ? h : h_guess;
+  }
+  return h_guess;
 }
 
 // Guess of a group of m elements of length h_guess from the trial elements.

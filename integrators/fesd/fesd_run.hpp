@@ -245,9 +245,17 @@ class FesdRun {
   // the group's unknowns (stage states, algebraic values consistent with them, v_end, h), the guess
   // that the full group system is then checked at. Returns false if the statuses leave no smooth
   // field or the iteration fails (the full group solve then starts from GroupGuess).
+  // `element`: the trial element the switch was detected in.
   bool ReducedSwitchGuess(const std::vector<Vector>& trial_w, const Vector& y_start, double h_trial,
-                          int m, double h_guess, int pair, double weight, int power, Vector* w,
-                          int* iterations, long* factorizations);
+                          int element, int m, double h_guess, int pair, double weight, int power,
+                          Vector* w, int* iterations, long* factorizations);
+  // The element length of m equal elements that end where the interpolant of pair k's
+  // continuous free side through the start and the stages of trial element `element` (their
+  // values at the trial solution) crosses zero: a first guess accurate to the interpolant's
+  // order s + 1 where the linear crossing fraction of the checks is accurate to second order.
+  // h_guess if the free side is a jump side or does not cross.
+  double CrossingGuess(const std::vector<Vector>& trial_w, const Vector& y_start, double h_trial,
+                       int element, int pair, int m, double h_guess);
 
   // Guess of a group of m elements of length h_guess from the trial elements.
   Vector GroupGuess(const std::vector<Vector>& trial_w, const Vector& y_start, double h_trial,
