@@ -839,6 +839,10 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
   VelocitySystem system(*this, linear);
   VelocityLevelEvaluation e;
   PointEvaluation point;
+  // A linear velocity level is the expansion of one evaluation at (y, guess), which the blocks
+  // make without looking at the roles: evaluated once for all trials.
+  PointEvaluation expansion;
+  if (linear) Evaluate(y, guess, Derivatives::kStates, &expansion);
   for (unsigned mask = 0; mask < (1u << candidates.size()); ++mask) {
     std::vector<PairRole> trial = roles;
     int leaving = 0;
@@ -859,7 +863,7 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
     }
     if (!admitted) continue;
     system.SetRoles(trial);
-    system.Reset(y, guess);
+    system.Reset(y, guess, linear ? &expansion : nullptr);
     const SemismoothNewtonResult result = trial_newton.Solve(system, guess);
     if (!result.converged()) continue;
     // The free side of every candidate must be nonnegative.
