@@ -9,7 +9,6 @@ namespace moreau::internal {
 SmoothCollocationSolver::SmoothCollocationSolver(LoweredSystem* system, int stages,
                                                  LinearSolverKind kind)
     : system_(system), tableau_(RadauIIA(stages)), n_(system->num_states()), s_(stages) {
-  MOREAU_ASSERT(system->num_algebraic() == 0, "smooth collocation needs n_z = 0");
   const double nonzeros = s_ * static_cast<double>(s_) * system->EstimatedNonzerosFy() + s_ * n_;
   solver_ = MakeLinearSolver(kind, s_ * n_, nonzeros);
   stage_f_.resize(n_, s_);
@@ -20,7 +19,8 @@ SmoothCollocationSolver::SmoothCollocationSolver(LoweredSystem* system, int stag
 SmoothCollocationSolver::Outcome SmoothCollocationSolver::Solve(double h, const Vector& y0,
                                                                 const Stopping& stopping, Matrix* z,
                                                                 int* iterations) {
-  const Vector no_algebraic;
+  MOREAU_ASSERT(fixed_algebraic_.size() == system_->num_algebraic(),
+                "smooth collocation needs n_z = 0 or fixed algebraic values");
   double previous_increment = 0.0;
   for (int k = 1; k <= stopping.max_iterations; ++k) {
     *iterations = k;
@@ -28,7 +28,7 @@ SmoothCollocationSolver::Outcome SmoothCollocationSolver::Solve(double h, const 
     for (int j = 0; j < s_; ++j) {
       point_ = y0 + z->col(j);
       PointEvaluation& eval = stage_eval_[static_cast<std::size_t>(j)];
-      system_->Evaluate(point_, no_algebraic, Derivatives::kStates, &eval);
+      system_->Evaluate(point_, fixed_algebraic_, Derivatives::kStates, &eval);
       ++function_evaluations_;
       if (!eval.F.allFinite()) return Outcome::kNonFinite;
       stage_f_.col(j) = eval.F;
@@ -59,6 +59,7 @@ SmoothCollocationSolver::Outcome SmoothCollocationSolver::Solve(double h, const 
       z->col(j) += rhs_.segment(j * n_, n_);
       increment = std::max(increment, ScaledIncrement(rhs_.segment(j * n_, n_), y0, stopping));
     }
+    last_increment_ = increment;
     if (increment <= stopping.tolerance) return Outcome::kConverged;
     // Diverging (contraction rate >= 1 after the first correction) or stalled at round-off.
     if (k >= 3 && increment >= previous_increment) {

@@ -1,7 +1,9 @@
 #pragma once
 // Full Newton for the Radau IIA collocation of a lowered system without algebraic unknowns,
 //   Z_i - h sum_j a_ij F(y0 + Z_j) = 0,  i = 1..s,
-// with the exact stage Jacobians (matrix delta_ij I - h a_ij F_y(Y_j), dense or sparse LU).
+// with the exact stage Jacobians (matrix delta_ij I - h a_ij F_y(Y_j), dense or sparse LU);
+// or of the field y' = F(y, z_fixed) of a system with algebraic unknowns held at fixed values
+// (SetFixedAlgebraic: FESD's smooth elements of hysteresis relays, whose statuses fix theta).
 // Shared by the smooth Radau IIA integrator and by FESD for elements without complementarity
 // pairs, so that a scene without effects costs FESD what it costs Radau IIA (private to
 // moreau::integrators).
@@ -34,9 +36,16 @@ class SmoothCollocationSolver {
 
   SmoothCollocationSolver(LoweredSystem* system, int stages, LinearSolverKind kind);
 
+  // Holds the algebraic unknowns at z (size n_z of the system) in every evaluation: the
+  // collocation is then that of y' = F(y, z). Required before Solve when n_z > 0.
+  void SetFixedAlgebraic(const Vector& z) { fixed_algebraic_ = z; }
+
   // Solves from the stage increments in z (n_y x s, column j = Z_j); z holds the result.
   Outcome Solve(double h, const Vector& y0, const Stopping& stopping, Matrix* z, int* iterations);
 
+  // The scaled increment (see Stopping) of the last iteration of the last Solve: a bound on
+  // the error of the iterate it corrected.
+  double last_increment() const { return last_increment_; }
   long num_newton_iterations() const { return newton_iterations_; }
   long num_function_evaluations() const { return function_evaluations_; }
   long num_factorizations() const { return solver_->num_factorizations(); }
@@ -53,6 +62,8 @@ class SmoothCollocationSolver {
   std::vector<PointEvaluation> stage_eval_;  // per stage: F and F_y (dense or sparse)
   Matrix stage_f_;
   Vector rhs_, point_;
+  Vector fixed_algebraic_;  // empty, or n_z values (SetFixedAlgebraic)
+  double last_increment_ = 0.0;
   long newton_iterations_ = 0;
   long function_evaluations_ = 0;
 };

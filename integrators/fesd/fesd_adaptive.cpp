@@ -160,7 +160,7 @@ Violation FesdRun::JumpStageViolation(const CollocationStages& stages, const Vec
             previous_c + (tableau_.c[i] - previous_c) * previous[k] / (previous[k] - free[k]);
       }
       fraction = std::clamp(fraction, 1e-3, 1.0);
-      if (!first.found || fraction < first.fraction) first = {true, element, fraction};
+      if (!first.found || fraction < first.fraction) first = {true, element, fraction, k};
     }
     previous = free;
     previous_c = tableau_.c[i];
@@ -494,20 +494,29 @@ bool FesdRun::SolveComparisonElement(const Vector& y0, double t0, double h,
     PieceState(t0 + tableau_.c[i] * h, &states[static_cast<std::size_t>(i)],
                &algebraic[static_cast<std::size_t>(i)]);
   }
-  if (smooth_) {
+  // Without pairs, or where the statuses leave a smooth field (smooth elements, section 5),
+  // the comparison solution is a Radau IIA step of that field: the states of the full element
+  // system's solution with these statuses (whose algebraic values are functions of them), to
+  // the Newton tolerance, at the cost of the field's Newton.
+  SmoothCollocationSolver* field = smooth_ ? smooth_.get() : SmoothFieldSolver(a_zero);
+  if (field != nullptr) {
     Matrix increments(ny_, s_);
     for (int i = 0; i < s_; ++i) increments.col(i) = states[static_cast<std::size_t>(i)] - base;
     SmoothCollocationSolver::Stopping stopping;
     stopping.tolerance = options_.newton.tolerance;
     stopping.max_iterations = options_.newton.max_iterations;
-    const long factorizations = smooth_->num_factorizations();
+    const long factorizations = field->num_factorizations();
     int iterations = 0;
-    const auto outcome = smooth_->Solve(h, y0, stopping, &increments, &iterations);
+    const auto outcome = field->Solve(h, y0, stopping, &increments, &iterations);
     result_.stats.num_newton_iterations += iterations;
-    factorizations_ += smooth_->num_factorizations() - factorizations;
-    if (outcome != SmoothCollocationSolver::Outcome::kConverged) return false;
-    *y_end = y0 + increments.col(s_ - 1);
-    return true;
+    factorizations_ += field->num_factorizations() - factorizations;
+    if (outcome == SmoothCollocationSolver::Outcome::kConverged) {
+      // Known to its last Newton increment (relative to 1 + |y0|, as kNewtonNoise scales).
+      if (!smooth_) comparison_residual_ = std::max(comparison_residual_, field->last_increment());
+      *y_end = y0 + increments.col(s_ - 1);
+      return true;
+    }
+    if (smooth_) return false;  // otherwise the full element system below
   }
   GroupSetup setup;
   setup.y_start = y0;

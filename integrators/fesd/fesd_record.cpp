@@ -181,6 +181,11 @@ void FesdRun::ConsistentFreeSides(const internal::CollocationStages& stages, int
 }
 
 bool FesdRun::JumpFreeSidesInClosedForm(Vector* free) const {
+  // Relays (Reduction::kRelayModes) have jump free sides too (theta of their regions); they
+  // take the velocity-level solve, which is linear for one relay (docs/lowering.md).
+  if (reduction_ != Reduction::kStewartMode && reduction_ != Reduction::kFreeMovingSets) {
+    return false;
+  }
   const int field = SmoothField();
   if (field < 0) return false;
   if (reduction_ == Reduction::kStewartMode) {

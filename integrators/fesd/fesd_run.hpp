@@ -9,6 +9,7 @@
 //   fesd_adaptive.cpp      adaptive steps: the step loop, error estimate, rejection, retries
 //   dense_output.cpp       values at requested output times from the collocation polynomials
 
+#include <array>
 #include <chrono>
 #include <memory>
 #include <optional>
@@ -26,11 +27,12 @@ namespace moreau::internal {
 
 // Where a free side first turned negative in a solved element: the fraction of the element at
 // which it crossed zero (linear interpolation between the last nonnegative sample and the first
-// negative one).
+// negative one), and its pair (-1 if unknown: an element that did not converge).
 struct Violation {
   bool found = false;
   int element = 0;
   double fraction = 1.0;
+  int pair = -1;
 };
 
 // The local transfer of one solved element or group: [dy_end; dtau_end] as a linear map of
@@ -179,12 +181,26 @@ class FesdRun {
   // --- smooth elements (FesdOptions::reduce_smooth_elements) ------------------------------
   // Which statuses leave a smooth field x' = f(x) (InitializeSmoothFields decides per scene):
   // Stewart's form of one switching effect with exactly one active mode (b = lambda_k = 0
-  // kept for one pair only), or moving sets with no active constraint (b = lambda = 0 kept
-  // for every pair).
-  enum class Reduction { kNone, kStewartMode, kFreeMovingSets };
+  // kept for one pair only), moving sets with no active constraint (b = lambda = 0 kept
+  // for every pair), or hysteresis relays by time-freezing (and nothing else) with every
+  // relay in one region or sliding on a memory boundary (theta constant, see RelayTheta).
+  enum class Reduction { kNone, kStewartMode, kFreeMovingSets, kRelayModes };
   void InitializeSmoothFields();
-  // The field the current statuses leave (index into smooth_fields_: the mode, or 0), or -1.
-  int SmoothField() const;
+  // The field statuses leave (index into smooth_fields_: the mode, or 0), or -1.
+  int SmoothField() const { return SmoothField(a_zero_); }
+  int SmoothField(const std::vector<bool>& a_zero) const;
+  // Relays (Reduction::kRelayModes): theta of every relay under the statuses a_zero, written
+  // into *z at the theta unknowns (other entries untouched). Per relay, with the regions
+  // mode_A, to_A, to_B, mode_B of docs/lowering.md: one active region k gives theta = e_k
+  // (e^T theta = 1, theta_j = 0 for j != k); the active pairs {mode_A, to_A} (sliding on
+  // w = 0) or {to_B, mode_B} (on w = 1) give theta = 1/2 on both (w' = a (theta_1 - theta_2
+  // + theta_3 - theta_4) = 0 keeps w on the boundary, e^T theta = 1). The state derivative
+  // of a relay-only system depends on z through theta alone (docs/lowering.md), so y' =
+  // F(y, z) is then a smooth field. Returns false for any other status pattern.
+  bool RelayTheta(const std::vector<bool>& a_zero, Vector* z) const;
+  // The Radau IIA solver of the field the statuses a_zero leave, with the run's parameters
+  // and inputs (and, for relays, theta) set, or null if they leave none.
+  internal::SmoothCollocationSolver* SmoothFieldSolver(const std::vector<bool>& a_zero);
   // The guess *w of one element of length h from y0 (previous: the last element's unknowns
   // for the extrapolation, or null) as a Radau IIA step of that field (its own lowered system,
   // without algebraic unknowns) with algebraic values consistent with the stage states
@@ -221,6 +237,27 @@ class FesdRun {
   // dtau_s = -(diota)/(diota/dtau), diota/dtau = iota_y F_-, and the state at the boundary by
   // (F_- - F_+) dtau_s, F_-/F_+ the fields before and after the switch.
   void ApplySaltation(const std::vector<bool>& before, const Vector& v_before, int k);
+
+  // Reduced switch group (smooth elements, docs/fesd-formulation.md section 5): where the
+  // statuses leave a smooth field (hysteresis relays, Reduction::kRelayModes), the group of m equal
+  // elements that ends on the switch of `pair` is solved as m Radau IIA steps of that field whose
+  // common length h is the root of the pair's scaled indicator at the end state (as in the event
+  // equation: w_k iota_k(y_end, v_end) / tau^{p_k}, v_end the velocity level at y_end), found by
+  // the Illinois method from h_trial (the trial elements' end, no solve) and h_guess. *w receives
+  // the group's unknowns (stage states, algebraic values consistent with them, v_end, h), the guess
+  // that the full group system is then checked at. Returns false if the statuses leave no smooth
+  // field or the iteration fails (the full group solve then starts from GroupGuess).
+  // `element`: the trial element the switch was detected in.
+  bool ReducedSwitchGuess(const std::vector<Vector>& trial_w, const Vector& y_start, double h_trial,
+                          int element, int m, double h_guess, int pair, double weight, int power,
+                          Vector* w, int* iterations, long* factorizations);
+  // The element length of m equal elements that end where the interpolant of pair k's
+  // continuous free side through the start and the stages of trial element `element` (their
+  // values at the trial solution) crosses zero: a first guess accurate to the interpolant's
+  // order s + 1 where the linear crossing fraction of the checks is accurate to second order.
+  // h_guess if the free side is a jump side or does not cross.
+  double CrossingGuess(const std::vector<Vector>& trial_w, const Vector& y_start, double h_trial,
+                       int element, int pair, int m, double h_guess);
 
   // Guess of a group of m elements of length h_guess from the trial elements.
   Vector GroupGuess(const std::vector<Vector>& trial_w, const Vector& y_start, double h_trial,
@@ -435,6 +472,10 @@ class FesdRun {
   };
   Reduction reduction_ = Reduction::kNone;
   std::vector<FieldSolver> smooth_fields_;
+  // kRelayModes: per relay the indices in z of theta for its regions mode_A, to_A, to_B,
+  // mode_B, and the fixed algebraic values of the field (RelayTheta).
+  std::vector<std::array<int, 4>> relay_theta_;
+  Vector relay_field_z_;
   Matrix smooth_field_z_;  // stage increments of a smooth-element solve (n_y x s)
   Matrix smooth_z_, last_z_matrix_, extrapolation_;
   double extrapolation_ratio_ = -1.0;

@@ -172,6 +172,11 @@ class HysteresisBlock final : public RelayBlockBase {
 
   bool HasClockRate() const override { return true; }
 
+  // One relay: F (x' = P f + 2 theta_1 f_A + 2 theta_4 f_B, Q_1 = 1; w' and clock' = P), G,
+  // A, B are affine in z, with P = 2 (theta_1 + theta_4) affine too; the roles are not read.
+  // With several relays P and Q_i are products of the thetas.
+  bool AffineInAlgebraic() const override { return num_relays_ == 1; }
+
   // P = prod_i r_i, dP/dtheta_j1 = dP/dtheta_j4 = 2 prod_{l != j} r_l.
   double ClockRate(const ConstVectorRef& z, Eigen::RowVectorXd* d_rate_dz) const override {
     Rates(z);

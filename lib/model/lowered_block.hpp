@@ -217,8 +217,9 @@ class LoweredBlock {
   virtual bool MonotoneVelocityLevel() const { return false; }
 
   // True if the block's contributions to F, G, A and B are affine in z with coefficients that
-  // depend on y only, and do not depend on the velocity-level roles (BlockContext). If every
-  // block says so (and no clock rate multiplies F), the velocity-level rows are affine in v and
+  // depend on y only, and do not depend on the velocity-level roles (BlockContext); for the
+  // time-freezing block, its clock rate P(z) too. If every block says so (and the blocks that
+  // P multiplies have no algebraic unknowns), the velocity-level rows are affine in v and
   // a velocity-level problem of fixed statuses is solved by one linear solve
   // (SolveVelocityLevel). False is always safe.
   virtual bool AffineInAlgebraic() const { return false; }

@@ -440,7 +440,7 @@ namespace {
 // Velocity-level problem as a mixed complementarity system in v (roles fixed).
 //
 // With `linear` (systems affine in the algebraic unknowns, LoweredBlock::AffineInAlgebraic:
-// Stewart, one-surface Heaviside, moving sets; no time-freezing) the rows are exactly
+// Stewart, one-surface Heaviside, moving sets, one relay by time-freezing) the rows are exactly
 // E(v) = M(y) v + q(y), and so are the pair sides a(v), b(v). The lowered system is then
 // evaluated once, at the solve's initial point v0, and every value Newton asks for is
 // E(v0) + M (v - v0), the values at v = 0 for the row scales included. Newton takes the same
@@ -674,9 +674,13 @@ class VelocitySolver {
 }  // namespace internal
 
 bool LoweredSystem::VelocityLevelIsLinear() const {
-  if (clock_rate_block_ >= 0) return false;  // time-freezing multiplies F by a rate P(z)
   for (const auto& block : blocks_) {
     if (!block->AffineInAlgebraic()) return false;
+    // Time-freezing multiplies the physical-time blocks' F by the clock rate P(z), affine in z
+    // if its block says so: the product is affine only where those blocks do not depend on z.
+    if (clock_rate_block_ >= 0 && block->ScaledByClockRate() && block->num_algebraic() > 0) {
+      return false;
+    }
   }
   return true;
 }
@@ -854,6 +858,10 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
   VelocitySystem system(*this, linear);
   VelocityLevelEvaluation e;
   PointEvaluation point;
+  // A linear velocity level is the expansion of one evaluation at (y, guess), which the blocks
+  // make without looking at the roles: evaluated once for all trials.
+  PointEvaluation expansion;
+  if (linear) Evaluate(y, guess, Derivatives::kStates, &expansion);
   for (unsigned mask = 0; mask < (1u << candidates.size()); ++mask) {
     std::vector<PairRole> trial = roles;
     int leaving = 0;
@@ -874,7 +882,7 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
     }
     if (!admitted) continue;
     system.SetRoles(trial);
-    system.Reset(y, guess);
+    system.Reset(y, guess, linear ? &expansion : nullptr);
     const SemismoothNewtonResult result = trial_newton.Solve(system, guess);
     if (!result.converged()) continue;
     // The free side of every candidate must be nonnegative.

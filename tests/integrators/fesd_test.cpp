@@ -457,6 +457,57 @@ TEST(FesdTest, SmoothElementsAgreeWithTheFullSolve) {
   }
 }
 
+// Hysteresis relays (time-freezing): an element in which every relay is in one region or slides
+// on a memory boundary is a Radau IIA step of the lowered field with theta held at its constant
+// values (1, or 1/2 on the two sides of the boundary). H1: one relay; H3: two, each freezing the
+// other while it jumps. Groups that end on a switch are reduced too (the element length is the
+// root of the switching indicator, driven to round-off). Both runs with the Newton tolerance
+// 1e-14: at the default 1e-12 the full group solve stops at a residual of 2.6e-13 (H1, s = 2),
+// which moves the first switch by 4.5e-13. Same agreement as above relative to 1 + |y| (the
+// Newton tolerance is relative to it; the temperatures reach 20, where round-off alone gives
+// 1.2e-13).
+TEST(FesdTest, SmoothElementsOfRelaysAgreeWithTheFullSolve) {
+  constexpr double kConvergedTolerance = 1e-14;
+  for (const char* name : {"H1", "H3"}) {
+    for (int stages : {1, 2, 3}) {
+      const Scene scene = MakeScene(name);
+      FesdOptions full;
+      full.stages = stages;
+      full.step_size = 0.1;
+      full.newton.tolerance = kConvergedTolerance;
+      full.reduce_smooth_elements = false;
+      FesdOptions reduced = full;
+      reduced.reduce_smooth_elements = true;
+      const FesdResult a = SimulateFesd(scene, full);
+      const FesdResult b = SimulateFesd(scene, reduced);
+      const std::string label = std::string(name) + " s = " + std::to_string(stages);
+      ExpectCertificates(a, full, label + " (full)");
+      ExpectCertificates(b, reduced, label + " (reduced)");
+      EXPECT_EQ(a.stats.num_reduced_elements, 0) << label;
+      EXPECT_GT(b.stats.num_reduced_elements, 0) << label;
+      ASSERT_EQ(a.events.size(), b.events.size()) << label;
+      for (std::size_t k = 0; k < a.events.size(); ++k) {
+        EXPECT_EQ(a.events[k].kind, b.events[k].kind) << label << " event " << k;
+        EXPECT_NEAR(a.events[k].t, b.events[k].t, kReducedAgreement) << label << " event " << k;
+      }
+      ASSERT_EQ(a.elements.size(), b.elements.size()) << label;
+      ASSERT_EQ(a.numerical_trajectory.size(), b.numerical_trajectory.size()) << label;
+      double size = 0.0;
+      for (const Vector& y : a.numerical_trajectory.x) {
+        size = std::max(size, y.lpNorm<Eigen::Infinity>());
+      }
+      const double agreement = kReducedAgreement * (1.0 + size);
+      for (std::size_t k = 0; k < a.numerical_trajectory.size(); ++k) {
+        EXPECT_LE(
+            (a.numerical_trajectory.x[k] - b.numerical_trajectory.x[k]).lpNorm<Eigen::Infinity>(),
+            agreement)
+            << label << " tau = " << a.numerical_trajectory.t[k];
+      }
+      EXPECT_LE((a.final_state - b.final_state).lpNorm<Eigen::Infinity>(), agreement) << label;
+    }
+  }
+}
+
 // With sensitivities, a smooth element's transfer comes from the factorization at the reduced
 // solution: the same derivatives as the full solve's.
 TEST(FesdSensitivityTest, SmoothElementsGiveTheFullSolvesDerivatives) {

@@ -119,13 +119,15 @@ struct FesdOptions {
   bool sensitivities = false;
   /// Smooth elements: in an element whose statuses leave a smooth vector field (Stewart's form
   /// of one SwitchingSurfaces effect with exactly one active mode, no other effects or
-  /// dynamics; or moving sets only, with no active constraint), the element equations are
-  /// exactly a Radau IIA step of that field (theta = e_k and lambda, mu functions of the state;
-  /// or lambda = 0). The trial element is first solved that way (n_y s unknowns, the field
-  /// only), its algebraic stage values are reconstructed from the stage states, and the full
-  /// element system must then hold to the Newton tolerance (else its Newton continues from
-  /// there): results agree with the full solve to that tolerance; switch detection,
-  /// certificates and sensitivities are unchanged.
+  /// dynamics; moving sets only, with no active constraint; or hysteresis relays only, each in
+  /// one region or sliding on a memory boundary), the element equations are exactly a Radau
+  /// IIA step of that field (theta = e_k and lambda, mu functions of the state; lambda = 0;
+  /// theta constant, 1 or 1/2). The trial element is first solved that way (n_y s unknowns,
+  /// the field only), its algebraic stage values are reconstructed from the stage states, and
+  /// the full element system must then hold to the Newton tolerance (else its Newton continues
+  /// from there): results agree with the full solve to that tolerance; switch detection,
+  /// certificates and sensitivities are unchanged. The comparison solves of the adaptive
+  /// error estimate use the field too.
   bool reduce_smooth_elements = true;
   /// Step-size control by the local error estimate (see the file comment and
   /// docs/fesd-formulation.md, section 10) instead of fixed steps H.

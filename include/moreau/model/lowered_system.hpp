@@ -345,7 +345,8 @@ class LoweredSystem {
                           Vector* v) const;
   /// The same, given `point`: this system's Evaluate at (y, z) with derivatives (kStates or
   /// kAll), e.g. a collocation stage. Where the velocity level is linear (every effect affine
-  /// in the algebraic unknowns, no time-freezing) that evaluation is the velocity-level
+  /// in the algebraic unknowns; with time-freezing, one relay and no switching surfaces, see
+  /// VelocityLevelIsLinear) that evaluation is the velocity-level
   /// evaluation at z, the solve starts there and evaluates nothing more; otherwise `point` and
   /// z are not used.
   bool SolveVelocityLevel(const Vector& y, const std::vector<bool>& a_zero, const Vector& v0,
@@ -375,8 +376,9 @@ class LoweredSystem {
   void Layout();
   // The block that declares pair `declared`.
   int DeclaredBlock(int declared) const;
-  // True if every block is affine in the algebraic unknowns and no clock rate multiplies F:
-  // the velocity-level rows are then affine in v (velocity_level.cpp).
+  // True if every block is affine in the algebraic unknowns (the time-freezing block's clock
+  // rate included) and the clock rate multiplies no block with algebraic unknowns: the
+  // velocity-level rows are then affine in v (velocity_level.cpp).
   bool VelocityLevelIsLinear() const;
   // Evaluate; with `velocity_roles` (EvaluateVelocityLevel, z = v) blocks see the roles and v
   // in their context (BlockContext::velocity_roles).
