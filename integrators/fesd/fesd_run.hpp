@@ -3,6 +3,7 @@
 // solution procedure. Private to moreau::integrators; split by concern:
 //   fesd.cpp               options, the run loop over steps and segments, the result
 //   fesd_advance.cpp       one advance: trial elements, switch detection, group solves
+//   fesd_smooth.cpp        smooth elements and reduced switch groups (Radau IIA steps of one field)
 //   fesd_switches.cpp      status decisions at t0, at switches and at step boundaries
 //   fesd_record.cpp        committing solved elements: trajectories and certificates
 //   fesd_sensitivities.cpp implicit-function-theorem transfers and saltation
