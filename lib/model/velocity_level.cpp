@@ -754,6 +754,16 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
     }
   }
   decision.candidates = static_cast<int>(candidates.size());
+  // Whether every block admits the roles (its structure, e.g. e^T theta = 1, rules out some).
+  auto admitted_by_blocks = [&](const std::vector<PairRole>& r) {
+    for (const auto& block : blocks_) {
+      const auto first = r.begin() + block->layout.pair_offset;
+      if (!block->AdmitsRoles(std::vector<PairRole>(first, first + block->num_pairs()))) {
+        return false;
+      }
+    }
+    return true;
+  };
   if (candidates.empty()) {
     // No pair is zero on its continuous side: the signs decide every status, and the
     // enumeration below would make one trial, the velocity level of these fixed statuses.
@@ -763,12 +773,7 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
       decision.a_zero[static_cast<std::size_t>(k)] =
           roles[static_cast<std::size_t>(k)] == PairRole::kAZero;
     }
-    bool admitted = true;
-    for (const auto& block : blocks_) {
-      const auto first = roles.begin() + block->layout.pair_offset;
-      admitted &= block->AdmitsRoles(std::vector<PairRole>(first, first + block->num_pairs()));
-    }
-    if (admitted && SolveVelocityLevel(y, decision.a_zero, guess, &decision.v)) {
+    if (admitted_by_blocks(roles) && SolveVelocityLevel(y, decision.a_zero, guess, &decision.v)) {
       decision.solved = true;
       return decision;
     }
@@ -875,12 +880,7 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
       trial[static_cast<std::size_t>(k)] =
           (jump_zero == continuous_a) ? PairRole::kBZero : PairRole::kAZero;
     }
-    bool admitted = true;
-    for (const auto& block : blocks_) {
-      const auto first = trial.begin() + block->layout.pair_offset;
-      admitted &= block->AdmitsRoles(std::vector<PairRole>(first, first + block->num_pairs()));
-    }
-    if (!admitted) continue;
+    if (!admitted_by_blocks(trial)) continue;
     system.SetRoles(trial);
     system.Reset(y, guess, linear ? &expansion : nullptr);
     const SemismoothNewtonResult result = trial_newton.Solve(system, guess);
