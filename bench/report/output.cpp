@@ -173,27 +173,32 @@ void WritePlot(const SceneCase& scene, const std::vector<const Series*>& series,
   gp << "set title 'error vs step size (p: fitted order, dashed over the points used; dotted: "
         "order-fit floor)'\n"
      << "set xlabel 'step size h" << (scene.scene.Has<HysteresisRelay>() ? " (numerical time)" : "")
-     << "'\nplot ";
+     << "'\n";
+  std::ostringstream left;
   bool first = true;
   for (std::size_t i = 0; i < series.size(); ++i) {
     const Series& s = *series[i];
     if (s.method->tolerance_driven || point_block[i] < 0) continue;
-    gp << (first ? "" : ", \\\n  ") << "'" << data << "' index " << point_block[i]
-       << " using 1:2 with linespoints lw 2 pt " << 4 + 2 * std::max(0, s.method->stages - 1)
-       << " lc rgb '" << Colour(*s.method) << "' title '" << s.method->label
-       << " p=" << OrderText(s.fit) << "'";
+    left << (first ? "" : ", \\\n  ") << "'" << data << "' index " << point_block[i]
+         << " using 1:2 with linespoints lw 2 pt " << 4 + 2 * std::max(0, s.method->stages - 1)
+         << " lc rgb '" << Colour(*s.method) << "' title '" << s.method->label
+         << " p=" << OrderText(s.fit) << "'";
     if (fit_block[i] >= 0) {
-      gp << ", '" << data << "' index " << fit_block[i]
-         << " using 1:2 with lines dt 2 lw 1 lc rgb '" << Colour(*s.method) << "' notitle";
+      left << ", '" << data << "' index " << fit_block[i]
+           << " using 1:2 with lines dt 2 lw 1 lc rgb '" << Colour(*s.method) << "' notitle";
     }
     first = false;
   }
   if (first) {
-    gp << "NaN notitle";
+    // Only tolerance-driven methods (e.g. --integrators ida): an empty panel. gnuplot cannot
+    // autoscale a log axis without points, hence the fixed ranges.
+    gp << "set xrange [1e-3:1]\nset yrange [1e-12:1]\n"
+       << "set label 1 'no fixed-step method selected' at graph 0.5,0.5 center\n"
+       << "plot NaN notitle\nunset label 1\nset autoscale xy\n";
   } else {
-    gp << ", " << scene.floor << " with lines dt 3 lw 2 lc rgb '#777777' notitle";
+    gp << "plot " << left.str() << ", " << scene.floor
+       << " with lines dt 3 lw 2 lc rgb '#777777' notitle\n";
   }
-  gp << "\n";
   // Right: error against CPU time.
   gp << "set title 'error vs CPU time (median of repeats)'\n"
      << "set xlabel 'CPU time [ms]'\nplot ";
