@@ -200,7 +200,7 @@ void WritePlot(const SceneCase& scene, const std::vector<const Series*>& series,
        << " with lines dt 3 lw 2 lc rgb '#777777' notitle\n";
   }
   // Right: error against CPU time.
-  gp << "set title 'error vs CPU time (median of repeats)'\n"
+  gp << "set title 'error vs CPU time (median of interleaved repeats)'\n"
      << "set xlabel 'CPU time [ms]'\nplot ";
   first = true;
   for (std::size_t i = 0; i < series.size(); ++i) {
