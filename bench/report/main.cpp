@@ -87,36 +87,56 @@ int Run(const Settings& settings) {
   info.timing = settings.timing;
   info.revision = settings.revision;
   std::size_t done = 0;
-  for (Series& s : series) {
-    const std::vector<double> grid = s.scene->grid(*s.method);
-    for (double parameter : grid) {
-      ++done;
-      Measurement point;
-      point.scene = s.scene->name;
-      point.method = s.method;
-      point.parameter = parameter;
-      try {
-        point.timing = TimeRuns([&] { return s.method->run(s.scene->scene, parameter); },
-                                settings.timing, &point.output);
-      } catch (const std::invalid_argument& refusal) {
-        if (!s.points.empty()) throw;  // accepted once: a refusal now would be a bug
-        s.refused = refusal.what();
-        done += grid.size() - 1;
-        std::fprintf(stderr, "[report %3zu/%zu] %s %s: refused (%s)\n", done, planned,
-                     s.scene->name.c_str(), s.method->label.c_str(), refusal.what());
-        break;
-      }
-      info.runs += 1 + point.timing.repeats;
-      point.errors = MeasureErrors(*s.scene, point.output);
-      const double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
-      std::fprintf(stderr, "[report %3zu/%zu %5.0f s] %s %s %s = %s: %s, error %s, %s ms (%d)\n",
-                   done, planned, elapsed, s.scene->name.c_str(), s.method->label.c_str(),
-                   s.method->tolerance_driven ? "rtol" : "h", Short(parameter).c_str(),
-                   point.output.status.c_str(), Short(point.errors.total).c_str(),
-                   Short(point.timing.median_seconds * 1e3).c_str(), point.timing.repeats);
-      s.points.push_back(std::move(point));
+  for (const SceneCase& scene : scenes) {
+    std::vector<Series*> of_scene;
+    for (Series& s : series) {
+      if (s.scene == &scene) of_scene.push_back(&s);
     }
-    Summarize(&s);
+    // One untimed run per point (warm-up): its output, its errors, or the integrator's
+    // refusal of the scene.
+    for (Series* s : of_scene) {
+      for (double parameter : scene.grid(*s->method)) {
+        Measurement point;
+        point.scene = scene.name;
+        point.method = s->method;
+        point.parameter = parameter;
+        try {
+          point.output = s->method->run(scene.scene, parameter);
+        } catch (const std::invalid_argument& refusal) {
+          if (!s->points.empty()) throw;  // accepted once: a refusal now would be a bug
+          s->refused = refusal.what();
+          break;
+        }
+        point.errors = MeasureErrors(scene, point.output);
+        s->points.push_back(std::move(point));
+      }
+    }
+    // The timed runs of all the scene's points, interleaved (see TimeInterleaved).
+    std::vector<Measurement*> points;
+    for (Series* s : of_scene) {
+      for (Measurement& point : s->points) points.push_back(&point);
+    }
+    std::fprintf(stderr, "[report] %s: %zu points run once, timing them interleaved...\n",
+                 scene.name.c_str(), points.size());
+    TimeInterleaved(scene, points, settings.timing);
+    const double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
+    for (Series* s : of_scene) {
+      if (!s->refused.empty()) {
+        done += scene.grid(*s->method).size();
+        std::fprintf(stderr, "[report %3zu/%zu] %s %s: refused (%s)\n", done, planned,
+                     scene.name.c_str(), s->method->label.c_str(), s->refused.c_str());
+      }
+      for (const Measurement& point : s->points) {
+        ++done;
+        info.runs += 1 + point.timing.repeats;
+        std::fprintf(stderr, "[report %3zu/%zu %5.0f s] %s %s %s = %s: %s, error %s, %s ms (%d)\n",
+                     done, planned, elapsed, scene.name.c_str(), s->method->label.c_str(),
+                     s->method->tolerance_driven ? "rtol" : "h", Short(point.parameter).c_str(),
+                     point.output.status.c_str(), Short(point.errors.total).c_str(),
+                     Short(point.timing.median_seconds * 1e3).c_str(), point.timing.repeats);
+      }
+      Summarize(s);
+    }
   }
   info.wall_seconds = std::chrono::duration<double>(Clock::now() - start).count();
   const std::string link_base =

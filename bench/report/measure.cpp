@@ -5,6 +5,7 @@
 #include <cmath>
 #include <iomanip>
 #include <limits>
+#include <random>
 #include <sstream>
 
 #include "report.hpp"
@@ -53,6 +54,9 @@ double Hausdorff(const std::vector<double>& a, const std::vector<double>& b) {
   };
   return std::max(one_sided(a, b), one_sided(b, a));
 }
+
+// Seed of the shuffled order of TimeInterleaved's rounds (any fixed value).
+constexpr std::mt19937::result_type kShuffleSeed = 16;
 
 double ThreadCpuSeconds() {
   timespec now{};
@@ -155,33 +159,58 @@ Errors MeasureErrors(const SceneCase& scene, const RunOutput& output) {
   return errors;
 }
 
-Timing TimeRuns(const std::function<RunOutput()>& run, const TimingOptions& options,
-                RunOutput* first) {
-  *first = run();
-  Timing timing;
-  if (!first->success) {  // a failed run is reported, not timed
-    timing.median_seconds = timing.min_seconds = kNaN;
-    return timing;
-  }
-  std::vector<double> seconds;
-  double total = 0.0;
-  while (static_cast<int>(seconds.size()) < options.max_repeats &&
-         (static_cast<int>(seconds.size()) < options.min_repeats ||
-          total < options.min_total_seconds)) {
-    const double start = ThreadCpuSeconds();
-    const RunOutput repeat = run();
-    const double elapsed = ThreadCpuSeconds() - start;
-    seconds.push_back(elapsed);
-    total += elapsed;
-    if (repeat.final_state.size() != first->final_state.size() ||
-        (repeat.final_state.array() != first->final_state.array()).any()) {
-      timing.deterministic = false;
+void TimeInterleaved(const SceneCase& scene, const std::vector<Measurement*>& points,
+                     const TimingOptions& options) {
+  // Per point: the timed runs so far and their sum; only successful first runs are timed.
+  struct Pending {
+    Measurement* point;
+    std::vector<double> seconds;
+    double total = 0.0;
+  };
+  std::vector<Pending> pending;
+  for (Measurement* point : points) {
+    point->timing = Timing{};
+    if (point->output.success) {
+      pending.push_back({point, {}, 0.0});
+    } else {  // a failed run is reported, not timed
+      point->timing.median_seconds = point->timing.min_seconds = kNaN;
     }
   }
-  timing.repeats = static_cast<int>(seconds.size());
-  timing.median_seconds = Median(seconds);
-  timing.min_seconds = *std::min_element(seconds.begin(), seconds.end());
-  return timing;
+  auto needs_more = [&options](const Pending& p) {
+    const int repeats = static_cast<int>(p.seconds.size());
+    return repeats < options.max_repeats &&
+           (repeats < options.min_repeats || p.total < options.min_total_seconds);
+  };
+  // A fixed seed: the order is shuffled against position effects (a point always following
+  // the same neighbour), not to be random; two runs of the report time in the same order.
+  std::mt19937 shuffle_engine(kShuffleSeed);
+  std::vector<Pending*> round;
+  for (;;) {
+    round.clear();
+    for (Pending& p : pending) {
+      if (needs_more(p)) round.push_back(&p);
+    }
+    if (round.empty()) break;
+    std::shuffle(round.begin(), round.end(), shuffle_engine);
+    for (Pending* p : round) {
+      Measurement& point = *p->point;
+      const double start = ThreadCpuSeconds();
+      const RunOutput repeat = point.method->run(scene.scene, point.parameter);
+      const double elapsed = ThreadCpuSeconds() - start;
+      p->seconds.push_back(elapsed);
+      p->total += elapsed;
+      if (repeat.final_state.size() != point.output.final_state.size() ||
+          (repeat.final_state.array() != point.output.final_state.array()).any()) {
+        point.timing.deterministic = false;
+      }
+    }
+  }
+  for (Pending& p : pending) {
+    Timing& timing = p.point->timing;
+    timing.repeats = static_cast<int>(p.seconds.size());
+    timing.median_seconds = Median(p.seconds);
+    timing.min_seconds = *std::min_element(p.seconds.begin(), p.seconds.end());
+  }
 }
 
 void Summarize(Series* series) {

@@ -2,8 +2,8 @@
 // The accuracy-vs-time report (bench/report/, program `work_precision`, command
 // `scripts/report`): every benchmark scene with every integrator that accepts it, over a grid
 // of step sizes (or tolerances), errors against the closed form or an IDA reference, CPU time
-// as the median of repeated runs; CSV, gnuplot images, a markdown table and the README
-// section.
+// as the median of repeated runs (interleaved over the points of a scene); CSV, gnuplot
+// images, a markdown table and the README section.
 //
 // Layers of this program, one file each:
 //   cases.cpp    the scenes, their known answers, floors and grids
@@ -102,7 +102,7 @@ Errors MeasureErrors(const SceneCase& scene, const RunOutput& output);
 // machine (most runs take 0.1 to 30 ms), and a median of at least five runs is robust to the
 // occasional preempted run.
 struct TimingOptions {
-  int min_repeats = 5;             // timed runs at least
+  int min_repeats = 5;             // timed runs per point at least
   int max_repeats = 51;            // and at most
   double min_total_seconds = 0.5;  // keep repeating (up to max_repeats) until this much
 };
@@ -112,10 +112,6 @@ struct Timing {
   int repeats = 0;
   bool deterministic = true;  // every repeat gave bitwise the same final state
 };
-// Runs `run` once untimed (warm-up; its output is returned in *first) and then repeatedly
-// as `options` says.
-Timing TimeRuns(const std::function<RunOutput()>& run, const TimingOptions& options,
-                RunOutput* first);
 
 // One measured point.
 struct Measurement {
@@ -132,6 +128,16 @@ struct ExpectedOrder {
   double order = 0.0, low = 0.0, high = 0.0;
   std::string text;  // as printed in the table
 };
+
+// Times the points of one scene (each already run once untimed, its output in
+// Measurement::output), interleaved: in rounds, each of which runs every point still short of
+// its repeats (`options`) once, timed, in a shuffled order (fixed seed), until none is; then
+// the median per point. A burst of machine load thus spreads over the points of every method
+// of the scene instead of landing on the block of one of them. Points whose first run failed
+// are not timed (NaN). Sets Measurement::timing, including the determinism check against
+// the first run.
+void TimeInterleaved(const SceneCase& scene, const std::vector<Measurement*>& points,
+                     const TimingOptions& options);
 
 // Everything known about one (scene, method) pair.
 struct Series {
