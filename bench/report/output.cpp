@@ -406,7 +406,7 @@ std::string WriteReport(const std::vector<Series>& series, const std::vector<Sce
   if (!against_ida.empty()) {
     md << "Adaptive FESD against IDA: CPU time to reach each error divided by IDA's, from this "
           "run (medians of the same interleaved rounds; ≤ 1: adaptive FESD is not slower; ✗: "
-          "slower or not reached; \"IDA: not reached\": IDA's sweep, down to rtol 1e-12, does "
+          "slower or not reached; \"IDA: not reached\": IDA's sweep, down to rtol 1e-13, does "
           "not get there):\n\n"
        << against_ida << "\n";
   }
