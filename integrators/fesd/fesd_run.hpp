@@ -199,6 +199,14 @@ class FesdRun {
   // of a relay-only system depends on z through theta alone (docs/lowering.md), so y' =
   // F(y, z) is then a smooth field. Returns false for any other status pattern.
   bool RelayTheta(const std::vector<bool>& a_zero, Vector* z) const;
+  // Relays: the algebraic values of a stage at y of a smooth element or reduced group under
+  // the statuses a_zero_: theta of the field (relay_field_z_, set by SmoothFieldSolver) and
+  // lambda, mu from the stage's Voronoi indicators g with the relay's first active region a
+  // (mu = g_a, lambda_k = g_k - g_a: lambda_a = 0 as a_zero_ keeps it), the rest as
+  // ConsistentGuess. ConsistentGuess alone takes a from the region that contains y, which
+  // past the switching surface (a trial element that crosses it) is another region: the full
+  // check then fails on the status rows and takes a Newton iteration with derivatives.
+  Vector RelayStageAlgebraic(const Vector& y) const;
   // The Radau IIA solver of the field the statuses a_zero leave, with the run's parameters
   // and inputs (and, for relays, theta) set, or null if they leave none.
   internal::SmoothCollocationSolver* SmoothFieldSolver(const std::vector<bool>& a_zero);
@@ -473,9 +481,13 @@ class FesdRun {
   };
   Reduction reduction_ = Reduction::kNone;
   std::vector<FieldSolver> smooth_fields_;
-  // kRelayModes: per relay the indices in z of theta for its regions mode_A, to_A, to_B,
-  // mode_B, and the fixed algebraic values of the field (RelayTheta).
-  std::vector<std::array<int, 4>> relay_theta_;
+  // kRelayModes: per relay the indices in z of theta and lambda for its regions mode_A, to_A,
+  // to_B, mode_B and of mu, and the fixed algebraic values of the field (RelayTheta).
+  struct RelayUnknowns {
+    std::array<int, 4> theta{}, lambda{};
+    int mu = -1;
+  };
+  std::vector<RelayUnknowns> relay_theta_;
   Vector relay_field_z_;
   Matrix smooth_field_z_;  // stage increments of a smooth-element solve (n_y x s)
   Matrix smooth_z_, last_z_matrix_, extrapolation_;

@@ -31,14 +31,20 @@ void FesdRun::InitializeSmoothFields() {
     }
     const char* const regions[] = {"mode_A", "to_A", "to_B", "mode_B"};
     const std::vector<std::string>& names = system_.algebraic_names();
-    std::vector<std::array<int, 4>> theta;
+    auto index = [&](const std::string& name) {
+      const auto found = std::find(names.begin(), names.end(), name);
+      return found == names.end() ? -1 : static_cast<int>(found - names.begin());
+    };
+    std::vector<RelayUnknowns> theta;
     for (const std::string& relay : system_.relay_names()) {
-      std::array<int, 4> indices{};
-      for (int k = 0; k < 4; ++k) {
-        const auto found = std::find(names.begin(), names.end(), relay + ".theta_" + regions[k]);
-        if (found == names.end()) return;
-        indices[static_cast<std::size_t>(k)] = static_cast<int>(found - names.begin());
+      RelayUnknowns indices;
+      for (std::size_t k = 0; k < 4; ++k) {
+        indices.theta[k] = index(relay + ".theta_" + regions[k]);
+        indices.lambda[k] = index(relay + ".lambda_" + regions[k]);
+        if (indices.theta[k] < 0 || indices.lambda[k] < 0) return;
       }
+      indices.mu = index(relay + ".mu");
+      if (indices.mu < 0) return;
       theta.push_back(indices);
     }
     // The pairs are (theta, lambda) of the regions, relay by relay (lower_hysteresis.cpp).
@@ -115,9 +121,27 @@ bool FesdRun::RelayTheta(const std::vector<bool>& a_zero, Vector* z) const {
       return false;
     }
     if (z == nullptr) continue;
-    for (std::size_t k = 0; k < 4; ++k) (*z)[relay_theta_[i][k]] = theta[k];
+    for (std::size_t k = 0; k < 4; ++k) (*z)[relay_theta_[i].theta[k]] = theta[k];
   }
   return true;
+}
+
+Vector FesdRun::RelayStageAlgebraic(const Vector& y) const {
+  // lambda = g - min g, mu = min g (InitialAlgebraicGuess): g_k = lambda_k + mu.
+  Vector z = ConsistentGuess(y, z_guess_);
+  for (std::size_t i = 0; i < relay_theta_.size(); ++i) {
+    const RelayUnknowns& relay = relay_theta_[i];
+    std::size_t active = 0;
+    while (active < 3 && a_zero_[4 * i + active]) ++active;
+    const double g_active = z[relay.lambda[active]] + z[relay.mu];
+    for (std::size_t k = 0; k < 4; ++k) {
+      z[relay.theta[k]] = relay_field_z_[relay.theta[k]];
+      if (k != active) z[relay.lambda[k]] += z[relay.mu] - g_active;
+    }
+    z[relay.lambda[active]] = 0.0;
+    z[relay.mu] = g_active;
+  }
+  return z;
 }
 
 internal::SmoothCollocationSolver* FesdRun::SmoothFieldSolver(const std::vector<bool>& a_zero) {
@@ -187,7 +211,9 @@ bool FesdRun::SmoothElementGuess(const Vector& y0, double h, const Vector* previ
   for (int i = 0; i < s_; ++i) {
     w->segment(stages.state_offset(i), ny_) = smooth_field_z_.col(i);
     stage_y_ = y0 + smooth_field_z_.col(i);
-    w->segment(stages.algebraic_offset(i), nz_) = ConsistentGuess(stage_y_, z_guess_);
+    w->segment(stages.algebraic_offset(i), nz_) = reduction_ == Reduction::kRelayModes
+                                                      ? RelayStageAlgebraic(stage_y_)
+                                                      : ConsistentGuess(stage_y_, z_guess_);
   }
   return true;
 }
@@ -316,7 +342,7 @@ bool FesdRun::ReducedSwitchGuess(const std::vector<Vector>& trial_w, const Vecto
     for (int i = 0; i < s_; ++i) {
       unknowns.segment(stages.state_offset(i), ny_) = ze.col(i);
       stage_y_ = y0 + ze.col(i);
-      unknowns.segment(stages.algebraic_offset(i), nz_) = ConsistentGuess(stage_y_, z_guess_);
+      unknowns.segment(stages.algebraic_offset(i), nz_) = RelayStageAlgebraic(stage_y_);
     }
     y0 += ze.col(s_ - 1);
   }
