@@ -309,7 +309,9 @@ class FesdRun {
   // (reduction kStewartMode): the velocity-level rows on values, theta_j = 0 kept for j != k
   // and e^T theta = 1, alone give theta = e_k, so pair k's free side theta_k is 1 and every
   // other free side (lambda_j) is continuous. Moving sets without an active constraint
-  // (kFreeMovingSets): every jump side (lambda) is kept at zero, no free side is a jump. Sets
+  // (kFreeMovingSets): every jump side (lambda) is kept at zero, no free side is a jump.
+  // Hysteresis relays (kRelayModes): the free sides theta of the active regions are
+  // RelayTheta's values (1, or 1/2 on a memory boundary). Sets
   // the jump entries of *free (n_pairs) and returns true, or returns false (no smooth field).
   bool JumpFreeSidesInClosedForm(Vector* free) const;
 
@@ -508,6 +510,7 @@ class FesdRun {
   mutable std::vector<Vector> free_sides_;
   mutable Vector stage_y_, stage_v_;  // a stage state and its consistent velocity level
   mutable Vector closed_free_;        // JumpFreeSidesInClosedForm's scratch
+  mutable Vector closed_theta_;       // and its relays' theta (RelayTheta)
   // The consistent velocity level and indicators that EndViolation solved at an element's end
   // state, which is its last stage (c_s = 1), from that stage's evaluation and algebraic
   // values: the element's certificates need the same solve there (ConsistentFreeSides with the
