@@ -38,8 +38,9 @@ class SmoothCollocationSolver {
     // Newton (F_y at every iterate). Off: full Newton throughout.
     bool simplified = false;
     // With simplified: start from the stage Jacobians of the last evaluation with them (an
-    // earlier Solve of the same field, nearby points: the caller's judgment), if there is one
-    // since the last SetFixedAlgebraic.
+    // earlier Solve of the same field), if there is one since SetFixedAlgebraic last changed
+    // the field. Where they are too far from this solve's (other points, other parameters or
+    // inputs), the contraction test replaces them after the second iteration.
     bool reuse_jacobian = false;
   };
 
@@ -53,6 +54,9 @@ class SmoothCollocationSolver {
   // Holds the algebraic unknowns at z (size n_z of the system) in every evaluation: the
   // collocation is then that of y' = F(y, z). Required before Solve when n_z > 0.
   void SetFixedAlgebraic(const Vector& z) {
+    if (z.size() == fixed_algebraic_.size() && (z.array() == fixed_algebraic_.array()).all()) {
+      return;  // the same field: its Jacobians stay
+    }
     fixed_algebraic_ = z;
     have_jacobian_ = false;  // another field
   }

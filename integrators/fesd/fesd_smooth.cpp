@@ -204,10 +204,11 @@ bool FesdRun::SmoothElementGuess(const Vector& y0, double h, const Vector* previ
   internal::SmoothCollocationSolver::Stopping stopping;
   stopping.tolerance = options_.newton.tolerance;
   stopping.max_iterations = options_.newton.max_iterations;
-  // Relays: simplified Newton (the field is the lowered system with theta fixed; its
-  // derivative evaluation costs several value evaluations). The element is then checked on
-  // the full system, the comparison at the tolerance either way.
+  // Relays: simplified Newton from the field's last Jacobians (the field is the lowered
+  // system with theta fixed; its derivative evaluation costs several value evaluations). The
+  // element is then checked on the full system.
   stopping.simplified = reduction_ == Reduction::kRelayModes;
+  stopping.reuse_jacobian = stopping.simplified;
   const long before = solver->num_factorizations();
   const auto outcome = solver->Solve(h, y0, stopping, &smooth_field_z_, iterations);
   *factorizations = solver->num_factorizations() - before;
@@ -247,9 +248,10 @@ bool FesdRun::ReducedSwitchGuess(const std::vector<Vector>& trial_w, const Vecto
   internal::SmoothCollocationSolver::Stopping stopping;
   stopping.tolerance = options_.newton.tolerance;
   stopping.max_iterations = options_.newton.max_iterations;
-  // Simplified Newton; every solve after the first starts from the last stage Jacobians (the
-  // same field from the same start, over lengths that the root iteration changes ever less).
+  // Simplified Newton from the field's last stage Jacobians (the root iteration re-solves the
+  // same field from the same start, over lengths that it changes ever less).
   stopping.simplified = true;
+  stopping.reuse_jacobian = true;
   const long factorizations_before = solver->num_factorizations();
   // Stage increments of the m elements, for the length z_h (first guess: the trial elements).
   std::vector<Matrix> z(static_cast<std::size_t>(m), Matrix(ny_, s_));
@@ -294,7 +296,6 @@ bool FesdRun::ReducedSwitchGuess(const std::vector<Vector>& trial_w, const Vecto
       int its = 0;
       const auto outcome = solver->Solve(h, y_end, stopping, &ze, &its);
       *iterations += its;
-      stopping.reuse_jacobian = true;
       if (outcome != internal::SmoothCollocationSolver::Outcome::kConverged) {
         z_h = h;
         return std::numeric_limits<double>::quiet_NaN();
