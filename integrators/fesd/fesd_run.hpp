@@ -251,8 +251,10 @@ class FesdRun {
   // statuses leave a smooth field (hysteresis relays, Reduction::kRelayModes), the group of m equal
   // elements that ends on the switch of `pair` is solved as m Radau IIA steps of that field whose
   // common length h is the root of the pair's scaled indicator at the end state (as in the event
-  // equation: w_k iota_k(y_end, v_end) / tau^{p_k}, v_end the velocity level at y_end), found by
-  // the Illinois method from h_trial (the trial elements' end, no solve) and h_guess. *w receives
+  // equation: w_k iota_k(y_end, v_end) / tau^{p_k}, v_end the velocity level at y_end), found
+  // from the interpolated crossing (CrossingGuess, else h_guess) by a Newton step (continuous free
+  // sides) or a secant through h_trial (the trial elements' end, no solve), then secant steps
+  // kept inside a bracket once there is one. *w receives
   // the group's unknowns (stage states, algebraic values consistent with them, v_end, h), the guess
   // that the full group system is then checked at. Returns false if the statuses leave no smooth
   // field or the iteration fails (the full group solve then starts from GroupGuess).

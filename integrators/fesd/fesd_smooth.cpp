@@ -312,8 +312,46 @@ bool FesdRun::ReducedSwitchGuess(const std::vector<Vector>& trial_w, const Vecto
   double a = h_trial, fa = scaled_indicator(h_trial);
   double b = CrossingGuess(trial_w, y_start, h_trial, element, pair, m, h_guess), fb = solve(b);
   const double tolerance = kIndicatorFraction * options_.newton.tolerance;
+  const double h_max = group_.setup().h_max;
+  int evaluation = 1;
+  if (!solve_level && std::isfinite(fb) && std::fabs(fb) > tolerance) {
+    // A Newton step from b where the trial end h_trial is far (a secant through it is not):
+    // the end state moves with the common length h at m F(y_end) (the flow of the field over
+    // m elements, to the elements' local error), so f'(h) = weight (d iota/dy) m F(y_end) /
+    // (h / h_trial)^p - p f(h) / h.
+    PointEvaluation field;
+    system_.Evaluate(y_end, relay_field_z_, Derivatives::kNone, &field);
+    system_.EvaluateEventIndicators(y_end, level, a_zero_, Derivatives::kStates, &indicator);
+    const double rate = m * indicator.d_y.Row(pair).dot(field.F);
+    const double slope = weight * rate / std::pow(b / h_trial, power) - power * fb / b;
+    const double c = b - fb / slope;
+    if (std::isfinite(c) && c > 0.0 && c <= h_max) {
+      a = b;
+      fa = fb;
+      b = c;
+      fb = solve(c);
+      ++evaluation;
+    }
+  }
+  // Secant steps through the last two lengths; once two values of opposite signs bracket the
+  // root, a step that leaves the bracket is replaced by the bracket's false position.
+  bool has_negative = false, has_positive = false;
+  double negative = 0.0, f_negative = 0.0, positive = 0.0, f_positive = 0.0;
+  auto bracket = [&](double h, double f) {
+    if (f < 0.0) {
+      has_negative = true;
+      negative = h;
+      f_negative = f;
+    } else if (f > 0.0) {
+      has_positive = true;
+      positive = h;
+      f_positive = f;
+    }
+  };
+  bracket(a, fa);
+  bracket(b, fb);
   bool found = false;
-  for (int evaluation = 1; evaluation <= kMaxEvaluations; ++evaluation) {
+  for (; evaluation <= kMaxEvaluations; ++evaluation) {
     if (!std::isfinite(fa) || !std::isfinite(fb)) break;
     if (std::fabs(fb) <= tolerance) {
       if (solve_level) {
@@ -326,18 +364,17 @@ bool FesdRun::ReducedSwitchGuess(const std::vector<Vector>& trial_w, const Vecto
       continue;
     }
     if (fa == fb) break;
-    const double c = b - fb * (b - a) / (fb - fa);
-    if (!(c > 0.0 && c <= group_.setup().h_max)) break;
-    const bool bracket = (fa < 0.0) != (fb < 0.0);
-    const double fc = solve(c);
-    if (bracket && (fc < 0.0) == (fb < 0.0)) {
-      fa *= 0.5;  // Illinois: the retained end's value halved
-    } else {
-      a = b;
-      fa = fb;
+    double c = b - fb * (b - a) / (fb - fa);
+    if (has_negative && has_positive &&
+        !(c > std::min(negative, positive) && c < std::max(negative, positive))) {
+      c = positive - f_positive * (positive - negative) / (f_positive - f_negative);
     }
+    if (!(c > 0.0 && c <= h_max)) break;
+    a = b;
+    fa = fb;
     b = c;
-    fb = fc;
+    fb = solve(c);
+    bracket(b, fb);
   }
   *factorizations = solver->num_factorizations() - factorizations_before;
   if (!found) return false;
