@@ -22,16 +22,28 @@ SmoothCollocationSolver::Outcome SmoothCollocationSolver::Solve(double h, const 
   MOREAU_ASSERT(fixed_algebraic_.size() == system_->num_algebraic(),
                 "smooth collocation needs n_z = 0 or fixed algebraic values");
   double previous_increment = 0.0;
+  // Simplified Newton until an increment contracts too little; then full Newton.
+  bool simplified = stopping.simplified;
+  bool evaluate_jacobian = !(simplified && stopping.reuse_jacobian && have_jacobian_);
+  bool factorize = true;
   for (int k = 1; k <= stopping.max_iterations; ++k) {
     *iterations = k;
     ++newton_iterations_;
+    const bool with_jacobian = evaluate_jacobian || !simplified;
+    if (with_jacobian) have_jacobian_ = false;  // until factorized
     for (int j = 0; j < s_; ++j) {
       point_ = y0 + z->col(j);
-      PointEvaluation& eval = stage_eval_[static_cast<std::size_t>(j)];
-      system_->Evaluate(point_, fixed_algebraic_, Derivatives::kStates, &eval);
+      PointEvaluation& eval =
+          with_jacobian ? stage_eval_[static_cast<std::size_t>(j)] : value_eval_;
+      system_->Evaluate(point_, fixed_algebraic_,
+                        with_jacobian ? Derivatives::kStates : Derivatives::kNone, &eval);
       ++function_evaluations_;
       if (!eval.F.allFinite()) return Outcome::kNonFinite;
       stage_f_.col(j) = eval.F;
+    }
+    if (with_jacobian) {
+      factorize = true;
+      evaluate_jacobian = false;
     }
     // (Radau IIA collocation) residual -(Z_i - h sum_j a_ij F_j), stacked stage by stage.
     for (int i = 0; i < s_; ++i) {
@@ -39,19 +51,24 @@ SmoothCollocationSolver::Outcome SmoothCollocationSolver::Solve(double h, const 
       r = -z->col(i);
       for (int j = 0; j < s_; ++j) r += h * tableau_.a(i, j) * stage_f_.col(j);
     }
-    // Newton matrix: delta_ij I - h a_ij F_y(Y_j).
-    matrix_.Reset(s_ * n_, solver_->wants_sparse());
-    for (int i = 0; i < s_; ++i) {
-      matrix_.AddDiagonal(i * n_, i * n_, n_, 1.0);
-      for (int j = 0; j < s_; ++j) {
-        matrix_.AddDerivative(i * n_, j * n_, stage_eval_[static_cast<std::size_t>(j)].F_y,
-                              -h * tableau_.a(i, j));
+    if (factorize || h != factorized_h_) {
+      // Newton matrix: delta_ij I - h a_ij F_y(Y_j).
+      matrix_.Reset(s_ * n_, solver_->wants_sparse());
+      for (int i = 0; i < s_; ++i) {
+        matrix_.AddDiagonal(i * n_, i * n_, n_, 1.0);
+        for (int j = 0; j < s_; ++j) {
+          matrix_.AddDerivative(i * n_, j * n_, stage_eval_[static_cast<std::size_t>(j)].F_y,
+                                -h * tableau_.a(i, j));
+        }
       }
+      matrix_.Finalize();
+      const FactorizationStatus status = solver_->Factorize(matrix_);
+      factorized_h_ = h;
+      factorize = false;
+      have_jacobian_ = status == FactorizationStatus::kSuccess;
+      if (status == FactorizationStatus::kNonFinite) return Outcome::kNonFinite;
+      if (status == FactorizationStatus::kSingular) return Outcome::kSingular;
     }
-    matrix_.Finalize();
-    const FactorizationStatus status = solver_->Factorize(matrix_);
-    if (status == FactorizationStatus::kNonFinite) return Outcome::kNonFinite;
-    if (status == FactorizationStatus::kSingular) return Outcome::kSingular;
     solver_->Solve(rhs_);
     if (!rhs_.allFinite()) return Outcome::kNonFinite;
     double increment = 0.0;
@@ -61,6 +78,15 @@ SmoothCollocationSolver::Outcome SmoothCollocationSolver::Solve(double h, const 
     }
     last_increment_ = increment;
     if (increment <= stopping.tolerance) return Outcome::kConverged;
+    if (simplified) {
+      // Jacobians too far from the iterate's: full Newton from here (F_y at this iterate).
+      if (k >= 2 && increment > kRefreshContraction * previous_increment) {
+        simplified = false;
+        evaluate_jacobian = true;
+      }
+      previous_increment = increment;
+      continue;
+    }
     // Diverging (contraction rate >= 1 after the first correction) or stalled at round-off.
     if (k >= 3 && increment >= previous_increment) {
       return increment <= 1e3 * stopping.tolerance ? Outcome::kConverged : Outcome::kNotConverged;

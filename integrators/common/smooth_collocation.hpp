@@ -32,13 +32,34 @@ class SmoothCollocationSolver {
     double relative_tolerance = 0.0;
     double absolute_tolerance = 0.0;
     int max_iterations = 25;
+    // Simplified Newton: the stage Jacobians F_y are evaluated at the first iterate only (or
+    // not at all with reuse_jacobian), later iterations evaluate F alone; where an increment
+    // is not below kRefreshContraction times the previous one the solve goes on as full
+    // Newton (F_y at every iterate). Off: full Newton throughout.
+    bool simplified = false;
+    // With simplified: start from the stage Jacobians of the last evaluation with them (an
+    // earlier Solve of the same field), if there is one since SetFixedAlgebraic last changed
+    // the field. Where they are too far from this solve's (other points, other parameters or
+    // inputs), the contraction test replaces them after the second iteration.
+    bool reuse_jacobian = false;
   };
+
+  // Simplified Newton keeps its Jacobians while each increment is at most this fraction of
+  // the previous one: the error left after the stopping increment d is then at most
+  // d * r / (1 - r) <= d / 9, within the tolerance that d met.
+  static constexpr double kRefreshContraction = 0.1;
 
   SmoothCollocationSolver(LoweredSystem* system, int stages, LinearSolverKind kind);
 
   // Holds the algebraic unknowns at z (size n_z of the system) in every evaluation: the
   // collocation is then that of y' = F(y, z). Required before Solve when n_z > 0.
-  void SetFixedAlgebraic(const Vector& z) { fixed_algebraic_ = z; }
+  void SetFixedAlgebraic(const Vector& z) {
+    if (z.size() == fixed_algebraic_.size() && (z.array() == fixed_algebraic_.array()).all()) {
+      return;  // the same field: its Jacobians stay
+    }
+    fixed_algebraic_ = z;
+    have_jacobian_ = false;  // another field
+  }
 
   // Solves from the stage increments in z (n_y x s, column j = Z_j); z holds the result.
   Outcome Solve(double h, const Vector& y0, const Stopping& stopping, Matrix* z, int* iterations);
@@ -60,6 +81,9 @@ class SmoothCollocationSolver {
   std::unique_ptr<LinearSolver> solver_;
   SystemMatrix matrix_;
   std::vector<PointEvaluation> stage_eval_;  // per stage: F and F_y (dense or sparse)
+  PointEvaluation value_eval_;               // simplified Newton: F alone
+  bool have_jacobian_ = false;  // stage_eval_ holds F_y of this field, factorized at factorized_h_
+  double factorized_h_ = 0.0;
   Matrix stage_f_;
   Vector rhs_, point_;
   Vector fixed_algebraic_;  // empty, or n_z values (SetFixedAlgebraic)

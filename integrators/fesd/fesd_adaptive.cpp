@@ -505,6 +505,10 @@ bool FesdRun::SolveComparisonElement(const Vector& y0, double t0, double h,
     SmoothCollocationSolver::Stopping stopping;
     stopping.tolerance = options_.newton.tolerance;
     stopping.max_iterations = options_.newton.max_iterations;
+    // Relays: simplified Newton from the field's last Jacobians, as for their smooth elements
+    // (SmoothElementGuess); the comparison is known to the tolerance either way.
+    stopping.simplified = reduction_ == Reduction::kRelayModes;
+    stopping.reuse_jacobian = stopping.simplified;
     const long factorizations = field->num_factorizations();
     int iterations = 0;
     const auto outcome = field->Solve(h, y0, stopping, &increments, &iterations);

@@ -181,13 +181,25 @@ void FesdRun::ConsistentFreeSides(const internal::CollocationStages& stages, int
 }
 
 bool FesdRun::JumpFreeSidesInClosedForm(Vector* free) const {
-  // Relays (Reduction::kRelayModes) have jump free sides too (theta of their regions); they
-  // take the velocity-level solve, which is linear for one relay (docs/lowering.md).
-  if (reduction_ != Reduction::kStewartMode && reduction_ != Reduction::kFreeMovingSets) {
-    return false;
-  }
+  if (reduction_ == Reduction::kNone) return false;
   const int field = SmoothField();
   if (field < 0) return false;
+  if (reduction_ == Reduction::kRelayModes) {
+    // Relays: pair 4 i + k is region k's theta_ik ⟂ lambda_ik, its free side theta_ik where
+    // lambda_ik = 0 is kept. The velocity level's theta is RelayTheta's: one active region
+    // (theta_j = 0 kept for the others, e^T theta = 1) or two on a memory boundary, where the
+    // differentiated row g_1 - g_2 (or g_3 - g_4), a function of w_i alone, makes w_i' =
+    // a_i (theta_1 - theta_2 + theta_3 - theta_4) = 0 and so theta 1/2 on both.
+    closed_theta_.setZero(nz_);
+    RelayTheta(a_zero_, &closed_theta_);
+    for (std::size_t i = 0; i < relay_theta_.size(); ++i) {
+      for (std::size_t k = 0; k < 4; ++k) {
+        const int pair = static_cast<int>(4 * i + k);
+        if (FreeSideIsJump(pair)) (*free)[pair] = closed_theta_[relay_theta_[i].theta[k]];
+      }
+    }
+    return true;
+  }
   if (reduction_ == Reduction::kStewartMode) {
     // Pair `field` is mode k = field's theta_k ⟂ lambda_k with lambda_k = 0 kept.
     MOREAU_ASSERT(FreeSideIsJump(field), "Stewart mode pair without a jump free side");

@@ -199,6 +199,14 @@ class FesdRun {
   // of a relay-only system depends on z through theta alone (docs/lowering.md), so y' =
   // F(y, z) is then a smooth field. Returns false for any other status pattern.
   bool RelayTheta(const std::vector<bool>& a_zero, Vector* z) const;
+  // Relays: the algebraic values of a stage at y of a smooth element or reduced group under
+  // the statuses a_zero_: theta of the field (relay_field_z_, set by SmoothFieldSolver) and
+  // lambda, mu from the stage's Voronoi indicators g with the relay's first active region a
+  // (mu = g_a, lambda_k = g_k - g_a: lambda_a = 0 as a_zero_ keeps it), the rest as
+  // ConsistentGuess. ConsistentGuess alone takes a from the region that contains y, which
+  // past the switching surface (a trial element that crosses it) is another region: the full
+  // check then fails on the status rows and takes a Newton iteration with derivatives.
+  Vector RelayStageAlgebraic(const Vector& y) const;
   // The Radau IIA solver of the field the statuses a_zero leave, with the run's parameters
   // and inputs (and, for relays, theta) set, or null if they leave none.
   internal::SmoothCollocationSolver* SmoothFieldSolver(const std::vector<bool>& a_zero);
@@ -243,8 +251,10 @@ class FesdRun {
   // statuses leave a smooth field (hysteresis relays, Reduction::kRelayModes), the group of m equal
   // elements that ends on the switch of `pair` is solved as m Radau IIA steps of that field whose
   // common length h is the root of the pair's scaled indicator at the end state (as in the event
-  // equation: w_k iota_k(y_end, v_end) / tau^{p_k}, v_end the velocity level at y_end), found by
-  // the Illinois method from h_trial (the trial elements' end, no solve) and h_guess. *w receives
+  // equation: w_k iota_k(y_end, v_end) / tau^{p_k}, v_end the velocity level at y_end), found
+  // from the interpolated crossing (CrossingGuess, else h_guess) by a Newton step (continuous free
+  // sides) or a secant through h_trial (the trial elements' end, no solve), then secant steps
+  // kept inside a bracket once there is one. *w receives
   // the group's unknowns (stage states, algebraic values consistent with them, v_end, h), the guess
   // that the full group system is then checked at. Returns false if the statuses leave no smooth
   // field or the iteration fails (the full group solve then starts from GroupGuess).
@@ -301,7 +311,9 @@ class FesdRun {
   // (reduction kStewartMode): the velocity-level rows on values, theta_j = 0 kept for j != k
   // and e^T theta = 1, alone give theta = e_k, so pair k's free side theta_k is 1 and every
   // other free side (lambda_j) is continuous. Moving sets without an active constraint
-  // (kFreeMovingSets): every jump side (lambda) is kept at zero, no free side is a jump. Sets
+  // (kFreeMovingSets): every jump side (lambda) is kept at zero, no free side is a jump.
+  // Hysteresis relays (kRelayModes): the free sides theta of the active regions are
+  // RelayTheta's values (1, or 1/2 on a memory boundary). Sets
   // the jump entries of *free (n_pairs) and returns true, or returns false (no smooth field).
   bool JumpFreeSidesInClosedForm(Vector* free) const;
 
@@ -473,9 +485,13 @@ class FesdRun {
   };
   Reduction reduction_ = Reduction::kNone;
   std::vector<FieldSolver> smooth_fields_;
-  // kRelayModes: per relay the indices in z of theta for its regions mode_A, to_A, to_B,
-  // mode_B, and the fixed algebraic values of the field (RelayTheta).
-  std::vector<std::array<int, 4>> relay_theta_;
+  // kRelayModes: per relay the indices in z of theta and lambda for its regions mode_A, to_A,
+  // to_B, mode_B and of mu, and the fixed algebraic values of the field (RelayTheta).
+  struct RelayUnknowns {
+    std::array<int, 4> theta{}, lambda{};
+    int mu = -1;
+  };
+  std::vector<RelayUnknowns> relay_theta_;
   Vector relay_field_z_;
   Matrix smooth_field_z_;  // stage increments of a smooth-element solve (n_y x s)
   Matrix smooth_z_, last_z_matrix_, extrapolation_;
@@ -496,6 +512,7 @@ class FesdRun {
   mutable std::vector<Vector> free_sides_;
   mutable Vector stage_y_, stage_v_;  // a stage state and its consistent velocity level
   mutable Vector closed_free_;        // JumpFreeSidesInClosedForm's scratch
+  mutable Vector closed_theta_;       // and its relays' theta (RelayTheta)
   // The consistent velocity level and indicators that EndViolation solved at an element's end
   // state, which is its last stage (c_s = 1), from that stage's evaluation and algebraic
   // values: the element's certificates need the same solve there (ConsistentFreeSides with the

@@ -31,14 +31,20 @@ void FesdRun::InitializeSmoothFields() {
     }
     const char* const regions[] = {"mode_A", "to_A", "to_B", "mode_B"};
     const std::vector<std::string>& names = system_.algebraic_names();
-    std::vector<std::array<int, 4>> theta;
+    auto index = [&](const std::string& name) {
+      const auto found = std::find(names.begin(), names.end(), name);
+      return found == names.end() ? -1 : static_cast<int>(found - names.begin());
+    };
+    std::vector<RelayUnknowns> theta;
     for (const std::string& relay : system_.relay_names()) {
-      std::array<int, 4> indices{};
-      for (int k = 0; k < 4; ++k) {
-        const auto found = std::find(names.begin(), names.end(), relay + ".theta_" + regions[k]);
-        if (found == names.end()) return;
-        indices[static_cast<std::size_t>(k)] = static_cast<int>(found - names.begin());
+      RelayUnknowns indices;
+      for (std::size_t k = 0; k < 4; ++k) {
+        indices.theta[k] = index(relay + ".theta_" + regions[k]);
+        indices.lambda[k] = index(relay + ".lambda_" + regions[k]);
+        if (indices.theta[k] < 0 || indices.lambda[k] < 0) return;
       }
+      indices.mu = index(relay + ".mu");
+      if (indices.mu < 0) return;
       theta.push_back(indices);
     }
     // The pairs are (theta, lambda) of the regions, relay by relay (lower_hysteresis.cpp).
@@ -115,9 +121,27 @@ bool FesdRun::RelayTheta(const std::vector<bool>& a_zero, Vector* z) const {
       return false;
     }
     if (z == nullptr) continue;
-    for (std::size_t k = 0; k < 4; ++k) (*z)[relay_theta_[i][k]] = theta[k];
+    for (std::size_t k = 0; k < 4; ++k) (*z)[relay_theta_[i].theta[k]] = theta[k];
   }
   return true;
+}
+
+Vector FesdRun::RelayStageAlgebraic(const Vector& y) const {
+  // lambda = g - min g, mu = min g (InitialAlgebraicGuess): g_k = lambda_k + mu.
+  Vector z = ConsistentGuess(y, z_guess_);
+  for (std::size_t i = 0; i < relay_theta_.size(); ++i) {
+    const RelayUnknowns& relay = relay_theta_[i];
+    std::size_t active = 0;
+    while (active < 3 && a_zero_[4 * i + active]) ++active;
+    const double g_active = z[relay.lambda[active]] + z[relay.mu];
+    for (std::size_t k = 0; k < 4; ++k) {
+      z[relay.theta[k]] = relay_field_z_[relay.theta[k]];
+      if (k != active) z[relay.lambda[k]] += z[relay.mu] - g_active;
+    }
+    z[relay.lambda[active]] = 0.0;
+    z[relay.mu] = g_active;
+  }
+  return z;
 }
 
 internal::SmoothCollocationSolver* FesdRun::SmoothFieldSolver(const std::vector<bool>& a_zero) {
@@ -180,6 +204,11 @@ bool FesdRun::SmoothElementGuess(const Vector& y0, double h, const Vector* previ
   internal::SmoothCollocationSolver::Stopping stopping;
   stopping.tolerance = options_.newton.tolerance;
   stopping.max_iterations = options_.newton.max_iterations;
+  // Relays: simplified Newton from the field's last Jacobians (the field is the lowered
+  // system with theta fixed; its derivative evaluation costs several value evaluations). The
+  // element is then checked on the full system.
+  stopping.simplified = reduction_ == Reduction::kRelayModes;
+  stopping.reuse_jacobian = stopping.simplified;
   const long before = solver->num_factorizations();
   const auto outcome = solver->Solve(h, y0, stopping, &smooth_field_z_, iterations);
   *factorizations = solver->num_factorizations() - before;
@@ -187,7 +216,9 @@ bool FesdRun::SmoothElementGuess(const Vector& y0, double h, const Vector* previ
   for (int i = 0; i < s_; ++i) {
     w->segment(stages.state_offset(i), ny_) = smooth_field_z_.col(i);
     stage_y_ = y0 + smooth_field_z_.col(i);
-    w->segment(stages.algebraic_offset(i), nz_) = ConsistentGuess(stage_y_, z_guess_);
+    w->segment(stages.algebraic_offset(i), nz_) = reduction_ == Reduction::kRelayModes
+                                                      ? RelayStageAlgebraic(stage_y_)
+                                                      : ConsistentGuess(stage_y_, z_guess_);
   }
   return true;
 }
@@ -217,6 +248,10 @@ bool FesdRun::ReducedSwitchGuess(const std::vector<Vector>& trial_w, const Vecto
   internal::SmoothCollocationSolver::Stopping stopping;
   stopping.tolerance = options_.newton.tolerance;
   stopping.max_iterations = options_.newton.max_iterations;
+  // Simplified Newton from the field's last stage Jacobians (the root iteration re-solves the
+  // same field from the same start, over lengths that it changes ever less).
+  stopping.simplified = true;
+  stopping.reuse_jacobian = true;
   const long factorizations_before = solver->num_factorizations();
   // Stage increments of the m elements, for the length z_h (first guess: the trial elements).
   std::vector<Matrix> z(static_cast<std::size_t>(m), Matrix(ny_, s_));
@@ -277,8 +312,46 @@ bool FesdRun::ReducedSwitchGuess(const std::vector<Vector>& trial_w, const Vecto
   double a = h_trial, fa = scaled_indicator(h_trial);
   double b = CrossingGuess(trial_w, y_start, h_trial, element, pair, m, h_guess), fb = solve(b);
   const double tolerance = kIndicatorFraction * options_.newton.tolerance;
+  const double h_max = group_.setup().h_max;
+  int evaluation = 1;
+  if (!solve_level && std::isfinite(fb) && std::fabs(fb) > tolerance) {
+    // A Newton step from b where the trial end h_trial is far (a secant through it is not):
+    // the end state moves with the common length h at m F(y_end) (the flow of the field over
+    // m elements, to the elements' local error), so f'(h) = weight (d iota/dy) m F(y_end) /
+    // (h / h_trial)^p - p f(h) / h.
+    PointEvaluation field;
+    system_.Evaluate(y_end, relay_field_z_, Derivatives::kNone, &field);
+    system_.EvaluateEventIndicators(y_end, level, a_zero_, Derivatives::kStates, &indicator);
+    const double rate = m * indicator.d_y.Row(pair).dot(field.F);
+    const double slope = weight * rate / std::pow(b / h_trial, power) - power * fb / b;
+    const double c = b - fb / slope;
+    if (std::isfinite(c) && c > 0.0 && c <= h_max) {
+      a = b;
+      fa = fb;
+      b = c;
+      fb = solve(c);
+      ++evaluation;
+    }
+  }
+  // Secant steps through the last two lengths; once two values of opposite signs bracket the
+  // root, a step that leaves the bracket is replaced by the bracket's false position.
+  bool has_negative = false, has_positive = false;
+  double negative = 0.0, f_negative = 0.0, positive = 0.0, f_positive = 0.0;
+  auto bracket = [&](double h, double f) {
+    if (f < 0.0) {
+      has_negative = true;
+      negative = h;
+      f_negative = f;
+    } else if (f > 0.0) {
+      has_positive = true;
+      positive = h;
+      f_positive = f;
+    }
+  };
+  bracket(a, fa);
+  bracket(b, fb);
   bool found = false;
-  for (int evaluation = 1; evaluation <= kMaxEvaluations; ++evaluation) {
+  for (; evaluation <= kMaxEvaluations; ++evaluation) {
     if (!std::isfinite(fa) || !std::isfinite(fb)) break;
     if (std::fabs(fb) <= tolerance) {
       if (solve_level) {
@@ -291,18 +364,17 @@ bool FesdRun::ReducedSwitchGuess(const std::vector<Vector>& trial_w, const Vecto
       continue;
     }
     if (fa == fb) break;
-    const double c = b - fb * (b - a) / (fb - fa);
-    if (!(c > 0.0 && c <= group_.setup().h_max)) break;
-    const bool bracket = (fa < 0.0) != (fb < 0.0);
-    const double fc = solve(c);
-    if (bracket && (fc < 0.0) == (fb < 0.0)) {
-      fa *= 0.5;  // Illinois: the retained end's value halved
-    } else {
-      a = b;
-      fa = fb;
+    double c = b - fb * (b - a) / (fb - fa);
+    if (has_negative && has_positive &&
+        !(c > std::min(negative, positive) && c < std::max(negative, positive))) {
+      c = positive - f_positive * (positive - negative) / (f_positive - f_negative);
     }
+    if (!(c > 0.0 && c <= h_max)) break;
+    a = b;
+    fa = fb;
     b = c;
-    fb = fc;
+    fb = solve(c);
+    bracket(b, fb);
   }
   *factorizations = solver->num_factorizations() - factorizations_before;
   if (!found) return false;
@@ -316,7 +388,7 @@ bool FesdRun::ReducedSwitchGuess(const std::vector<Vector>& trial_w, const Vecto
     for (int i = 0; i < s_; ++i) {
       unknowns.segment(stages.state_offset(i), ny_) = ze.col(i);
       stage_y_ = y0 + ze.col(i);
-      unknowns.segment(stages.algebraic_offset(i), nz_) = ConsistentGuess(stage_y_, z_guess_);
+      unknowns.segment(stages.algebraic_offset(i), nz_) = RelayStageAlgebraic(stage_y_);
     }
     y0 += ze.col(s_ - 1);
   }

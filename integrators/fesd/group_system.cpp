@@ -38,12 +38,18 @@ void GroupSystem::Configure(const GroupSetup& setup) {
     elements_.emplace_back(system_, s_);
     value_elements_.emplace_back(system_, s_);
   }
-  if (setup.with_event && nz_ > 0) {
+  if (setup.with_event && nz_ > 0) velocity_scale_.setOnes(nz_);
+  // Index-1 pairs (both sides continuous) alone are scaled by the free velocity level: without
+  // them (hysteresis relays, Stewart's form) it is not evaluated.
+  bool both_continuous = false;
+  for (const PairInfo& pair : system_->pairs()) {
+    both_continuous |= pair.continuous == ContinuousSide::kBoth;
+  }
+  if (setup.with_event && nz_ > 0 && both_continuous) {
     VelocityLevelEvaluation free;
     system_->EvaluateVelocityLevel(setup.y_start, Vector::Zero(nz_),
                                    LoweredSystem::RolesFor(setup.a_zero), Derivatives::kNone,
                                    &free);
-    velocity_scale_.setOnes(nz_);
     for (int k = 0; k < np_; ++k) {
       const auto info = static_cast<std::size_t>(k);
       if (system_->pairs()[info].continuous != ContinuousSide::kBoth) continue;
