@@ -154,8 +154,9 @@ class FesdRun {
   int RelayMemoryIndex(const RelaySignal& signal) const;
 
   // Algebraic guess at y: consistent values of the continuous variables from y, jump
-  // variables (theta, alpha, multipliers) from the velocity-level values v.
-  Vector ConsistentGuess(const Vector& y, const Vector& v) const;
+  // variables (theta, alpha, multipliers) from the velocity-level values v. The result lives
+  // in a workspace (no allocation per element) until the next call: copy it to keep it.
+  const Vector& ConsistentGuess(const Vector& y, const Vector& v) const;
 
   // Advances from tau_ towards step_end with `remaining` nominal elements: a trial pass of
   // fixed-length elements; if a free side turns negative, a group solve of equal elements that
@@ -496,6 +497,7 @@ class FesdRun {
   mutable std::vector<Vector> free_sides_;
   mutable Vector stage_y_, stage_v_;  // a stage state and its consistent velocity level
   mutable Vector closed_free_;        // JumpFreeSidesInClosedForm's scratch
+  mutable Vector consistent_z_;       // ConsistentGuess's result
   // The consistent velocity level and indicators that EndViolation solved at an element's end
   // state, which is its last stage (c_s = 1), from that stage's evaluation and algebraic
   // values: the element's certificates need the same solve there (ConsistentFreeSides with the
