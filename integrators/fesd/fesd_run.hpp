@@ -261,9 +261,11 @@ class FesdRun {
   double CrossingGuess(const std::vector<Vector>& trial_w, const Vector& y_start, double h_trial,
                        int element, int pair, int m, double h_guess);
 
-  // Guess of a group of m elements of length h_guess from the trial elements.
+  // Guess of a group of m elements of length h_guess from the trial elements: their stage
+  // increments rescaled by h_guess / h_trial, or with on_trajectory the stage states on the
+  // trial elements' collocation polynomials (a guess accurate to their local error).
   Vector GroupGuess(const std::vector<Vector>& trial_w, const Vector& y_start, double h_trial,
-                    int m, double h_guess, const Vector& v_end);
+                    int m, double h_guess, const Vector& v_end, bool on_trajectory);
 
   // True if pair k's free side (the side its status does not keep at zero) is a jump variable
   // (an active constraint's multiplier, a sliding mode's theta or alpha). Stage values of those
