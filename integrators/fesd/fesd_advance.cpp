@@ -3,6 +3,7 @@
 #include <cmath>
 #include <limits>
 #include <sstream>
+#include <utility>
 #include <variant>
 
 #include "fesd_run.hpp"
@@ -48,6 +49,8 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
   // Trial pass: Radau IIA elements of length h_trial with the current statuses.
   std::vector<SolveRecord> records;
   std::vector<Vector> trial_w;
+  records.reserve(static_cast<std::size_t>(*remaining));  // no regrowth per element
+  trial_w.reserve(static_cast<std::size_t>(*remaining));
   Vector y = y_start;
   EndVelocity v_end = velocity_;  // the velocity level at the end of the last checked element
   Violation violation;
@@ -96,11 +99,13 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
     }
     const Vector y_next = group_.EndState(solved.solution);
     if (!violation.found) violation = EndViolation(group_.element(0), y_next, scales, e, &v_end);
-    trial_w.push_back(solved.solution);
+    if (!violation.found) {
+      const Vector& a0 = records.empty() ? boundary_a_ : records.back().a_last;
+      const Vector& b0 = records.empty() ? boundary_b_ : records.back().b_last;
+      records.push_back(Record(solved.solution, h_trial, false, solved, *remaining - e, a0, b0));
+    }
+    trial_w.push_back(std::move(solved.solution));  // its last use
     if (violation.found) break;
-    const Vector& a0 = records.empty() ? boundary_a_ : records.back().a_last;
-    const Vector& b0 = records.empty() ? boundary_b_ : records.back().b_last;
-    records.push_back(Record(solved.solution, h_trial, false, solved, *remaining - e, a0, b0));
     y = y_next;
   }
 
