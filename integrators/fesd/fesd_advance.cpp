@@ -3,6 +3,7 @@
 #include <cmath>
 #include <limits>
 #include <sstream>
+#include <utility>
 #include <variant>
 
 #include "fesd_run.hpp"
@@ -48,6 +49,8 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
   // Trial pass: Radau IIA elements of length h_trial with the current statuses.
   std::vector<SolveRecord> records;
   std::vector<Vector> trial_w;
+  records.reserve(static_cast<std::size_t>(*remaining));  // no regrowth per element
+  trial_w.reserve(static_cast<std::size_t>(*remaining));
   Vector y = y_start;
   EndVelocity v_end = velocity_;  // the velocity level at the end of the last checked element
   Violation violation;
@@ -96,11 +99,13 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
     }
     const Vector y_next = group_.EndState(solved.solution);
     if (!violation.found) violation = EndViolation(group_.element(0), y_next, scales, e, &v_end);
-    trial_w.push_back(solved.solution);
+    if (!violation.found) {
+      const Vector& a0 = records.empty() ? boundary_a_ : records.back().a_last;
+      const Vector& b0 = records.empty() ? boundary_b_ : records.back().b_last;
+      records.push_back(Record(solved.solution, h_trial, false, solved, *remaining - e, a0, b0));
+    }
+    trial_w.push_back(std::move(solved.solution));  // its last use
     if (violation.found) break;
-    const Vector& a0 = records.empty() ? boundary_a_ : records.back().a_last;
-    const Vector& b0 = records.empty() ? boundary_b_ : records.back().b_last;
-    records.push_back(Record(solved.solution, h_trial, false, solved, *remaining - e, a0, b0));
     y = y_next;
   }
 
@@ -123,6 +128,16 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
   ResolveVelocity(&v_end);  // the group's guess
   int m = (violation.fraction >= 0.5 || e == 0) ? e + 1 : e;
   double h_guess = (e + violation.fraction) * h_trial / m;
+  // On a continuous free side, before the attempts proper (and only where the reduced switch
+  // group does not apply): the same m, the length where the interpolant through the start and
+  // the stages of trial element e crosses zero (CrossingGuess), and the stage states on the
+  // trial elements' collocation polynomials. The sampled fraction above is at best the linear
+  // crossing between two samples, and only the first node c_1 if the first stage is already
+  // negative (F1, s = 2: a third of the element for a switch at a twentieth of it; the group's
+  // Newton then takes four iterations instead of two). If this try does not converge or shows
+  // an earlier switch, the attempts proceed exactly as without it.
+  bool trajectory_try = violation.pair >= 0;
+  bool reduced_tried = false;
   for (int attempt = 0; attempt <= options_.max_event_retries; ++attempt) {
     if (attempt > 0) ++result_.stats.num_event_retries;
     GroupSetup setup;
@@ -142,11 +157,17 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
     long reduced_factorizations = 0;
     const int pair = violation.pair;
     const bool reduced =
-        attempt == 0 && pair >= 0 &&
+        attempt == 0 && pair >= 0 && !reduced_tried &&
         ReducedSwitchGuess(trial_w, y_start, h_trial, e, m, h_guess, pair,
                            setup.indicator_weights[pair], powers[static_cast<std::size_t>(pair)],
                            &guess, &reduced_iterations, &reduced_factorizations);
-    if (!reduced) guess = GroupGuess(trial_w, y_start, h_trial, m, h_guess, v_end.v);
+    reduced_tried = true;  // a repeated attempt 0 (after the trajectory try) does not redo it
+    trajectory_try = trajectory_try && !reduced;
+    if (!reduced) {
+      const double h_try =
+          trajectory_try ? CrossingGuess(trial_w, y_start, h_trial, e, pair, m, h_guess) : h_guess;
+      guess = GroupGuess(trial_w, y_start, h_trial, m, h_try, v_end.v, trajectory_try);
+    }
     solved_by_ = reduced ? &reduced_newton_ : &newton_;
     SemismoothNewtonResult solved = (reduced ? reduced_newton_ : newton_).Solve(group_, guess);
     if (reduced) {
@@ -158,6 +179,11 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
     }
     CountNewton(solved);
     ++result_.stats.num_groups;
+    if (trajectory_try && !solved.converged()) {
+      trajectory_try = false;
+      --attempt;  // the attempts proper start now
+      continue;
+    }
     if (!solved.converged()) {
       // Other element counts and shorter guesses, alternately.
       if (attempt % 2 == 0 && m > 1) {
@@ -183,6 +209,12 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
         inner = EndViolation(group_.element(k), group_.ElementStart(w, k + 1), scales, k, &v_inner);
       }
     }
+    if (inner.found && trajectory_try) {
+      trajectory_try = false;
+      --attempt;
+      continue;
+    }
+    trajectory_try = false;
     if (inner.found) {
       // An earlier switch inside the group: aim at it.
       const double offset = (inner.element + inner.fraction) * h;
@@ -359,12 +391,40 @@ void FesdRun::ExtrapolatedIncrements(double h, Matrix* z) {
 
 // Guess of a group of m elements of length h_guess from the trial elements.
 Vector FesdRun::GroupGuess(const std::vector<Vector>& trial_w, const Vector& y_start,
-                           double h_trial, int m, double h_guess, const Vector& v_end) {
+                           double h_trial, int m, double h_guess, const Vector& v_end,
+                           bool on_trajectory) {
   Vector w = Vector::Zero(group_.num_unknowns());
   const internal::CollocationStages& stages = group_.element(0);
+  const int trials = static_cast<int>(trial_w.size());
+  // The trial pass's trajectory at offset t from y_start: trial element q's collocation
+  // polynomial y_q + sum_j w_j((t - q h_trial) / h_trial) Z_j (the last one extrapolated).
+  std::vector<Vector> trial_start;
+  if (on_trajectory && trials > 0) {
+    trial_start.assign(static_cast<std::size_t>(trials), y_start);
+    for (int q = 1; q < trials; ++q) {
+      trial_start[static_cast<std::size_t>(q)] =
+          trial_start[static_cast<std::size_t>(q - 1)] +
+          trial_w[static_cast<std::size_t>(q - 1)].segment(stages.state_offset(s_ - 1), ny_);
+    }
+  }
+  auto state_at = [&](double t, Vector* y) {
+    const int q = std::clamp(static_cast<int>(std::floor(t / h_trial)), 0, trials - 1);
+    const Vector weights = tableau_.InterpolationWeights(t / h_trial - q);
+    const Vector& z = trial_w[static_cast<std::size_t>(q)];
+    *y = trial_start[static_cast<std::size_t>(q)];
+    for (int j = 0; j < s_; ++j) *y += weights[j] * z.segment(stages.state_offset(j), ny_);
+  };
+  Vector element_start, stage_state;
   for (int e = 0; e < m; ++e) {
     Vector element;
-    if (e < static_cast<int>(trial_w.size())) {
+    if (e < trials && on_trajectory) {
+      element = trial_w[static_cast<std::size_t>(e)];  // algebraic values of trial element e
+      state_at(e * h_guess, &element_start);
+      for (int i = 0; i < s_; ++i) {
+        state_at((e + tableau_.c[i]) * h_guess, &stage_state);
+        element.segment(stages.state_offset(i), ny_) = stage_state - element_start;
+      }
+    } else if (e < trials) {
       element = trial_w[static_cast<std::size_t>(e)];
       // Stage increments scale with the element length to first order.
       for (int i = 0; i < s_; ++i)

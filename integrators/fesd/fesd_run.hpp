@@ -154,8 +154,9 @@ class FesdRun {
   int RelayMemoryIndex(const RelaySignal& signal) const;
 
   // Algebraic guess at y: consistent values of the continuous variables from y, jump
-  // variables (theta, alpha, multipliers) from the velocity-level values v.
-  Vector ConsistentGuess(const Vector& y, const Vector& v) const;
+  // variables (theta, alpha, multipliers) from the velocity-level values v. The result lives
+  // in a workspace (no allocation per element) until the next call: copy it to keep it.
+  const Vector& ConsistentGuess(const Vector& y, const Vector& v) const;
 
   // Advances from tau_ towards step_end with `remaining` nominal elements: a trial pass of
   // fixed-length elements; if a free side turns negative, a group solve of equal elements that
@@ -270,9 +271,11 @@ class FesdRun {
   double CrossingGuess(const std::vector<Vector>& trial_w, const Vector& y_start, double h_trial,
                        int element, int pair, int m, double h_guess);
 
-  // Guess of a group of m elements of length h_guess from the trial elements.
+  // Guess of a group of m elements of length h_guess from the trial elements: their stage
+  // increments rescaled by h_guess / h_trial, or with on_trajectory the stage states on the
+  // trial elements' collocation polynomials (a guess accurate to their local error).
   Vector GroupGuess(const std::vector<Vector>& trial_w, const Vector& y_start, double h_trial,
-                    int m, double h_guess, const Vector& v_end);
+                    int m, double h_guess, const Vector& v_end, bool on_trajectory);
 
   // True if pair k's free side (the side its status does not keep at zero) is a jump variable
   // (an active constraint's multiplier, a sliding mode's theta or alpha). Stage values of those
@@ -513,6 +516,7 @@ class FesdRun {
   mutable Vector stage_y_, stage_v_;  // a stage state and its consistent velocity level
   mutable Vector closed_free_;        // JumpFreeSidesInClosedForm's scratch
   mutable Vector closed_theta_;       // and its relays' theta (RelayTheta)
+  mutable Vector consistent_z_;       // ConsistentGuess's result
   // The consistent velocity level and indicators that EndViolation solved at an element's end
   // state, which is its last stage (c_s = 1), from that stage's evaluation and algebraic
   // values: the element's certificates need the same solve there (ConsistentFreeSides with the

@@ -151,8 +151,10 @@ int FesdRun::RelayMemoryIndex(const RelaySignal& signal) const {
 
 // Algebraic guess at y: consistent values of the continuous variables from y, jump
 // variables (theta, alpha, multipliers) from the velocity-level values v.
-Vector FesdRun::ConsistentGuess(const Vector& y, const Vector& v) const {
-  Vector z = system_.InitialAlgebraicGuess(y);
+const Vector& FesdRun::ConsistentGuess(const Vector& y, const Vector& v) const {
+  MOREAU_ASSERT(&v != &consistent_z_, "ConsistentGuess: v is its own output");
+  Vector& z = consistent_z_;
+  system_.InitialAlgebraicGuess(y, nullptr, &z);
   for (int i = 0; i < nz_; ++i) {
     if (!system_.continuous_algebraic()[static_cast<std::size_t>(i)]) z[i] = v[i];
   }

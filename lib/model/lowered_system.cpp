@@ -440,13 +440,20 @@ std::vector<Event> LoweredSystem::InitialEvents(double t, const Vector& y,
 }
 
 Vector LoweredSystem::InitialAlgebraicGuess(const Vector& y, const Vector* previous) const {
+  Vector z;
+  InitialAlgebraicGuess(y, previous, &z);
+  return z;
+}
+
+void LoweredSystem::InitialAlgebraicGuess(const Vector& y, const Vector* previous,
+                                          Vector* z) const {
   MOREAU_ASSERT(previous == nullptr || previous->size() == num_algebraic_,
                 "InitialAlgebraicGuess: previous has the wrong size");
-  Vector z = Vector::Zero(num_algebraic_);
+  MOREAU_ASSERT(previous != z, "InitialAlgebraicGuess: previous is the output");
+  z->setZero(num_algebraic_);
   internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
   context.sparse = sparse_;
-  for (const auto& block : blocks_) block->InitialGuess(context, y, previous, z);
-  return z;
+  for (const auto& block : blocks_) block->InitialGuess(context, y, previous, *z);
 }
 
 void LoweredSystem::SetInputs(const Vector& u) {

@@ -562,6 +562,20 @@ SemismoothNewtonOptions VelocityNewtonOptions(bool sparse) {
   return options;
 }
 
+// DecideStatuses without monotone candidates: every trial decides every pair, so its problem
+// is a system of equations, and with a linear velocity level a linear one, which Newton solves
+// in one step (a second removes round-off). A trial that has not converged after this many
+// iterations is singular or inconsistent (Stewart's sliding trial at a transversal crossing
+// whose fields have equal normal components: 23 iterations to stagnation before), and is not a
+// continuation.
+constexpr int kLinearTrialIterations = 3;
+
+SemismoothNewtonOptions LinearTrialNewtonOptions(bool sparse) {
+  SemismoothNewtonOptions options = VelocityNewtonOptions(sparse);
+  options.max_iterations = kLinearTrialIterations;
+  return options;
+}
+
 }  // namespace
 
 namespace internal {
@@ -580,6 +594,26 @@ class VelocitySolver {
       : problem_(system, linear),
         newton_(VelocityNewtonOptions(system.sparse())),
         linear_(linear) {}
+
+  // LoweredSystem::DecideStatuses' workspace, kept across decisions (FESD decides at t0 and at
+  // every switch): the trials' problem, their Newton solvers (with their linear solvers) and
+  // the evaluations, so that a decision allocates only for its result.
+  struct Decision {
+    Decision(const LoweredSystem& system, bool linear)
+        : problem(system, linear),
+          newton(VelocityNewtonOptions(system.sparse())),
+          linear_trial_newton(LinearTrialNewtonOptions(system.sparse())) {}
+    VelocitySystem problem;
+    SemismoothNewton newton;               // every candidate complementary, and general trials
+    SemismoothNewton linear_trial_newton;  // trials of a linear level without monotone ones
+    Vector guess;
+    PointEvaluation at_y, point, expansion;
+    VelocityLevelEvaluation evaluation;
+  };
+  Decision& decision(const LoweredSystem& system) {
+    if (decision_ == nullptr) decision_ = std::make_unique<Decision>(system, linear_);
+    return *decision_;
+  }
 
   // point: the system's evaluation at (y, v0) with derivatives, or null.
   bool Solve(const LoweredSystem& system, const Vector& y, const std::vector<bool>& a_zero,
@@ -669,6 +703,7 @@ class VelocitySolver {
   SystemMatrix jacobian_;
   std::unique_ptr<LinearSolver> solver_;
   int solver_size_ = -1;
+  std::unique_ptr<Decision> decision_;
 };
 
 }  // namespace internal
@@ -721,9 +756,14 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
     decision.v.resize(0);
     return decision;
   }
+  if (!velocity_solver_) {
+    velocity_solver_ = std::make_shared<internal::VelocitySolver>(*this, VelocityLevelIsLinear());
+  }
+  internal::VelocitySolver::Decision& workspace = velocity_solver_->decision(*this);
   // Continuous sides at y from the index-1 consistent values (e.g. lambda = g - min g).
-  const Vector guess = InitialAlgebraicGuess(y);
-  PointEvaluation at_y;
+  Vector& guess = workspace.guess;
+  InitialAlgebraicGuess(y, nullptr, &guess);
+  PointEvaluation& at_y = workspace.at_y;
   Evaluate(y, guess, Derivatives::kNone, &at_y);
   std::vector<PairRole> roles(static_cast<std::size_t>(num_pairs_));
   std::vector<int> candidates;
@@ -779,7 +819,7 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
     }
   }
   const int nx = scene_.num_states();
-  SemismoothNewton newton(VelocityNewtonOptions(sparse_));
+  SemismoothNewton& newton = workspace.newton;
   // Row of each complementary pair among the a, b rows of a velocity-level evaluation (they
   // follow the pair order).
   auto complementary_rows = [&](const std::vector<PairRole>& r) {
@@ -815,8 +855,11 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
   };
 
   const bool linear = VelocityLevelIsLinear();
+  // One problem and evaluation workspace for all trials (SetRoles and Reset set every part
+  // of the problem; the evaluations size and fill their outputs).
+  VelocitySystem& system = workspace.problem;
+  VelocityLevelEvaluation& e = workspace.evaluation;
   if (static_cast<int>(enumerated.size()) > kMaxEnumeratedCandidates) {
-    VelocitySystem system(*this, linear);
     system.SetRoles(roles);
     system.Reset(y, guess);
     const SemismoothNewtonResult result = newton.Solve(system, guess);
@@ -825,7 +868,6 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
       return decision;
     }
     decision.v = result.solution;
-    VelocityLevelEvaluation e;
     EvaluateVelocityLevel(y, decision.v, roles, Derivatives::kNone, &e);
     for (int k = 0; k < num_pairs_; ++k)
       decision.a_zero[static_cast<std::size_t>(k)] =
@@ -837,16 +879,9 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
     return decision;
   }
   for (int k : monotone) roles[static_cast<std::size_t>(k)] = PairRole::kComplementary;
-  // Without monotone candidates every trial decides every pair: its problem is a system of
-  // equations, and with a linear velocity level a linear one, which Newton solves in one step
-  // (a second removes round-off). A trial that has not converged after kLinearTrialIterations
-  // is singular or inconsistent (Stewart's sliding trial at a transversal crossing whose fields
-  // have equal normal components: 23 iterations to stagnation before), and is not a
-  // continuation.
-  constexpr int kLinearTrialIterations = 3;
-  SemismoothNewtonOptions trial_options = VelocityNewtonOptions(sparse_);
-  if (linear && monotone.empty()) trial_options.max_iterations = kLinearTrialIterations;
-  SemismoothNewton trial_newton(trial_options);
+  // Without monotone candidates every trial decides every pair (kLinearTrialIterations).
+  SemismoothNewton& trial_newton =
+      linear && monotone.empty() ? workspace.linear_trial_newton : workspace.newton;
 
   // Enumerate: every candidate keeps either its jump side at zero (the continuous side may
   // leave zero) or its continuous side's rate at zero (it stays at zero).
@@ -858,14 +893,10 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
   };
   std::vector<Valid> valid;
   const double sign_tolerance = candidate_tolerance;
-  // One problem and evaluation workspace for all trials (SetRoles and Reset set every part
-  // of the problem; the evaluations size and fill their outputs).
-  VelocitySystem system(*this, linear);
-  VelocityLevelEvaluation e;
-  PointEvaluation point;
+  PointEvaluation& point = workspace.point;
   // A linear velocity level is the expansion of one evaluation at (y, guess), which the blocks
   // make without looking at the roles: evaluated once for all trials.
-  PointEvaluation expansion;
+  PointEvaluation& expansion = workspace.expansion;
   if (linear) Evaluate(y, guess, Derivatives::kStates, &expansion);
   for (unsigned mask = 0; mask < (1u << candidates.size()); ++mask) {
     std::vector<PairRole> trial = roles;

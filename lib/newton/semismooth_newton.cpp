@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <sstream>
+#include <utility>
 #include <vector>
 
 #include "moreau/core/error.hpp"
@@ -180,7 +181,9 @@ SemismoothNewtonResult SemismoothNewton::Solve(MixedComplementaritySystem& syste
         << " (||S Phi||_inf = " << p.norm << ")";
       result.message = s.str();
     }
-    return result;
+    // Moved, not copied (every return of Solve is `return finish(...)`, the last use of
+    // result): copying would allocate the solution and the history once more per solve.
+    return std::move(result);
   };
   // Factorizes the generalized Jacobian for derivatives (da, db) at the last evaluated point.
   auto factorize = [&](const Vector& da, const Vector& db) {

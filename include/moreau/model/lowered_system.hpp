@@ -236,6 +236,9 @@ class LoweredSystem {
   /// multipliers come from `previous` (or are 0). Where y does not decide (y on a switching
   /// surface), the values in `previous` are kept.
   Vector InitialAlgebraicGuess(const Vector& y, const Vector* previous = nullptr) const;
+  /// The same into *z (resized; no allocation when it has the size already). previous must
+  /// not be z.
+  void InitialAlgebraicGuess(const Vector& y, const Vector* previous, Vector* z) const;
   /// Sets the input values u used by Evaluate (held constant by integrators within a step).
   void SetInputs(const Vector& u);
   const Vector& inputs() const { return inputs_; }
