@@ -2,8 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <sstream>
+#include <string>
+#include <string_view>
 #include <utility>
 #include <vector>
 
@@ -79,6 +82,25 @@ std::string SemismoothNewtonStats::Summary() const {
 }
 
 namespace {
+
+// "<status> after <n> iterations: <reason> (||S Phi||_inf = <norm>)", the norm as an ostream
+// with precision 6 prints it (%.6g). Built with snprintf rather than an ostringstream: failed
+// solves are routine (the velocity-level enumeration's rejected trials, the FESD trial
+// elements), and the stream's construction cost more than the solve of a small system.
+std::string FailureMessage(NewtonStatus status, long iterations, std::string_view reason,
+                           double norm) {
+  char number[32];
+  std::snprintf(number, sizeof(number), "%.6g", norm);
+  std::string message = ToString(status);
+  message += " after ";
+  message += std::to_string(iterations);
+  message += " iterations: ";
+  message += reason;
+  message += " (||S Phi||_inf = ";
+  message += number;
+  message += ')';
+  return message;
+}
 
 // Relative decrease of the merit below which a window of iterations counts as no progress.
 constexpr double kStagnationDecrease = 1e-3;
@@ -162,7 +184,7 @@ SemismoothNewtonResult SemismoothNewton::Solve(MixedComplementaritySystem& syste
   std::vector<double>& merits = ws.merits;
   history.clear();
   merits.clear();
-  auto finish = [&](NewtonStatus status, const Point& p, const std::string& reason) {
+  auto finish = [&](NewtonStatus status, const Point& p, std::string_view reason) {
     result.status = status;
     result.solution = p.w;
     result.residual_history = history;
@@ -175,11 +197,7 @@ SemismoothNewtonResult SemismoothNewton::Solve(MixedComplementaritySystem& syste
       }
     }
     if (status != NewtonStatus::kConverged) {
-      std::ostringstream s;
-      s.precision(6);
-      s << ToString(status) << " after " << stats.iterations << " iterations: " << reason
-        << " (||S Phi||_inf = " << p.norm << ")";
-      result.message = s.str();
+      result.message = FailureMessage(status, stats.iterations, reason, p.norm);
     }
     // Moved, not copied (every return of Solve is `return finish(...)`, the last use of
     // result): copying would allocate the solution and the history once more per solve.
