@@ -32,13 +32,17 @@ bool FesdRun::Advance(double step_end, int* remaining) {
 bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
   const double rest = step_end - tau_;
   const double h_trial = rest / *remaining;
-  const Vector y_start = y_;
+  AdvanceBuffers& buffers = advance_;
+  buffers.y_start = y_;
+  const Vector& y_start = buffers.y_start;
   // Indicator scales, and the pairs that start at zero (just switched): their indicators
   // are divided by tau^2 so that h -> 0 is not a root (zero-length elements are excluded).
   IndicatorEvaluation& start = indicators_;
   IndicatorsAt(y_start, velocity_, &start);
-  Vector scales(np_);
-  std::vector<int> powers(static_cast<std::size_t>(np_), 0);
+  Vector& scales = buffers.scales;
+  scales.resize(np_);
+  std::vector<int>& powers = buffers.powers;
+  powers.assign(static_cast<std::size_t>(np_), 0);
   for (int k = 0; k < np_; ++k) {
     scales[k] = std::max(1.0, std::fabs(start.values[k]));
     if (std::fabs(start.values[k]) <= options_.event_tolerance) {
@@ -47,22 +51,26 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
   }
 
   // Trial pass: Radau IIA elements of length h_trial with the current statuses.
-  std::vector<SolveRecord> records;
-  std::vector<Vector> trial_w;
+  std::vector<SolveRecord>& records = buffers.records;
+  std::vector<Vector>& trial_w = buffers.trial_w;
+  records.clear();
+  trial_w.clear();
   records.reserve(static_cast<std::size_t>(*remaining));  // no regrowth per element
   trial_w.reserve(static_cast<std::size_t>(*remaining));
-  Vector y = y_start;
-  EndVelocity v_end = velocity_;  // the velocity level at the end of the last checked element
+  Vector& y = buffers.y;
+  y = y_start;
+  EndVelocity& v_end = buffers.v_end;
+  v_end = velocity_;  // the velocity level at the end of the last checked element
   Violation violation;
   std::string trial_failure;  // why the trial pass suspected a switch, if not by signs
-  GroupSetup trial_setup;     // one element of fixed length (its vectors reused across elements)
+  GroupSetup& trial_setup = buffers.trial_setup;  // one element of fixed length
   trial_setup.a_zero = a_zero_;
   trial_setup.h_fixed = h_trial;
   for (int e = 0; e < *remaining; ++e) {
     trial_setup.y_start = y;
     group_.Configure(trial_setup);
     const Vector* previous = trial_w.empty() ? last_w_ptr() : &trial_w.back();
-    Vector guess;
+    Vector& guess = buffers.guess;
     int reduced_iterations = 0;
     long reduced_factorizations = 0;
     const bool reduced = SmoothElementGuess(y, h_trial, previous, &guess, &reduced_iterations,

@@ -528,6 +528,18 @@ class FesdRun {
     Vector y, z, indicators;
   };
   mutable EndLevel end_level_;
+  // AdvanceOnce's per-step vectors, kept across steps so that a step does not allocate them
+  // again (AdvanceOnce is not reentrant: Decide and the checks it calls do not advance).
+  struct AdvanceBuffers {
+    Vector y_start, y, scales;
+    std::vector<int> powers;
+    std::vector<SolveRecord> records;  // the trial pass's elements, committed after it
+    std::vector<Vector> trial_w;       // their solutions
+    EndVelocity v_end;
+    GroupSetup trial_setup;  // only y_start, a_zero and h_fixed are ever set
+    Vector guess;
+  };
+  AdvanceBuffers advance_;
 };
 
 }  // namespace moreau::internal
