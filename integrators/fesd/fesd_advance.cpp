@@ -53,7 +53,8 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
   // Trial pass: Radau IIA elements of length h_trial with the current statuses.
   std::vector<SolveRecord>& records = buffers.records;
   std::vector<Vector>& trial_w = buffers.trial_w;
-  records.clear();
+  std::size_t& num_records = buffers.num_records;
+  num_records = 0;
   trial_w.clear();
   records.reserve(static_cast<std::size_t>(*remaining));  // no regrowth per element
   trial_w.reserve(static_cast<std::size_t>(*remaining));
@@ -108,9 +109,12 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
     const Vector y_next = group_.EndState(solved.solution);
     if (!violation.found) violation = EndViolation(group_.element(0), y_next, scales, e, &v_end);
     if (!violation.found) {
-      const Vector& a0 = records.empty() ? boundary_a_ : records.back().a_last;
-      const Vector& b0 = records.empty() ? boundary_b_ : records.back().b_last;
-      records.push_back(Record(solved.solution, h_trial, false, solved, *remaining - e, a0, b0));
+      if (records.size() == num_records) records.emplace_back();  // before taking a0, b0
+      const Vector& a0 = num_records == 0 ? boundary_a_ : records[num_records - 1].a_last;
+      const Vector& b0 = num_records == 0 ? boundary_b_ : records[num_records - 1].b_last;
+      Record(solved.solution, h_trial, false, solved, *remaining - e, a0, b0,
+             &records[num_records]);
+      ++num_records;
     }
     trial_w.push_back(std::move(solved.solution));  // its last use
     if (violation.found) break;
@@ -118,7 +122,7 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
   }
 
   if (!violation.found) {
-    for (SolveRecord& record : records) Commit(std::move(record));
+    for (std::size_t i = 0; i < num_records; ++i) Commit(records[i]);
     last_w_ = trial_w.back();
     have_last_w_ = true;
     last_h_ = h_trial;
@@ -241,7 +245,8 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
       return false;
     }
     const bool switched = h < setup.h_max * (1.0 - 1e-12);
-    Commit(Record(w, h, switched, solved, *remaining, boundary_a_, boundary_b_));
+    Record(w, h, switched, solved, *remaining, boundary_a_, boundary_b_, &buffers.group_record);
+    Commit(buffers.group_record);
     last_w_ = w.segment(group_.element_offset(m - 1), group_.element_size());
     have_last_w_ = true;
     last_h_ = h;

@@ -18,12 +18,32 @@ namespace moreau::internal {
 SolveRecord FesdRun::Record(const Vector& w, double h, bool ends_at_switch,
                             const SemismoothNewtonResult& solved, int remaining, const Vector& a0,
                             const Vector& b0) {
+  SolveRecord record;
+  Record(w, h, ends_at_switch, solved, remaining, a0, b0, &record);
+  return record;
+}
+
+// Overwrites every part of *out that a record sets, reusing its vectors (a kept record: no
+// allocation per element once their sizes are reached).
+void FesdRun::Record(const Vector& w, double h, bool ends_at_switch,
+                     const SemismoothNewtonResult& solved, int remaining, const Vector& a0,
+                     const Vector& b0, SolveRecord* out) {
   const GroupSetup& setup = group_.setup();
   const int m = setup.elements;
-  SolveRecord record;
+  SolveRecord& record = *out;
+  record.elements.clear();
+  record.ends.clear();
+  record.algebraic.clear();
+  record.stage_points.t.clear();
+  record.stage_points.x.clear();
+  record.stage_points.algebraic.clear();
+  record.stage_points.step.clear();
+  record.polynomials.clear();
+  record.length = 0.0;
   record.frozen = system_.TimeFrozen(a_zero_);
   if (options_.sensitivities) record.transfer = LocalTransfer(w, m, remaining);
-  Vector y0 = setup.y_start;
+  Vector& y0 = record.y_end;  // the start of each element, at the end the record's end state
+  y0 = setup.y_start;
   // Boundary values of each element: a0, b0, then the last stage of the element before.
   const Vector* a_previous = &a0;
   const Vector* b_previous = &b0;
@@ -74,20 +94,18 @@ SolveRecord FesdRun::Record(const Vector& w, double h, bool ends_at_switch,
     y0 += w_e.segment(stages.state_offset(s_ - 1), ny_);  // the element's end state
     a_previous = &stages.stage(s_ - 1).A;
     b_previous = &stages.stage(s_ - 1).B;
-    record.z_last = stages.Algebraic(w_e, s_ - 1);
+    record.z_last = w_e.segment(stages.algebraic_offset(s_ - 1), nz_);  // Algebraic(w_e, s - 1)
     if (options_.record_trajectory && e + 1 < m) {
       record.ends.push_back(y0);
       record.algebraic.push_back(record.z_last);
     }
     record.length += h;
   }
-  record.y_end = std::move(y0);
   record.a_last = *a_previous;
   record.b_last = *b_previous;
-  return record;
 }
 
-void FesdRun::Commit(SolveRecord&& record) {
+void FesdRun::Commit(SolveRecord& record) {
   for (std::size_t e = 0; e < record.elements.size(); ++e) {
     if (!record.polynomials.empty()) OnCommittedElement(record.polynomials[e]);
     FesdElement element = record.elements[e];

@@ -338,9 +338,11 @@ class FesdRun {
   SolveRecord Record(const Vector& w, double h, bool ends_at_switch,
                      const SemismoothNewtonResult& solved, int remaining, const Vector& a0,
                      const Vector& b0);
+  void Record(const Vector& w, double h, bool ends_at_switch, const SemismoothNewtonResult& solved,
+              int remaining, const Vector& a0, const Vector& b0, SolveRecord* out);
 
-  // Takes the record's contents (stage points, trajectories) by move.
-  void Commit(SolveRecord&& record);
+  // Takes the record's stage points by move (its other vectors stay, for reuse by Record).
+  void Commit(SolveRecord& record);
 
   // Free side of every pair at stage i: continuous sides from the stage values, jump sides
   // consistent with the stage state (closed form where JumpFreeSidesInClosedForm gives them,
@@ -533,8 +535,10 @@ class FesdRun {
   struct AdvanceBuffers {
     Vector y_start, y, scales;
     std::vector<int> powers;
-    std::vector<SolveRecord> records;  // the trial pass's elements, committed after it
-    std::vector<Vector> trial_w;       // their solutions
+    std::vector<SolveRecord> records;  // the trial pass's elements (the first num_records)
+    std::size_t num_records = 0;
+    SolveRecord group_record;     // a group's elements
+    std::vector<Vector> trial_w;  // their solutions
     EndVelocity v_end;
     GroupSetup trial_setup;  // only y_start, a_zero and h_fixed are ever set
     Vector guess;
