@@ -158,7 +158,17 @@ Vector CollocationStages::EndState(const ConstVectorRef& y0, const ConstVectorRe
 Vector CollocationStages::InitialGuess(const ConstVectorRef& y0, double h, const Vector* previous,
                                        double previous_h, const Vector& z_previous,
                                        bool algebraic) const {
-  Vector w = Vector::Zero(unknowns());
+  Vector w;
+  InitialGuess(y0, h, previous, previous_h, z_previous, &w, algebraic);
+  return w;
+}
+
+void CollocationStages::InitialGuess(const ConstVectorRef& y0, double h, const Vector* previous,
+                                     double previous_h, const Vector& z_previous, Vector* out,
+                                     bool algebraic) const {
+  MOREAU_ASSERT(out != previous && out != &z_previous, "InitialGuess: an input is the output");
+  Vector& w = *out;
+  w.setZero(unknowns());
   if (previous != nullptr && previous_h > 0.0) {
     // Collocation polynomial of the previous step: u(theta) = y_prev + sum_j w_j(theta) Z_j.
     // The weights depend on h / previous_h only; they are cached (constant steps).
@@ -191,12 +201,12 @@ Vector CollocationStages::InitialGuess(const ConstVectorRef& y0, double h, const
       for (int i = 0; i < s_; ++i) w[state_offset(i) + clock] = h * tableau_.c[i] * start.F[clock];
     }
   }
-  if (!algebraic) return w;
+  if (!algebraic) return;
   for (int i = 0; i < s_; ++i) {
     guess_y_ = y0 + w.segment(state_offset(i), ny_);
-    w.segment(algebraic_offset(i), nz_) = system_->InitialAlgebraicGuess(guess_y_, &z_previous);
+    system_->InitialAlgebraicGuess(guess_y_, &z_previous, &guess_z_);
+    w.segment(algebraic_offset(i), nz_) = guess_z_;
   }
-  return w;
 }
 
 }  // namespace moreau::internal

@@ -92,6 +92,9 @@ class CollocationStages {
   // them itself).
   Vector InitialGuess(const ConstVectorRef& y0, double h, const Vector* previous, double previous_h,
                       const Vector& z_previous, bool algebraic = true) const;
+  // The same into *out (its storage reused; neither previous nor z_previous).
+  void InitialGuess(const ConstVectorRef& y0, double h, const Vector* previous, double previous_h,
+                    const Vector& z_previous, Vector* out, bool algebraic = true) const;
 
  private:
   LoweredSystem* system_;
@@ -103,7 +106,7 @@ class CollocationStages {
   // Extrapolation weights for the last step-length ratio (column i: stage i of the new step).
   mutable double cached_ratio_ = -1.0;
   mutable Matrix extrapolation_;
-  mutable Vector guess_y_;
+  mutable Vector guess_y_, guess_z_;
 };
 
 }  // namespace moreau::internal

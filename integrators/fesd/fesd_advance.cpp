@@ -77,8 +77,8 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
     const bool reduced = SmoothElementGuess(y, h_trial, previous, &guess, &reduced_iterations,
                                             &reduced_factorizations);
     if (!reduced) {
-      guess = group_.element(0).InitialGuess(y, h_trial, previous,
-                                             previous != nullptr ? h_trial : 0.0, z_guess_);
+      group_.element(0).InitialGuess(y, h_trial, previous, previous != nullptr ? h_trial : 0.0,
+                                     z_guess_, &guess);
     }
     solved_by_ = reduced ? &reduced_newton_ : &newton_;
     SemismoothNewtonResult solved = (reduced ? reduced_newton_ : newton_).Solve(group_, guess);

@@ -197,8 +197,8 @@ bool FesdRun::SmoothElementGuess(const Vector& y0, double h, const Vector* previ
   if (solver == nullptr) return false;
   const internal::CollocationStages& stages = group_.element(0);
   // Stage increments extrapolated as for the full element; algebraic values set below.
-  *w = stages.InitialGuess(y0, h, previous, previous != nullptr ? h : 0.0, z_guess_,
-                           /*algebraic=*/false);
+  stages.InitialGuess(y0, h, previous, previous != nullptr ? h : 0.0, z_guess_, w,
+                      /*algebraic=*/false);
   smooth_field_z_.resize(ny_, s_);
   for (int i = 0; i < s_; ++i) smooth_field_z_.col(i) = w->segment(stages.state_offset(i), ny_);
   internal::SmoothCollocationSolver::Stopping stopping;
@@ -216,9 +216,13 @@ bool FesdRun::SmoothElementGuess(const Vector& y0, double h, const Vector* previ
   for (int i = 0; i < s_; ++i) {
     w->segment(stages.state_offset(i), ny_) = smooth_field_z_.col(i);
     stage_y_ = y0 + smooth_field_z_.col(i);
-    w->segment(stages.algebraic_offset(i), nz_) = reduction_ == Reduction::kRelayModes
-                                                      ? RelayStageAlgebraic(stage_y_)
-                                                      : ConsistentGuess(stage_y_, z_guess_);
+    // Not one conditional expression: its type would be Vector, a copy of ConsistentGuess's
+    // kept result.
+    if (reduction_ == Reduction::kRelayModes) {
+      w->segment(stages.algebraic_offset(i), nz_) = RelayStageAlgebraic(stage_y_);
+    } else {
+      w->segment(stages.algebraic_offset(i), nz_) = ConsistentGuess(stage_y_, z_guess_);
+    }
   }
   return true;
 }

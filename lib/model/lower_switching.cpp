@@ -269,7 +269,8 @@ class StewartBlock final : public SwitchingBlockBase {
       z.segment(z0, 2 * m + 1) = previous->segment(z0, 2 * m + 1);
       return;
     }
-    Vector g(m);
+    Vector& g = guess_g_;
+    g.resize(m);
     for (int k = 0; k < m; ++k) {
       g[k] = 0.0;
       for (int j = 0; j < num_surfaces_; ++j) g[k] -= Sign(k, j) * c_[j];
@@ -312,6 +313,9 @@ class StewartBlock final : public SwitchingBlockBase {
     if (active_after.size() < active_before.size()) kind = EventKind::kSlideEnd;
     return {{t, kind, effect_.name, names(active_before) + " -> " + names(active_after)}};
   }
+
+ private:
+  Vector guess_g_;  // InitialGuess's g, kept (it is called for every stage of every element)
 };
 
 // Heaviside step form: one alpha_j in [0, 1] per surface,
