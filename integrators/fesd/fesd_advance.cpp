@@ -106,7 +106,8 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
     if (!violation.found && check_jump_stages_) {
       violation = JumpStageViolation(group_.element(0), scales, e);
     }
-    const Vector y_next = group_.EndState(solved.solution);
+    group_.EndState(solved.solution, &buffers.y_next);
+    const Vector& y_next = buffers.y_next;
     if (!violation.found) violation = EndViolation(group_.element(0), y_next, scales, e, &v_end);
     if (!violation.found) {
       if (records.size() == num_records) records.emplace_back();  // before taking a0, b0

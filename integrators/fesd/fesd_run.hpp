@@ -519,6 +519,7 @@ class FesdRun {
   mutable Vector closed_free_;        // JumpFreeSidesInClosedForm's scratch
   mutable Vector closed_theta_;       // and its relays' theta (RelayTheta)
   mutable Vector consistent_z_;       // ConsistentGuess's result
+  Vector boundary_scaled_;            // DecideAtBoundary's scaled indicators
   // The consistent velocity level and indicators that EndViolation solved at an element's end
   // state, which is its last stage (c_s = 1), from that stage's evaluation and algebraic
   // values: the element's certificates need the same solve there (ConsistentFreeSides with the
@@ -533,7 +534,7 @@ class FesdRun {
   // AdvanceOnce's per-step vectors, kept across steps so that a step does not allocate them
   // again (AdvanceOnce is not reentrant: Decide and the checks it calls do not advance).
   struct AdvanceBuffers {
-    Vector y_start, y, scales;
+    Vector y_start, y, y_next, scales;
     std::vector<int> powers;
     std::vector<SolveRecord> records;  // the trial pass's elements (the first num_records)
     std::size_t num_records = 0;

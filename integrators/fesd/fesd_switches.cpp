@@ -50,7 +50,8 @@ bool FesdRun::DecideAtBoundary() {
   if (np_ == 0) return false;
   IndicatorEvaluation& end = indicators_;
   IndicatorsAt(y_, velocity_, &end);
-  Vector scaled(np_);
+  Vector& scaled = boundary_scaled_;
+  scaled.resize(np_);
   for (int k = 0; k < np_; ++k) scaled[k] = end.values[k] / std::max(1.0, std::fabs(end.values[k]));
   Eigen::Index first = 0;
   if (scaled.minCoeff(&first) > options_.event_tolerance) return false;

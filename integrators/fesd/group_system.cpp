@@ -107,6 +107,12 @@ Vector GroupSystem::EndState(const ConstVectorRef& w) const {
   return ElementStart(w, setup_.elements);
 }
 
+void GroupSystem::EndState(const ConstVectorRef& w, Vector* y) const {
+  *y = setup_.y_start;  // as ElementStart(w, m)
+  const int last = (s_ - 1) * (ny_ + nz_);
+  for (int k = 0; k < setup_.elements; ++k) *y += w.segment(element_offset(k) + last, ny_);
+}
+
 void GroupSystem::EvaluateAll(const Vector& w, Derivatives derivatives,
                               std::vector<CollocationStages>* target) {
   start_scratch_ = setup_.y_start;
@@ -143,7 +149,8 @@ bool GroupSystem::Evaluate(const Vector& w, bool with_jacobian, Vector* r, Vecto
   a->resize(num_pairs());
   b->resize(num_pairs());
   if (setup_.with_event) {
-    const Vector y_end = EndState(w);
+    Vector& y_end = end_scratch_;
+    EndState(w, &y_end);
     const auto v = w.segment(v_offset(), nz_);
     const Derivatives level = with_jacobian ? Derivatives::kStates : Derivatives::kNone;
     // Into the members that AssembleJacobian reads (with derivatives) or into scratch (values

@@ -48,6 +48,7 @@ class GroupSystem final : public MixedComplementaritySystem {
   double H(const Vector& w) const { return setup_.with_event ? w[h_index()] : setup_.h_fixed; }
   Vector ElementStart(const ConstVectorRef& w, int e) const;
   Vector EndState(const ConstVectorRef& w) const;
+  void EndState(const ConstVectorRef& w, Vector* y) const;  // into *y (its storage reused)
 
   int num_unknowns() const override;
   int num_equations() const override;
@@ -99,6 +100,7 @@ class GroupSystem final : public MixedComplementaritySystem {
   // accuracy. Other rows keep their absolute scale (their v locates switches).
   Vector velocity_scale_;
   Vector start_scratch_;              // scratch: element start state
+  Vector end_scratch_;                // scratch: the group's end state (with the event)
   VelocityLevelEvaluation velocity_;  // at the last with-Jacobian evaluation
   IndicatorEvaluation indicators_;
   VelocityLevelEvaluation value_velocity_;  // scratch of values-only evaluations
