@@ -18,6 +18,10 @@ constexpr double kSwitchTolerance = 1e-8;
 constexpr double kRoundOff = 1e-14;
 // x(T) of H1 with s = 3, h = 0.1 (measured 5e-12).
 constexpr double kFinalStateTolerance = 1e-10;
+// The first ten thermostat switch times with s = 3, h = 0.1 are within 1.2e-13 of the closed
+// form (README "Hysteresis"); 1e-11 notices the loss of two of those digits (the reduced
+// switch groups' root stopping early, say) with room for round-off across platforms.
+constexpr double kThreeStageSwitchTolerance = 1e-11;
 // Observed orders must lie within this of 2s - 1 (issue acceptance).
 constexpr double kOrderSlack = 0.3;
 
@@ -61,7 +65,8 @@ TEST(HysteresisTest, ThermostatSwitchTimesAndStatesMatchClosedForm) {
     EXPECT_EQ(w.initial_value, 0);
     ASSERT_EQ(w.jump_times.size(), exact.size());
     for (std::size_t k = 0; k < 10; ++k) {
-      EXPECT_NEAR(events[k].t, exact[k].t, kSwitchTolerance)
+      EXPECT_NEAR(events[k].t, exact[k].t,
+                  stages == 3 ? kThreeStageSwitchTolerance : kSwitchTolerance)
           << "switch " << k << ", s = " << stages;
       EXPECT_EQ(events[k].detail, exact[k].w_after == 1 ? "A -> B" : "B -> A");
       EXPECT_EQ(w.jump_times[k], events[k].t);
