@@ -1,5 +1,6 @@
 #include "group_system.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -38,23 +39,25 @@ void GroupSystem::Configure(const GroupSetup& setup) {
     elements_.emplace_back(system_, s_);
     value_elements_.emplace_back(system_, s_);
   }
-  if (setup.with_event && nz_ > 0) velocity_scale_.setOnes(nz_);
-  // Index-1 pairs (both sides continuous) alone are scaled by the free velocity level: without
-  // them (hysteresis relays, Stewart's form) it is not evaluated.
-  bool both_continuous = false;
-  for (const PairInfo& pair : system_->pairs()) {
-    both_continuous |= pair.continuous == ContinuousSide::kBoth;
-  }
-  if (setup.with_event && nz_ > 0 && both_continuous) {
-    VelocityLevelEvaluation free;
-    system_->EvaluateVelocityLevel(setup.y_start, Vector::Zero(nz_),
-                                   LoweredSystem::RolesFor(setup.a_zero), Derivatives::kNone,
-                                   &free);
-    for (int k = 0; k < np_; ++k) {
-      const auto info = static_cast<std::size_t>(k);
-      if (system_->pairs()[info].continuous != ContinuousSide::kBoth) continue;
-      const double size = std::fabs(free.equations[ng_ + k]);
-      if (std::isfinite(size)) velocity_scale_[ng_ + k] = 1.0 / std::max(1.0, size);
+  if (setup.with_event && nz_ > 0) {
+    velocity_scale_.setOnes(nz_);
+    // Index-1 pairs (both sides continuous) alone are scaled by the free velocity level:
+    // without them (hysteresis relays, Stewart's form) it is not evaluated.
+    const auto& pairs = system_->pairs();
+    const bool index1 = std::any_of(pairs.begin(), pairs.end(), [](const PairInfo& pair) {
+      return pair.continuous == ContinuousSide::kBoth;
+    });
+    if (index1) {
+      VelocityLevelEvaluation free;
+      system_->EvaluateVelocityLevel(setup.y_start, Vector::Zero(nz_),
+                                     LoweredSystem::RolesFor(setup.a_zero), Derivatives::kNone,
+                                     &free);
+      for (int k = 0; k < np_; ++k) {
+        const auto info = static_cast<std::size_t>(k);
+        if (pairs[info].continuous != ContinuousSide::kBoth) continue;
+        const double size = std::fabs(free.equations[ng_ + k]);
+        if (std::isfinite(size)) velocity_scale_[ng_ + k] = 1.0 / std::max(1.0, size);
+      }
     }
   }
   da_status_.resize(s_ * np_);
@@ -97,10 +100,15 @@ double GroupSystem::EstimatedJacobianNonzeros() const {
 }
 
 Vector GroupSystem::ElementStart(const ConstVectorRef& w, int e) const {
-  Vector y = setup_.y_start;
-  const int last = (s_ - 1) * (ny_ + nz_);
-  for (int k = 0; k < e; ++k) y += w.segment(element_offset(k) + last, ny_);
+  Vector y;
+  ElementStart(w, e, &y);
   return y;
+}
+
+void GroupSystem::ElementStart(const ConstVectorRef& w, int e, Vector* y) const {
+  *y = setup_.y_start;
+  const int last = (s_ - 1) * (ny_ + nz_);
+  for (int k = 0; k < e; ++k) *y += w.segment(element_offset(k) + last, ny_);
 }
 
 Vector GroupSystem::EndState(const ConstVectorRef& w) const {
@@ -108,9 +116,7 @@ Vector GroupSystem::EndState(const ConstVectorRef& w) const {
 }
 
 void GroupSystem::EndState(const ConstVectorRef& w, Vector* y) const {
-  *y = setup_.y_start;  // as ElementStart(w, m)
-  const int last = (s_ - 1) * (ny_ + nz_);
-  for (int k = 0; k < setup_.elements; ++k) *y += w.segment(element_offset(k) + last, ny_);
+  ElementStart(w, setup_.elements, y);
 }
 
 void GroupSystem::EvaluateAll(const Vector& w, Derivatives derivatives,

@@ -47,6 +47,7 @@ class GroupSystem final : public MixedComplementaritySystem {
   int element_rows() const { return element_rows_; }
   double H(const Vector& w) const { return setup_.with_event ? w[h_index()] : setup_.h_fixed; }
   Vector ElementStart(const ConstVectorRef& w, int e) const;
+  void ElementStart(const ConstVectorRef& w, int e, Vector* y) const;  // into *y (reused)
   Vector EndState(const ConstVectorRef& w) const;
   void EndState(const ConstVectorRef& w, Vector* y) const;  // into *y (its storage reused)
 
