@@ -3,16 +3,16 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <utility>
 
 #include "moreau/core/error.hpp"
 
 namespace moreau {
 
-void Trajectory::Append(double time, const Vector& state, const Vector& algebraic_values,
-                        double length) {
+void Trajectory::Append(double time, Vector state, Vector algebraic_values, double length) {
   t.push_back(time);
-  x.push_back(state);
-  algebraic.push_back(algebraic_values);
+  x.push_back(std::move(state));
+  algebraic.push_back(std::move(algebraic_values));
   step.push_back(length);
 }
 

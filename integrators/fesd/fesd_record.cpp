@@ -31,14 +31,7 @@ void FesdRun::Record(const Vector& w, double h, bool ends_at_switch,
   const GroupSetup& setup = group_.setup();
   const int m = setup.elements;
   SolveRecord& record = *out;
-  record.elements.clear();
-  record.ends.clear();
-  record.algebraic.clear();
-  record.stage_points.t.clear();
-  record.stage_points.x.clear();
-  record.stage_points.algebraic.clear();
-  record.stage_points.step.clear();
-  record.polynomials.clear();
+  record.ClearLists();
   record.length = 0.0;
   record.frozen = system_.TimeFrozen(a_zero_);
   if (options_.sensitivities) record.transfer = LocalTransfer(w, m, remaining);
@@ -82,13 +75,10 @@ void FesdRun::Record(const Vector& w, double h, bool ends_at_switch,
       record.polynomials.push_back(std::move(polynomial));
     }
     if (options_.record_stages && !record.frozen) {
-      Trajectory& points = record.stage_points;
       for (int i = 0; i < s_; ++i) {
         const Vector& yi = stages.stage_state(i);  // y0 + Z_i
-        points.t.push_back(yi[system_.clock_index()]);
-        points.x.emplace_back(yi.head(nx_));
-        points.algebraic.push_back(TrajectoryAlgebraic(stages.Algebraic(w_e, i)));
-        points.step.push_back(h);
+        record.stage_points.Append(yi[system_.clock_index()], yi.head(nx_),
+                                   TrajectoryAlgebraic(stages.Algebraic(w_e, i)), h);
       }
     }
     y0 += w_e.segment(stages.state_offset(s_ - 1), ny_);  // the element's end state
@@ -133,12 +123,10 @@ void FesdRun::Commit(SolveRecord& record) {
       }
     }
   }
-  Trajectory& stages = result_.stage_trajectory;
-  for (std::size_t i = 0; i < record.stage_points.size(); ++i) {
-    stages.t.push_back(record.stage_points.t[i]);
-    stages.x.push_back(std::move(record.stage_points.x[i]));
-    stages.algebraic.push_back(std::move(record.stage_points.algebraic[i]));
-    stages.step.push_back(record.stage_points.step[i]);
+  Trajectory& points = record.stage_points;
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    result_.stage_trajectory.Append(points.t[i], std::move(points.x[i]),
+                                    std::move(points.algebraic[i]), points.step[i]);
   }
   y_ = record.y_end;
   z_last_ = record.z_last;

@@ -71,6 +71,18 @@ struct SolveRecord {
   bool frozen = false;    // physical time frozen (a relay jumping): not in physical outputs
   Transfer transfer;
   std::vector<ElementPolynomial> polynomials;  // per element, with keep_polynomials_
+
+  // Empties what Record appends to, keeping the capacity (a record reused across steps).
+  void ClearLists() {
+    elements.clear();
+    ends.clear();
+    algebraic.clear();
+    stage_points.t.clear();
+    stage_points.x.clear();
+    stage_points.algebraic.clear();
+    stage_points.step.clear();
+    polynomials.clear();
+  }
 };
 
 class FesdRun {

@@ -23,7 +23,8 @@ struct Trajectory {
   std::vector<double> step;       ///< length of the step/element ending at t (0 at t0)
 
   std::size_t size() const { return t.size(); }
-  void Append(double time, const Vector& state, const Vector& algebraic_values, double length);
+  /// Appends one point (the vectors moved in: pass temporaries or std::move to avoid copies).
+  void Append(double time, Vector state, Vector algebraic_values, double length);
 };
 
 /// The memory w(t) of a hysteresis relay in physical time, a piecewise-constant signal:
