@@ -219,7 +219,8 @@ class FesdRun {
   // ConsistentGuess. ConsistentGuess alone takes a from the region that contains y, which
   // past the switching surface (a trial element that crosses it) is another region: the full
   // check then fails on the status rows and takes a Newton iteration with derivatives.
-  Vector RelayStageAlgebraic(const Vector& y) const;
+  // The result lives in a workspace until the next call (as ConsistentGuess's).
+  const Vector& RelayStageAlgebraic(const Vector& y) const;
   // The Radau IIA solver of the field the statuses a_zero leave, with the run's parameters
   // and inputs (and, for relays, theta) set, or null if they leave none.
   internal::SmoothCollocationSolver* SmoothFieldSolver(const std::vector<bool>& a_zero);
@@ -531,6 +532,7 @@ class FesdRun {
   mutable Vector closed_free_;        // JumpFreeSidesInClosedForm's scratch
   mutable Vector closed_theta_;       // and its relays' theta (RelayTheta)
   mutable Vector consistent_z_;       // ConsistentGuess's result
+  mutable Vector relay_stage_z_;      // RelayStageAlgebraic's result
   Vector boundary_scaled_;            // DecideAtBoundary's scaled indicators
   // The consistent velocity level and indicators that EndViolation solved at an element's end
   // state, which is its last stage (c_s = 1), from that stage's evaluation and algebraic

@@ -3,18 +3,15 @@
 // group that ends on a switch solved as Radau IIA steps of that field with its length the root
 // of the switching indicator.
 
-#include <Eigen/Dense>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
-#include <sstream>
+#include <string>
 #include <variant>
+#include <vector>
 
 #include "fesd_run.hpp"
-#include "moreau/complementarity/ncp_function.hpp"
-#include "moreau/core/error.hpp"
-#include "moreau/integrators/simulate.hpp"
-#include "moreau/model/projection.hpp"
 
 namespace moreau::internal {
 
@@ -126,9 +123,10 @@ bool FesdRun::RelayTheta(const std::vector<bool>& a_zero, Vector* z) const {
   return true;
 }
 
-Vector FesdRun::RelayStageAlgebraic(const Vector& y) const {
+const Vector& FesdRun::RelayStageAlgebraic(const Vector& y) const {
   // lambda = g - min g, mu = min g (InitialAlgebraicGuess): g_k = lambda_k + mu.
-  Vector z = ConsistentGuess(y, z_guess_);
+  Vector& z = relay_stage_z_;
+  z = ConsistentGuess(y, z_guess_);
   for (std::size_t i = 0; i < relay_theta_.size(); ++i) {
     const RelayUnknowns& relay = relay_theta_[i];
     std::size_t active = 0;
@@ -216,13 +214,10 @@ bool FesdRun::SmoothElementGuess(const Vector& y0, double h, const Vector* previ
   for (int i = 0; i < s_; ++i) {
     w->segment(stages.state_offset(i), ny_) = smooth_field_z_.col(i);
     stage_y_ = y0 + smooth_field_z_.col(i);
-    // Not one conditional expression: its type would be Vector, a copy of ConsistentGuess's
-    // kept result.
-    if (reduction_ == Reduction::kRelayModes) {
-      w->segment(stages.algebraic_offset(i), nz_) = RelayStageAlgebraic(stage_y_);
-    } else {
-      w->segment(stages.algebraic_offset(i), nz_) = ConsistentGuess(stage_y_, z_guess_);
-    }
+    // Both return their kept result (const Vector&): the conditional copies nothing.
+    w->segment(stages.algebraic_offset(i), nz_) = reduction_ == Reduction::kRelayModes
+                                                      ? RelayStageAlgebraic(stage_y_)
+                                                      : ConsistentGuess(stage_y_, z_guess_);
   }
   return true;
 }
