@@ -254,6 +254,7 @@ void FesdRun::IntegrateTimeFreezing() {
   for (std::size_t segment = 0; segment + 1 < segment_ends_.size() && !failed(); ++segment) {
     segment_ = static_cast<int>(segment);
     system_.SetInputs(scene.InputValues(segment_ends_[segment]));
+    if (segment > 0 && !DecideAtBreakpoint()) break;
     const double target = segment_ends_[segment + 1];
     const double tolerance = kClockTolerance * std::max(1.0, std::fabs(target));
     while (!failed() && target - y_[clock] > tolerance) {
