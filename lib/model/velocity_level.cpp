@@ -576,6 +576,49 @@ SemismoothNewtonOptions LinearTrialNewtonOptions(bool sparse) {
   return options;
 }
 
+// A linear velocity-level problem of fixed statuses (every pair decided: no complementarity
+// rows): Newton's first step (the same factorization and solve) without the rest of its
+// machinery, accepted if the model's residual after it meets Newton's test; otherwise
+// (singular matrix, test failed) the caller's Newton decides. Where it is accepted, Newton
+// would have taken the same full step and stopped there (its line search takes a full step
+// that meets the tolerance), so the solution is Newton's.
+class LinearStep {
+ public:
+  bool Solve(VelocitySystem* problem, const SemismoothNewtonOptions& options, const Vector& v0,
+             Vector* v) {
+    const int n = problem->num_unknowns();
+    const double tolerance = options.tolerance;
+    problem->ResidualScale(v0, &scale_);
+    problem->Evaluate(v0, true, &residual_, &a_, &b_);
+    if (!residual_.allFinite()) return false;
+    if (scale_.cwiseProduct(residual_).lpNorm<Eigen::Infinity>() <= tolerance) {
+      *v = v0;  // Newton stops at the initial point (no minimum iterations)
+      return true;
+    }
+    if (solver_ == nullptr || solver_size_ != n) {
+      solver_ = MakeLinearSolver(options.linear_solver, n, problem->EstimatedJacobianNonzeros());
+      solver_size_ = n;
+    }
+    jacobian_.Reset(n, solver_->wants_sparse());
+    problem->AssembleJacobian(a_, b_, &jacobian_);  // no pairs: the weights are unused
+    jacobian_.Finalize();
+    if (solver_->Factorize(jacobian_) != FactorizationStatus::kSuccess) return false;
+    step_ = -residual_;
+    solver_->Solve(step_);
+    trial_ = v0 + step_;
+    if (!problem->Evaluate(trial_, true, &residual_, &a_, &b_)) return false;
+    if (!(scale_.cwiseProduct(residual_).lpNorm<Eigen::Infinity>() <= tolerance)) return false;
+    *v = trial_;
+    return true;
+  }
+
+ private:
+  Vector scale_, residual_, a_, b_, step_, trial_;
+  SystemMatrix jacobian_;
+  std::unique_ptr<LinearSolver> solver_;
+  int solver_size_ = -1;
+};
+
 }  // namespace
 
 namespace internal {
@@ -606,9 +649,12 @@ class VelocitySolver {
     VelocitySystem problem;
     SemismoothNewton newton;               // every candidate complementary, and general trials
     SemismoothNewton linear_trial_newton;  // trials of a linear level without monotone ones
-    Vector guess;
+    LinearStep linear_step;                // the same trials' first step (LinearStep)
+    Vector guess, solution, step, free_a, free_b, field;
     PointEvaluation at_y, point, expansion;
     VelocityLevelEvaluation evaluation;
+    VelocityLevelEvaluation check;  // a linear level's checked rows at the guess
+    CurvatureTerms no_curvature;    // (rows without derivatives with respect to y)
   };
   Decision& decision(const LoweredSystem& system) {
     if (decision_ == nullptr) decision_ = std::make_unique<Decision>(system, linear_);
@@ -627,7 +673,7 @@ class VelocitySolver {
     problem_.SetStatuses(a_zero);
     problem_.Reset(y, v0, point);
     bool converged = false;
-    if (!linear_ || !SolveLinear(v0, v)) {
+    if (!linear_ || !linear_step_.Solve(&problem_, newton_.options(), v0, v)) {
       const SemismoothNewtonResult result = newton_.Solve(problem_, v0);
       *v = result.solution;
       converged = result.converged();
@@ -647,37 +693,6 @@ class VelocitySolver {
   }
 
  private:
-  // A linear problem of fixed statuses: Newton's first step (the same factorization and
-  // solve) without the rest of its machinery, accepted if the model's residual after it meets
-  // Newton's test; otherwise (singular matrix, test failed) Newton decides.
-  bool SolveLinear(const Vector& v0, Vector* v) {
-    const int n = problem_.num_unknowns();
-    const double tolerance = newton_.options().tolerance;
-    problem_.ResidualScale(v0, &scale_);
-    problem_.Evaluate(v0, true, &residual_, &a_, &b_);
-    if (!residual_.allFinite()) return false;
-    if (scale_.cwiseProduct(residual_).lpNorm<Eigen::Infinity>() <= tolerance) {
-      *v = v0;  // Newton stops at the initial point (no minimum iterations)
-      return true;
-    }
-    if (solver_ == nullptr || solver_size_ != n) {
-      solver_ = MakeLinearSolver(newton_.options().linear_solver, n,
-                                 problem_.EstimatedJacobianNonzeros());
-      solver_size_ = n;
-    }
-    jacobian_.Reset(n, solver_->wants_sparse());
-    problem_.AssembleJacobian(a_, b_, &jacobian_);  // no pairs: the weights are unused
-    jacobian_.Finalize();
-    if (solver_->Factorize(jacobian_) != FactorizationStatus::kSuccess) return false;
-    step_ = -residual_;
-    solver_->Solve(step_);
-    trial_ = v0 + step_;
-    if (!problem_.Evaluate(trial_, true, &residual_, &a_, &b_)) return false;
-    if (!(scale_.cwiseProduct(residual_).lpNorm<Eigen::Infinity>() <= tolerance)) return false;
-    *v = trial_;
-    return true;
-  }
-
   struct Entry {
     bool valid = false;
     Vector y, inputs, parameters, v;
@@ -698,11 +713,7 @@ class VelocitySolver {
   const bool linear_;
   Entry entries_[kEntries];
   int next_ = 0;
-  // SolveLinear's workspace.
-  Vector scale_, residual_, a_, b_, step_, trial_;
-  SystemMatrix jacobian_;
-  std::unique_ptr<LinearSolver> solver_;
-  int solver_size_ = -1;
+  LinearStep linear_step_;
   std::unique_ptr<Decision> decision_;
 };
 
@@ -895,9 +906,22 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
   const double sign_tolerance = candidate_tolerance;
   PointEvaluation& point = workspace.point;
   // A linear velocity level is the expansion of one evaluation at (y, guess), which the blocks
-  // make without looking at the roles: evaluated once for all trials.
+  // make without looking at the roles: evaluated once for all trials. So are the rows the
+  // trials are checked on (every candidate complementary: the roles themselves), and a
+  // trial's free sides and state derivative at its solution are read off that expansion,
+  // E(v) = E(guess) + E_v (v - guess) and F(v) = F(guess) + F_z (v - guess): the linear model
+  // the trial was solved on, instead of an evaluation of the system with derivatives per
+  // trial (equal up to round-off: the rows and F are affine in v).
   PointEvaluation& expansion = workspace.expansion;
-  if (linear) Evaluate(y, guess, Derivatives::kStates, &expansion);
+  VelocityLevelEvaluation& check_rows = workspace.check;
+  if (linear) {
+    Evaluate(y, guess, Derivatives::kStates, &expansion);
+    AssembleVelocityRows(*this, expansion, workspace.no_curvature, guess, roles, Derivatives::kNone,
+                         &check_rows);
+  }
+  // Every trial's check has the roles `roles` (its candidates complementary again).
+  const std::vector<int> check_row = complementary_rows(roles);
+  Vector& solution = workspace.solution;
   for (unsigned mask = 0; mask < (1u << candidates.size()); ++mask) {
     std::vector<PairRole> trial = roles;
     int leaving = 0;
@@ -914,23 +938,44 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
     if (!admitted_by_blocks(trial)) continue;
     system.SetRoles(trial);
     system.Reset(y, guess, linear ? &expansion : nullptr);
-    const SemismoothNewtonResult result = trial_newton.Solve(system, guess);
-    if (!result.converged()) continue;
+    // Without monotone candidates a linear trial is a linear system: its first Newton step,
+    // where it meets the tolerance, is the solution Newton returns (LinearStep).
+    if (!(linear && monotone.empty() &&
+          workspace.linear_step.Solve(&system, trial_newton.options(), guess, &solution))) {
+      SemismoothNewtonResult result = trial_newton.Solve(system, guess);
+      if (!result.converged()) continue;
+      solution = std::move(result.solution);
+    }
     // The free side of every candidate must be nonnegative.
-    std::vector<PairRole> check = trial;
-    for (int k : candidates) check[static_cast<std::size_t>(k)] = PairRole::kComplementary;
-    EvaluateVelocityLevel(y, result.solution, check, Derivatives::kNone, &e);
-    const std::vector<int> row = complementary_rows(check);
+    const Vector* free_a = &workspace.free_a;
+    const Vector* free_b = &workspace.free_b;
+    if (linear) {
+      workspace.step = solution - guess;
+      workspace.free_a = check_rows.a;
+      workspace.free_b = check_rows.b;
+      check_rows.a_v.MultiplyAdd(workspace.step, workspace.free_a);
+      check_rows.b_v.MultiplyAdd(workspace.step, workspace.free_b);
+    } else {
+      EvaluateVelocityLevel(y, solution, roles, Derivatives::kNone, &e);
+      free_a = &e.a;
+      free_b = &e.b;
+    }
     bool ok = true;
     for (std::size_t i = 0; i < candidates.size(); ++i) {
       const bool jump_zero = (mask >> i) & 1u;
-      const int r = row[static_cast<std::size_t>(candidates[i])];
-      const double free = jump_zero ? e.b[r] : e.a[r];
+      const int r = check_row[static_cast<std::size_t>(candidates[i])];
+      const double free = jump_zero ? (*free_b)[r] : (*free_a)[r];
       ok &= free >= -sign_tolerance;
     }
     if (!ok) continue;
-    EvaluatePoint(y, result.solution, Derivatives::kNone, &trial, &point);
-    valid.push_back({trial, result.solution, point.F.head(nx), leaving});
+    if (linear) {
+      workspace.field = expansion.F;
+      expansion.F_z.MultiplyAdd(workspace.step, workspace.field);
+      valid.push_back({trial, solution, workspace.field.head(nx), leaving});
+    } else {
+      EvaluatePoint(y, solution, Derivatives::kNone, &trial, &point);
+      valid.push_back({trial, solution, point.F.head(nx), leaving});
+    }
   }
   if (valid.empty()) {
     decision.message = "no consistent continuation of the " + std::to_string(candidates.size()) +
