@@ -35,8 +35,9 @@ SmoothCollocationSolver::Outcome SmoothCollocationSolver::Solve(double h, const 
       point_ = y0 + z->col(j);
       PointEvaluation& eval =
           with_jacobian ? stage_eval_[static_cast<std::size_t>(j)] : value_eval_;
-      system_->Evaluate(point_, fixed_algebraic_,
-                        with_jacobian ? Derivatives::kStates : Derivatives::kNone, &eval);
+      // F and F_y alone (the algebraic unknowns are fixed: G, A, B are not read).
+      system_->EvaluateField(point_, fixed_algebraic_,
+                             with_jacobian ? Derivatives::kStates : Derivatives::kNone, &eval);
       ++function_evaluations_;
       if (!eval.F.allFinite()) return Outcome::kNonFinite;
       stage_f_.col(j) = eval.F;
