@@ -476,6 +476,56 @@ class VelocitySystem final : public MixedComplementaritySystem {
     } else if (linear_) {
       system_.EvaluateVelocityLevel(y_, v0, roles_, Derivatives::kNone, &evaluation_);
     }
+    Scale(v0);
+  }
+
+  // A linear level with dense storage whose roles_ decide every pair: Reset(y, v0, point) with
+  // the rows taken from `rows`, the rows assembled from the same point at the same v0 for
+  // `rows_roles` (roles_ except that pairs decided here may be complementary there: their
+  // jump-side value rows are `rows.a`, their continuous-side rate rows `rows.b`). The dense
+  // assembly computes every row on its own from the point, so the rows are those Reset would
+  // assemble, bitwise; a status decision assembles them once for all its trials.
+  void ResetFromRows(const Vector& y, const Vector& v0, const VelocityLevelEvaluation& rows,
+                     const std::vector<PairRole>& rows_roles) {
+    MOREAU_ASSERT(linear_ && !system_.sparse(), "ResetFromRows: linear dense levels only");
+    y_ = y;
+    complementary_ = 0;
+    const int nz = system_.num_algebraic(), ng = system_.num_equations();
+    const int rows_count = ng + static_cast<int>(roles_.size());
+    const auto& pairs = system_.pairs();
+    evaluation_.equations.resize(rows_count);
+    evaluation_.equations_v.SetZero(rows_count, nz, false);
+    Matrix& out = evaluation_.equations_v.MutableDense();
+    const Matrix& equations_v = rows.equations_v.dense();
+    const Matrix& a_v = rows.a_v.dense();
+    const Matrix& b_v = rows.b_v.dense();
+    evaluation_.equations.head(ng) = rows.equations.head(ng);
+    out.topRows(ng) = equations_v.topRows(ng);
+    int row = ng, source_row = ng, pair_row = 0;
+    for (std::size_t k = 0; k < roles_.size(); ++k) {
+      MOREAU_ASSERT(roles_[k] != PairRole::kComplementary, "ResetFromRows: undecided pair");
+      if (rows_roles[k] != PairRole::kComplementary) {
+        evaluation_.equations[row] = rows.equations[source_row];
+        out.row(row++) = equations_v.row(source_row++);
+        continue;
+      }
+      // The kept side: its rate if continuous (the b row), its value if a jump variable (a).
+      const bool continuous_a = pairs[k].continuous != ContinuousSide::kB;
+      const bool rate = (roles_[k] == PairRole::kAZero) == continuous_a;
+      evaluation_.equations[row] = rate ? rows.b[pair_row] : rows.a[pair_row];
+      out.row(row++) = rate ? b_v.row(pair_row) : a_v.row(pair_row);
+      ++pair_row;
+    }
+    evaluation_.a.resize(0);
+    evaluation_.b.resize(0);
+    evaluation_.a_v.SetZero(0, nz, false);
+    evaluation_.b_v.SetZero(0, nz, false);
+    Scale(v0);
+  }
+
+ private:
+  // Reset's row scales (and a linear level's expansion point).
+  void Scale(const Vector& v0) {
     if (linear_) {
       v0_ = v0;
       step_ = -v0;  // the values at v = 0
@@ -496,6 +546,7 @@ class VelocitySystem final : public MixedComplementaritySystem {
     if (!scale_.allFinite()) scale_.setOnes();  // a non-finite model is reported by Evaluate
   }
 
+ public:
   void ResidualScale(const Vector& /*v*/, Vector* scale) override { *scale = scale_; }
   int num_unknowns() const override { return system_.num_algebraic(); }
   int num_equations() const override { return system_.num_algebraic() - complementary_; }
@@ -937,7 +988,11 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
     }
     if (!admitted_by_blocks(trial)) continue;
     system.SetRoles(trial);
-    system.Reset(y, guess, linear ? &expansion : nullptr);
+    if (linear && monotone.empty() && !sparse_) {
+      system.ResetFromRows(y, guess, check_rows, roles);  // the rows assembled once
+    } else {
+      system.Reset(y, guess, linear ? &expansion : nullptr);
+    }
     // Without monotone candidates a linear trial is a linear system: its first Newton step,
     // where it meets the tolerance, is the solution Newton returns (LinearStep).
     if (!(linear && monotone.empty() &&
