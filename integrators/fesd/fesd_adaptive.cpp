@@ -417,8 +417,12 @@ double FesdRun::IndicatorResolution() const {
   const std::size_t n = nodes.size();
   double worst = 0.0;
   IndicatorEvaluation at;
+  // Kept across elements (no allocation per element and test point).
+  std::vector<int> continuous;
+  Vector v, y, actual, predicted;
+  std::vector<Vector> values(n);
   for (const ElementPolynomial& element : piece_) {
-    std::vector<int> continuous;
+    continuous.clear();
     for (int k = 0; k < np_; ++k) {
       const bool continuous_a =
           system_.pairs()[static_cast<std::size_t>(k)].continuous == ContinuousSide::kA;
@@ -426,18 +430,17 @@ double FesdRun::IndicatorResolution() const {
       if (element.a_zero[static_cast<std::size_t>(k)] != continuous_a) continuous.push_back(k);
     }
     if (continuous.empty()) continue;
-    const Vector v = element.algebraic.col(0);
-    auto indicators = [&](double theta) {
-      const Vector y = element.y0 + element.increments * tableau_.InterpolationWeights(theta);
+    v = element.algebraic.col(0);
+    auto indicators = [&](double theta, Vector* out) {
+      y = element.y0 + element.increments * tableau_.InterpolationWeights(theta);
       system_.EvaluateEventIndicators(y, v, element.a_zero, Derivatives::kNone, &at);
-      return at.values;
+      *out = at.values;
     };
-    std::vector<Vector> values;
-    for (double theta : nodes) values.push_back(indicators(theta));
+    for (std::size_t j = 0; j < n; ++j) indicators(nodes[j], &values[j]);
     for (double theta : tests) {
-      const Vector actual = indicators(theta);
+      indicators(theta, &actual);
       // Lagrange interpolation through the nodes.
-      Vector predicted = Vector::Zero(np_);
+      predicted.setZero(np_);
       for (std::size_t j = 0; j < n; ++j) {
         double basis = 1.0;
         for (std::size_t l = 0; l < n; ++l) {

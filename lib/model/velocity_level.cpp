@@ -702,6 +702,7 @@ class VelocitySolver {
     SemismoothNewton linear_trial_newton;  // trials of a linear level without monotone ones
     LinearStep linear_step;                // the same trials' first step (LinearStep)
     Vector guess, solution, step, free_a, free_b, field;
+    std::vector<PairRole> trial, block_roles;
     PointEvaluation at_y, point, expansion;
     VelocityLevelEvaluation evaluation;
     VelocityLevelEvaluation check;  // a linear level's checked rows at the guess
@@ -857,12 +858,12 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
   }
   decision.candidates = static_cast<int>(candidates.size());
   // Whether every block admits the roles (its structure, e.g. e^T theta = 1, rules out some).
+  std::vector<PairRole>& block_roles = workspace.block_roles;  // (no allocation per trial)
   auto admitted_by_blocks = [&](const std::vector<PairRole>& r) {
     for (const auto& block : blocks_) {
       const auto first = r.begin() + block->layout.pair_offset;
-      if (!block->AdmitsRoles(std::vector<PairRole>(first, first + block->num_pairs()))) {
-        return false;
-      }
+      block_roles.assign(first, first + block->num_pairs());
+      if (!block->AdmitsRoles(block_roles)) return false;
     }
     return true;
   };
@@ -974,7 +975,8 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
   const std::vector<int> check_row = complementary_rows(roles);
   Vector& solution = workspace.solution;
   for (unsigned mask = 0; mask < (1u << candidates.size()); ++mask) {
-    std::vector<PairRole> trial = roles;
+    std::vector<PairRole>& trial = workspace.trial;
+    trial = roles;
     int leaving = 0;
     for (std::size_t i = 0; i < candidates.size(); ++i) {
       const int k = candidates[i];
