@@ -490,9 +490,14 @@ void FesdRun::PieceState(double offset, Vector* y, Vector* z) const {
 
 bool FesdRun::SolveComparisonElement(const Vector& y0, double t0, double h,
                                      const std::vector<bool>& a_zero, Vector* y_end) {
-  Vector base, z;
+  // Kept across comparisons (no allocation per comparison element).
+  Vector& base = comparison_.base;
+  Vector& z = comparison_.z;
   PieceState(t0, &base, &z);
-  std::vector<Vector> states(static_cast<std::size_t>(s_)), algebraic(static_cast<std::size_t>(s_));
+  std::vector<Vector>& states = comparison_.states;
+  std::vector<Vector>& algebraic = comparison_.algebraic;
+  states.resize(static_cast<std::size_t>(s_));
+  algebraic.resize(static_cast<std::size_t>(s_));
   for (int i = 0; i < s_; ++i) {
     PieceState(t0 + tableau_.c[i] * h, &states[static_cast<std::size_t>(i)],
                &algebraic[static_cast<std::size_t>(i)]);
@@ -503,7 +508,8 @@ bool FesdRun::SolveComparisonElement(const Vector& y0, double t0, double h,
   // the Newton tolerance, at the cost of the field's Newton.
   SmoothCollocationSolver* field = smooth_ ? smooth_.get() : SmoothFieldSolver(a_zero);
   if (field != nullptr) {
-    Matrix increments(ny_, s_);
+    Matrix& increments = comparison_.increments;
+    increments.resize(ny_, s_);
     for (int i = 0; i < s_; ++i) increments.col(i) = states[static_cast<std::size_t>(i)] - base;
     SmoothCollocationSolver::Stopping stopping;
     stopping.tolerance = options_.newton.tolerance;
