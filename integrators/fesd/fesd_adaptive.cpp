@@ -421,26 +421,34 @@ double FesdRun::IndicatorResolution() const {
     tests.push_back(gaps[j].second);
   }
   const std::size_t n = nodes.size();
-  auto lagrange = [&](double theta) {  // the interpolation weights of the nodes at theta
-    Vector basis = Vector::Ones(static_cast<Eigen::Index>(n));
+  // The interpolation weights of the nodes at theta.
+  auto lagrange = [&](double theta, Vector* basis) {
+    basis->setOnes(static_cast<Eigen::Index>(n));
     for (std::size_t j = 0; j < n; ++j) {
       for (std::size_t l = 0; l < n; ++l) {
         if (l != j)
-          basis[static_cast<Eigen::Index>(j)] *= (theta - nodes[l]) / (nodes[j] - nodes[l]);
+          (*basis)[static_cast<Eigen::Index>(j)] *= (theta - nodes[l]) / (nodes[j] - nodes[l]);
       }
     }
-    return basis;
   };
   // The interpolant on a fine grid of the element, for dips of a free side below zero between
   // the nodes (below).
   Matrix dense_weights(kDipSamples, static_cast<Eigen::Index>(n));
+  Vector basis;
   for (int m = 0; m < kDipSamples; ++m) {
-    dense_weights.row(m) = lagrange((m + 0.5) / kDipSamples).transpose();
+    lagrange((m + 0.5) / kDipSamples, &basis);
+    dense_weights.row(m) = basis.transpose();
   }
   double worst = 0.0;
   IndicatorEvaluation at;
+  // Kept across elements (no allocation per element and test point).
+  std::vector<int> continuous;
+  Vector v, y, actual, predicted;
+  std::vector<Vector> values(n);
+  Matrix node_values(static_cast<Eigen::Index>(n), np_), dense;
+  std::vector<double> tests_here;
   for (const ElementPolynomial& element : piece_) {
-    std::vector<int> continuous;
+    continuous.clear();
     for (int k = 0; k < np_; ++k) {
       const bool continuous_a =
           system_.pairs()[static_cast<std::size_t>(k)].continuous == ContinuousSide::kA;
@@ -448,24 +456,23 @@ double FesdRun::IndicatorResolution() const {
       if (element.a_zero[static_cast<std::size_t>(k)] != continuous_a) continuous.push_back(k);
     }
     if (continuous.empty()) continue;
-    const Vector v = element.algebraic.col(0);
-    auto indicators = [&](double theta) {
-      const Vector y = element.y0 + element.increments * tableau_.InterpolationWeights(theta);
+    v = element.algebraic.col(0);
+    auto indicators = [&](double theta, Vector* out) {
+      y = element.y0 + element.increments * tableau_.InterpolationWeights(theta);
       system_.EvaluateEventIndicators(y, v, element.a_zero, Derivatives::kNone, &at);
-      return at.values;
+      *out = at.values;
     };
-    std::vector<Vector> values;
-    for (double theta : nodes) values.push_back(indicators(theta));
-    Matrix node_values(static_cast<Eigen::Index>(n), np_);
-    for (std::size_t j = 0; j < n; ++j)
+    for (std::size_t j = 0; j < n; ++j) {
+      indicators(nodes[j], &values[j]);
       node_values.row(static_cast<Eigen::Index>(j)) = values[j].transpose();
+    }
     // A free side positive at every node can still dip below zero between them: a contact that
     // begins and ends inside one element (two bodies in free flight, whose distance is quadratic
     // in t, pass through each other). Where the interpolant's minimum over the element is below
     // zero, the free side is evaluated there; negative, it is a switch that was not located.
     // Where it is not, the interpolant was wrong there and its miss counts as resolution.
-    const Matrix dense = dense_weights * node_values;
-    std::vector<double> tests_here = tests;
+    dense.noalias() = dense_weights * node_values;
+    tests_here = tests;
     for (int k : continuous) {
       Eigen::Index lowest = 0;
       const double minimum = dense.col(k).minCoeff(&lowest);
@@ -474,10 +481,10 @@ double FesdRun::IndicatorResolution() const {
       }
     }
     for (double theta : tests_here) {
-      const Vector actual = indicators(theta);
+      indicators(theta, &actual);
       // Lagrange interpolation through the nodes.
-      const Vector basis = lagrange(theta);
-      Vector predicted = Vector::Zero(np_);
+      lagrange(theta, &basis);
+      predicted.setZero(np_);
       for (std::size_t j = 0; j < n; ++j) {
         predicted += basis[static_cast<Eigen::Index>(j)] * values[j];
       }
@@ -523,9 +530,14 @@ void FesdRun::PieceState(double offset, Vector* y, Vector* z) const {
 
 bool FesdRun::SolveComparisonElement(const Vector& y0, double t0, double h,
                                      const std::vector<bool>& a_zero, Vector* y_end) {
-  Vector base, z;
+  // Kept across comparisons (no allocation per comparison element).
+  Vector& base = comparison_.base;
+  Vector& z = comparison_.z;
   PieceState(t0, &base, &z);
-  std::vector<Vector> states(static_cast<std::size_t>(s_)), algebraic(static_cast<std::size_t>(s_));
+  std::vector<Vector>& states = comparison_.states;
+  std::vector<Vector>& algebraic = comparison_.algebraic;
+  states.resize(static_cast<std::size_t>(s_));
+  algebraic.resize(static_cast<std::size_t>(s_));
   for (int i = 0; i < s_; ++i) {
     PieceState(t0 + tableau_.c[i] * h, &states[static_cast<std::size_t>(i)],
                &algebraic[static_cast<std::size_t>(i)]);
@@ -536,7 +548,8 @@ bool FesdRun::SolveComparisonElement(const Vector& y0, double t0, double h,
   // the Newton tolerance, at the cost of the field's Newton.
   SmoothCollocationSolver* field = smooth_ ? smooth_.get() : SmoothFieldSolver(a_zero);
   if (field != nullptr) {
-    Matrix increments(ny_, s_);
+    Matrix& increments = comparison_.increments;
+    increments.resize(ny_, s_);
     for (int i = 0; i < s_; ++i) increments.col(i) = states[static_cast<std::size_t>(i)] - base;
     SmoothCollocationSolver::Stopping stopping;
     stopping.tolerance = options_.newton.tolerance;

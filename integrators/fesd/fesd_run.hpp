@@ -513,6 +513,9 @@ class FesdRun {
   Vector relay_field_z_;
   Matrix smooth_field_z_;  // stage increments of a smooth-element solve (n_y x s)
   Matrix smooth_z_, last_z_matrix_, extrapolation_;
+  // ReducedSwitchGuess's stage increments per element and field evaluation (kept across groups).
+  std::vector<Matrix> switch_z_;
+  PointEvaluation switch_field_;
   double extrapolation_ratio_ = -1.0;
   // Adaptive steps and dense output.
   bool keep_polynomials_ = false;         // record ElementPolynomial of committed elements
@@ -520,9 +523,15 @@ class FesdRun {
   bool capture_piece_ = false;            // collect them in piece_ (adaptive attempts)
   std::vector<ElementPolynomial> piece_;  // elements committed by the current attempt
   double comparison_residual_ = 0.0;      // largest Newton residual of comparison solves
-  Eigen::RowVectorXd d_step_end_;         // d(step end)/d(x0, p, u) of the last step
-  bool dense_output_ = false;             // output times replace element ends
-  std::vector<double> output_times_;      // sorted, in (t0, tf]
+  struct ComparisonBuffers {  // SolveComparisonElement's vectors, kept across comparisons
+    Vector base, z;
+    std::vector<Vector> states, algebraic;
+    Matrix increments;
+  };
+  ComparisonBuffers comparison_;
+  Eigen::RowVectorXd d_step_end_;     // d(step end)/d(x0, p, u) of the last step
+  bool dense_output_ = false;         // output times replace element ends
+  std::vector<double> output_times_;  // sorted, in (t0, tf]
   std::size_t next_output_ = 0;
   // Workspaces of the per-element checks and certificates (const members, no allocation per
   // element): event indicators and the consistent free sides of each stage.

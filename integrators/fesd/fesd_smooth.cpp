@@ -253,7 +253,10 @@ bool FesdRun::ReducedSwitchGuess(const std::vector<Vector>& trial_w, const Vecto
   stopping.reuse_jacobian = true;
   const long factorizations_before = solver->num_factorizations();
   // Stage increments of the m elements, for the length z_h (first guess: the trial elements).
-  std::vector<Matrix> z(static_cast<std::size_t>(m), Matrix(ny_, s_));
+  // (kept across groups: no allocation per group)
+  std::vector<Matrix>& z = switch_z_;
+  if (static_cast<int>(z.size()) < m) z.resize(static_cast<std::size_t>(m));
+  for (int e = 0; e < m; ++e) z[static_cast<std::size_t>(e)].resize(ny_, s_);
   for (int e = 0; e < m; ++e) {
     for (int i = 0; i < s_; ++i) {
       z[static_cast<std::size_t>(e)].col(i) =
@@ -318,7 +321,7 @@ bool FesdRun::ReducedSwitchGuess(const std::vector<Vector>& trial_w, const Vecto
     // the end state moves with the common length h at m F(y_end) (the flow of the field over
     // m elements, to the elements' local error), so f'(h) = weight (d iota/dy) m F(y_end) /
     // (h / h_trial)^p - p f(h) / h.
-    PointEvaluation field;
+    PointEvaluation& field = switch_field_;
     system_.Evaluate(y_end, relay_field_z_, Derivatives::kNone, &field);
     system_.EvaluateEventIndicators(y_end, level, a_zero_, Derivatives::kStates, &indicator);
     const double rate = m * indicator.d_y.Row(pair).dot(field.F);

@@ -119,6 +119,12 @@ class RelayBlockBase : public LoweredBlock {
     }
   }
 
+  // One mode field's values (no derivatives).
+  static void EvaluateMode(const BlockContext& context, const ConstVectorRef& y,
+                           const SmoothFunction& mode, ArgumentMatrix* jacobian, Vector* values) {
+    jacobian->Jacobian(context, mode, y, Derivatives::kNone, values);
+  }
+
   // f_A,i and f_B,i (with Jacobians, columns x, [u], t, [p]).
   void EvaluateModes(const BlockContext& context, const ConstVectorRef& y, int i,
                      Derivatives derivatives) {
@@ -196,37 +202,60 @@ class HysteresisBlock final : public RelayBlockBase {
   void Evaluate(const BlockContext& context, const ConstVectorRef& y, const ConstVectorRef& z,
                 Derivatives derivatives, PointEvaluation* out) override {
     const int nx = num_states_;
-    EvaluateInputs(context, y, derivatives);
+    // F alone (LoweredSystem::EvaluateField): the inputs psi enter only G, which is skipped
+    // with A, B and their derivatives.
+    const bool field_only = context.field_only;
+    if (!field_only) EvaluateInputs(context, y, derivatives);
     Rates(z);
     for (int i = 0; i < num_relays_; ++i) {
       const HysteresisRelay& relay = relays_[static_cast<std::size_t>(i)];
       const double w = y[MemoryIndex(i)];
-      const double psi = psi_[static_cast<std::size_t>(i)].value;
+      const double psi = field_only ? 0.0 : psi_[static_cast<std::size_t>(i)].value;
       double theta_sum = 0.0, memory_rate = 0.0;
       for (int k = 0; k < kRegions; ++k) {
         const double theta = z[Theta(i, k)];
+        theta_sum += theta;
+        memory_rate += kMemoryDirection[k] * theta;
+        if (field_only) continue;
         // g_ik - lambda_ik - mu_i = 0 (Voronoi indicator of region k).
         out->G[Row(i, k)] = Indicator(k, psi, w) - z[Lambda(i, k)] - z[Mu(i)];
         // pair (theta_ik, lambda_ik).
         out->A[Pair(i, k)] = theta;
         out->B[Pair(i, k)] = z[Lambda(i, k)];
-        theta_sum += theta;
-        memory_rate += kMemoryDirection[k] * theta;
       }
-      out->G[Row(i, kRegions)] = theta_sum - 1.0;  // convex combination
+      if (!field_only) out->G[Row(i, kRegions)] = theta_sum - 1.0;  // convex combination
       // w_i' = a_i (theta_1 - theta_2 + theta_3 - theta_4).
       out->F[MemoryIndex(i)] += relay.auxiliary_gain * memory_rate;
       // x' += Q_i (2 theta_i1 f_A + 2 theta_i4 f_B).
-      EvaluateModes(context, y, i, derivatives);
       const double q = ProductExcept(i, -1);
       const double weight_a = 2.0 * z[Theta(i, kModeA)], weight_b = 2.0 * z[Theta(i, kModeB)];
+      if (derivatives == Derivatives::kNone) {
+        // Values only: a mode of weight zero adds 0 f = 0 (f finite) and is not evaluated (in
+        // a region or on a memory boundary one of them, or both, has weight zero: the smooth
+        // fields of reduced elements).
+        if (weight_a != 0.0) EvaluateMode(context, y, relay.mode_a, &mode_a_jacobian_, &mode_a_);
+        if (weight_b != 0.0) EvaluateMode(context, y, relay.mode_b, &mode_b_jacobian_, &mode_b_);
+        if (weight_a != 0.0 && weight_b != 0.0) {
+          field_ = weight_a * mode_a_ + weight_b * mode_b_;
+        } else if (weight_a != 0.0) {
+          field_ = weight_a * mode_a_;
+        } else if (weight_b != 0.0) {
+          field_ = weight_b * mode_b_;
+        } else {
+          continue;  // x' += 0
+        }
+        out->F.head(nx) += q * field_;
+        continue;
+      }
+      EvaluateModes(context, y, i, derivatives);
       field_ = weight_a * mode_a_ + weight_b * mode_b_;
       out->F.head(nx) += q * field_;
-      if (derivatives == Derivatives::kNone) continue;
 
-      const Psi& p = psi_[static_cast<std::size_t>(i)];
       const bool all = derivatives == Derivatives::kAll;
       for (int k = 0; k < kRegions; ++k) {
+        out->F_z.Add(MemoryIndex(i), Theta(i, k), relay.auxiliary_gain * kMemoryDirection[k]);
+        if (field_only) continue;
+        const Psi& p = psi_[static_cast<std::size_t>(i)];
         out->G_y.AddBlock(Row(i, k), 0, p.d_y, -2.0 * kPointPsi[k]);
         out->G_y.Add(Row(i, k), MemoryIndex(i), -2.0 * kPointW[k]);
         if (all) {
@@ -238,7 +267,6 @@ class HysteresisBlock final : public RelayBlockBase {
         out->G_z.Add(Row(i, kRegions), Theta(i, k), 1.0);
         out->A_z.Add(Pair(i, k), Theta(i, k), 1.0);
         out->B_z.Add(Pair(i, k), Lambda(i, k), 1.0);
-        out->F_z.Add(MemoryIndex(i), Theta(i, k), relay.auxiliary_gain * kMemoryDirection[k]);
       }
       AddModeJacobian(mode_a_jacobian_, q * weight_a, out);
       AddModeJacobian(mode_b_jacobian_, q * weight_b, out);

@@ -35,6 +35,9 @@ struct BlockContext {
   // Derivative storage of the system (LoweredSystem::sparse()): blocks differentiate their
   // model functions with sparse AD and add sparse blocks when set.
   bool sparse = false;
+  // Set by LoweredSystem::EvaluateField: only F and its derivatives are wanted; a block may
+  // leave its G, A, B rows and their derivatives unwritten (they are not read).
+  bool field_only = false;
 };
 
 // A matrix whose columns follow a smooth model function's argument layout x, [u], t, [p]

@@ -506,8 +506,8 @@ std::vector<Event> LoweredSystem::StatusEvents(double t, const std::vector<bool>
 
 void LoweredSystem::EvaluatePoint(const ConstVectorRef& y, const ConstVectorRef& z,
                                   Derivatives derivatives,
-                                  const std::vector<PairRole>* velocity_roles,
-                                  PointEvaluation* out) const {
+                                  const std::vector<PairRole>* velocity_roles, PointEvaluation* out,
+                                  bool field_only) const {
   MOREAU_ASSERT(y.size() == num_states_ && z.size() == num_algebraic_,
                 "LoweredSystem::Evaluate: wrong point size");
   const int nx = scene_.num_states();
@@ -546,6 +546,7 @@ void LoweredSystem::EvaluatePoint(const ConstVectorRef& y, const ConstVectorRef&
 
   internal::BlockContext context{nx, clock, &inputs_, &parameters_};
   context.sparse = sparse_;
+  context.field_only = field_only;
   // Smooth dynamics: x' = f(x, u, clock, p); clock' = 1.
   out->F[clock] = 1.0;
   if (!scene_.dynamics.empty()) {

@@ -476,6 +476,56 @@ class VelocitySystem final : public MixedComplementaritySystem {
     } else if (linear_) {
       system_.EvaluateVelocityLevel(y_, v0, roles_, Derivatives::kNone, &evaluation_);
     }
+    Scale(v0);
+  }
+
+  // A linear level with dense storage whose roles_ decide every pair: Reset(y, v0, point) with
+  // the rows taken from `rows`, the rows assembled from the same point at the same v0 for
+  // `rows_roles` (roles_ except that pairs decided here may be complementary there: their
+  // jump-side value rows are `rows.a`, their continuous-side rate rows `rows.b`). The dense
+  // assembly computes every row on its own from the point, so the rows are those Reset would
+  // assemble, bitwise; a status decision assembles them once for all its trials.
+  void ResetFromRows(const Vector& y, const Vector& v0, const VelocityLevelEvaluation& rows,
+                     const std::vector<PairRole>& rows_roles) {
+    MOREAU_ASSERT(linear_ && !system_.sparse(), "ResetFromRows: linear dense levels only");
+    y_ = y;
+    complementary_ = 0;
+    const int nz = system_.num_algebraic(), ng = system_.num_equations();
+    const int rows_count = ng + static_cast<int>(roles_.size());
+    const auto& pairs = system_.pairs();
+    evaluation_.equations.resize(rows_count);
+    evaluation_.equations_v.SetZero(rows_count, nz, false);
+    Matrix& out = evaluation_.equations_v.MutableDense();
+    const Matrix& equations_v = rows.equations_v.dense();
+    const Matrix& a_v = rows.a_v.dense();
+    const Matrix& b_v = rows.b_v.dense();
+    evaluation_.equations.head(ng) = rows.equations.head(ng);
+    out.topRows(ng) = equations_v.topRows(ng);
+    int row = ng, source_row = ng, pair_row = 0;
+    for (std::size_t k = 0; k < roles_.size(); ++k) {
+      MOREAU_ASSERT(roles_[k] != PairRole::kComplementary, "ResetFromRows: undecided pair");
+      if (rows_roles[k] != PairRole::kComplementary) {
+        evaluation_.equations[row] = rows.equations[source_row];
+        out.row(row++) = equations_v.row(source_row++);
+        continue;
+      }
+      // The kept side: its rate if continuous (the b row), its value if a jump variable (a).
+      const bool continuous_a = pairs[k].continuous != ContinuousSide::kB;
+      const bool rate = (roles_[k] == PairRole::kAZero) == continuous_a;
+      evaluation_.equations[row] = rate ? rows.b[pair_row] : rows.a[pair_row];
+      out.row(row++) = rate ? b_v.row(pair_row) : a_v.row(pair_row);
+      ++pair_row;
+    }
+    evaluation_.a.resize(0);
+    evaluation_.b.resize(0);
+    evaluation_.a_v.SetZero(0, nz, false);
+    evaluation_.b_v.SetZero(0, nz, false);
+    Scale(v0);
+  }
+
+ private:
+  // Reset's row scales (and a linear level's expansion point).
+  void Scale(const Vector& v0) {
     if (linear_) {
       v0_ = v0;
       step_ = -v0;  // the values at v = 0
@@ -496,6 +546,7 @@ class VelocitySystem final : public MixedComplementaritySystem {
     if (!scale_.allFinite()) scale_.setOnes();  // a non-finite model is reported by Evaluate
   }
 
+ public:
   void ResidualScale(const Vector& /*v*/, Vector* scale) override { *scale = scale_; }
   int num_unknowns() const override { return system_.num_algebraic(); }
   int num_equations() const override { return system_.num_algebraic() - complementary_; }
@@ -576,6 +627,49 @@ SemismoothNewtonOptions LinearTrialNewtonOptions(bool sparse) {
   return options;
 }
 
+// A linear velocity-level problem of fixed statuses (every pair decided: no complementarity
+// rows): Newton's first step (the same factorization and solve) without the rest of its
+// machinery, accepted if the model's residual after it meets Newton's test; otherwise
+// (singular matrix, test failed) the caller's Newton decides. Where it is accepted, Newton
+// would have taken the same full step and stopped there (its line search takes a full step
+// that meets the tolerance), so the solution is Newton's.
+class LinearStep {
+ public:
+  bool Solve(VelocitySystem* problem, const SemismoothNewtonOptions& options, const Vector& v0,
+             Vector* v) {
+    const int n = problem->num_unknowns();
+    const double tolerance = options.tolerance;
+    problem->ResidualScale(v0, &scale_);
+    problem->Evaluate(v0, true, &residual_, &a_, &b_);
+    if (!residual_.allFinite()) return false;
+    if (scale_.cwiseProduct(residual_).lpNorm<Eigen::Infinity>() <= tolerance) {
+      *v = v0;  // Newton stops at the initial point (no minimum iterations)
+      return true;
+    }
+    if (solver_ == nullptr || solver_size_ != n) {
+      solver_ = MakeLinearSolver(options.linear_solver, n, problem->EstimatedJacobianNonzeros());
+      solver_size_ = n;
+    }
+    jacobian_.Reset(n, solver_->wants_sparse());
+    problem->AssembleJacobian(a_, b_, &jacobian_);  // no pairs: the weights are unused
+    jacobian_.Finalize();
+    if (solver_->Factorize(jacobian_) != FactorizationStatus::kSuccess) return false;
+    step_ = -residual_;
+    solver_->Solve(step_);
+    trial_ = v0 + step_;
+    if (!problem->Evaluate(trial_, true, &residual_, &a_, &b_)) return false;
+    if (!(scale_.cwiseProduct(residual_).lpNorm<Eigen::Infinity>() <= tolerance)) return false;
+    *v = trial_;
+    return true;
+  }
+
+ private:
+  Vector scale_, residual_, a_, b_, step_, trial_;
+  SystemMatrix jacobian_;
+  std::unique_ptr<LinearSolver> solver_;
+  int solver_size_ = -1;
+};
+
 }  // namespace
 
 namespace internal {
@@ -606,9 +700,13 @@ class VelocitySolver {
     VelocitySystem problem;
     SemismoothNewton newton;               // every candidate complementary, and general trials
     SemismoothNewton linear_trial_newton;  // trials of a linear level without monotone ones
-    Vector guess;
+    LinearStep linear_step;                // the same trials' first step (LinearStep)
+    Vector guess, solution, step, free_a, free_b, field;
+    std::vector<PairRole> trial, block_roles;
     PointEvaluation at_y, point, expansion;
     VelocityLevelEvaluation evaluation;
+    VelocityLevelEvaluation check;  // a linear level's checked rows at the guess
+    CurvatureTerms no_curvature;    // (rows without derivatives with respect to y)
   };
   Decision& decision(const LoweredSystem& system) {
     if (decision_ == nullptr) decision_ = std::make_unique<Decision>(system, linear_);
@@ -627,7 +725,7 @@ class VelocitySolver {
     problem_.SetStatuses(a_zero);
     problem_.Reset(y, v0, point);
     bool converged = false;
-    if (!linear_ || !SolveLinear(v0, v)) {
+    if (!linear_ || !linear_step_.Solve(&problem_, newton_.options(), v0, v)) {
       const SemismoothNewtonResult result = newton_.Solve(problem_, v0);
       *v = result.solution;
       converged = result.converged();
@@ -647,37 +745,6 @@ class VelocitySolver {
   }
 
  private:
-  // A linear problem of fixed statuses: Newton's first step (the same factorization and
-  // solve) without the rest of its machinery, accepted if the model's residual after it meets
-  // Newton's test; otherwise (singular matrix, test failed) Newton decides.
-  bool SolveLinear(const Vector& v0, Vector* v) {
-    const int n = problem_.num_unknowns();
-    const double tolerance = newton_.options().tolerance;
-    problem_.ResidualScale(v0, &scale_);
-    problem_.Evaluate(v0, true, &residual_, &a_, &b_);
-    if (!residual_.allFinite()) return false;
-    if (scale_.cwiseProduct(residual_).lpNorm<Eigen::Infinity>() <= tolerance) {
-      *v = v0;  // Newton stops at the initial point (no minimum iterations)
-      return true;
-    }
-    if (solver_ == nullptr || solver_size_ != n) {
-      solver_ = MakeLinearSolver(newton_.options().linear_solver, n,
-                                 problem_.EstimatedJacobianNonzeros());
-      solver_size_ = n;
-    }
-    jacobian_.Reset(n, solver_->wants_sparse());
-    problem_.AssembleJacobian(a_, b_, &jacobian_);  // no pairs: the weights are unused
-    jacobian_.Finalize();
-    if (solver_->Factorize(jacobian_) != FactorizationStatus::kSuccess) return false;
-    step_ = -residual_;
-    solver_->Solve(step_);
-    trial_ = v0 + step_;
-    if (!problem_.Evaluate(trial_, true, &residual_, &a_, &b_)) return false;
-    if (!(scale_.cwiseProduct(residual_).lpNorm<Eigen::Infinity>() <= tolerance)) return false;
-    *v = trial_;
-    return true;
-  }
-
   struct Entry {
     bool valid = false;
     Vector y, inputs, parameters, v;
@@ -698,11 +765,7 @@ class VelocitySolver {
   const bool linear_;
   Entry entries_[kEntries];
   int next_ = 0;
-  // SolveLinear's workspace.
-  Vector scale_, residual_, a_, b_, step_, trial_;
-  SystemMatrix jacobian_;
-  std::unique_ptr<LinearSolver> solver_;
-  int solver_size_ = -1;
+  LinearStep linear_step_;
   std::unique_ptr<Decision> decision_;
 };
 
@@ -795,12 +858,12 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
   }
   decision.candidates = static_cast<int>(candidates.size());
   // Whether every block admits the roles (its structure, e.g. e^T theta = 1, rules out some).
+  std::vector<PairRole>& block_roles = workspace.block_roles;  // (no allocation per trial)
   auto admitted_by_blocks = [&](const std::vector<PairRole>& r) {
     for (const auto& block : blocks_) {
       const auto first = r.begin() + block->layout.pair_offset;
-      if (!block->AdmitsRoles(std::vector<PairRole>(first, first + block->num_pairs()))) {
-        return false;
-      }
+      block_roles.assign(first, first + block->num_pairs());
+      if (!block->AdmitsRoles(block_roles)) return false;
     }
     return true;
   };
@@ -895,11 +958,25 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
   const double sign_tolerance = candidate_tolerance;
   PointEvaluation& point = workspace.point;
   // A linear velocity level is the expansion of one evaluation at (y, guess), which the blocks
-  // make without looking at the roles: evaluated once for all trials.
+  // make without looking at the roles: evaluated once for all trials. So are the rows the
+  // trials are checked on (every candidate complementary: the roles themselves), and a
+  // trial's free sides and state derivative at its solution are read off that expansion,
+  // E(v) = E(guess) + E_v (v - guess) and F(v) = F(guess) + F_z (v - guess): the linear model
+  // the trial was solved on, instead of an evaluation of the system with derivatives per
+  // trial (equal up to round-off: the rows and F are affine in v).
   PointEvaluation& expansion = workspace.expansion;
-  if (linear) Evaluate(y, guess, Derivatives::kStates, &expansion);
+  VelocityLevelEvaluation& check_rows = workspace.check;
+  if (linear) {
+    Evaluate(y, guess, Derivatives::kStates, &expansion);
+    AssembleVelocityRows(*this, expansion, workspace.no_curvature, guess, roles, Derivatives::kNone,
+                         &check_rows);
+  }
+  // Every trial's check has the roles `roles` (its candidates complementary again).
+  const std::vector<int> check_row = complementary_rows(roles);
+  Vector& solution = workspace.solution;
   for (unsigned mask = 0; mask < (1u << candidates.size()); ++mask) {
-    std::vector<PairRole> trial = roles;
+    std::vector<PairRole>& trial = workspace.trial;
+    trial = roles;
     int leaving = 0;
     for (std::size_t i = 0; i < candidates.size(); ++i) {
       const int k = candidates[i];
@@ -913,24 +990,49 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
     }
     if (!admitted_by_blocks(trial)) continue;
     system.SetRoles(trial);
-    system.Reset(y, guess, linear ? &expansion : nullptr);
-    const SemismoothNewtonResult result = trial_newton.Solve(system, guess);
-    if (!result.converged()) continue;
+    if (linear && monotone.empty() && !sparse_) {
+      system.ResetFromRows(y, guess, check_rows, roles);  // the rows assembled once
+    } else {
+      system.Reset(y, guess, linear ? &expansion : nullptr);
+    }
+    // Without monotone candidates a linear trial is a linear system: its first Newton step,
+    // where it meets the tolerance, is the solution Newton returns (LinearStep).
+    if (!(linear && monotone.empty() &&
+          workspace.linear_step.Solve(&system, trial_newton.options(), guess, &solution))) {
+      SemismoothNewtonResult result = trial_newton.Solve(system, guess);
+      if (!result.converged()) continue;
+      solution = std::move(result.solution);
+    }
     // The free side of every candidate must be nonnegative.
-    std::vector<PairRole> check = trial;
-    for (int k : candidates) check[static_cast<std::size_t>(k)] = PairRole::kComplementary;
-    EvaluateVelocityLevel(y, result.solution, check, Derivatives::kNone, &e);
-    const std::vector<int> row = complementary_rows(check);
+    const Vector* free_a = &workspace.free_a;
+    const Vector* free_b = &workspace.free_b;
+    if (linear) {
+      workspace.step = solution - guess;
+      workspace.free_a = check_rows.a;
+      workspace.free_b = check_rows.b;
+      check_rows.a_v.MultiplyAdd(workspace.step, workspace.free_a);
+      check_rows.b_v.MultiplyAdd(workspace.step, workspace.free_b);
+    } else {
+      EvaluateVelocityLevel(y, solution, roles, Derivatives::kNone, &e);
+      free_a = &e.a;
+      free_b = &e.b;
+    }
     bool ok = true;
     for (std::size_t i = 0; i < candidates.size(); ++i) {
       const bool jump_zero = (mask >> i) & 1u;
-      const int r = row[static_cast<std::size_t>(candidates[i])];
-      const double free = jump_zero ? e.b[r] : e.a[r];
+      const int r = check_row[static_cast<std::size_t>(candidates[i])];
+      const double free = jump_zero ? (*free_b)[r] : (*free_a)[r];
       ok &= free >= -sign_tolerance;
     }
     if (!ok) continue;
-    EvaluatePoint(y, result.solution, Derivatives::kNone, &trial, &point);
-    valid.push_back({trial, result.solution, point.F.head(nx), leaving});
+    if (linear) {
+      workspace.field = expansion.F;
+      expansion.F_z.MultiplyAdd(workspace.step, workspace.field);
+      valid.push_back({trial, solution, workspace.field.head(nx), leaving});
+    } else {
+      EvaluatePoint(y, solution, Derivatives::kNone, &trial, &point);
+      valid.push_back({trial, solution, point.F.head(nx), leaving});
+    }
   }
   if (valid.empty()) {
     decision.message = "no consistent continuation of the " + std::to_string(candidates.size()) +

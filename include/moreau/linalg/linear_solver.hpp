@@ -70,6 +70,9 @@ class SystemMatrix {
   void Finalize();
 
   const Matrix& dense() const { return dense_; }
+  /// Dense storage: the matrix to write in place after Reset (small systems assembled from a
+  /// few small blocks, where the calls above cost more than their arithmetic).
+  Matrix& MutableDense() { return dense_; }
   const SparseMatrix& sparse_matrix() const { return sparse_matrix_; }
   /// y = A x (after Finalize).
   Vector Multiply(const Vector& x) const;

@@ -257,6 +257,14 @@ class LoweredSystem {
                 PointEvaluation* out) const {
     EvaluatePoint(y, z, derivatives, nullptr, out);
   }
+  /// F and its derivatives (F_y, F_z; F_u, F_p with Derivatives::kAll) as Evaluate gives them;
+  /// G, A, B and their derivatives are sized but unspecified (blocks may skip them). For
+  /// integrators of the field with the algebraic unknowns held fixed (the smooth elements of
+  /// FESD: Radau IIA steps of the field the statuses leave).
+  void EvaluateField(const ConstVectorRef& y, const ConstVectorRef& z, Derivatives derivatives,
+                     PointEvaluation* out) const {
+    EvaluatePoint(y, z, derivatives, nullptr, out, /*field_only=*/true);
+  }
 
   /// Velocity-level structure: continuous algebraic unknowns (rates at velocity level) and
   /// differentiated equations (see EvaluateVelocityLevel).
@@ -385,8 +393,10 @@ class LoweredSystem {
   bool VelocityLevelIsLinear() const;
   // Evaluate; with `velocity_roles` (EvaluateVelocityLevel, z = v) blocks see the roles and v
   // in their context (BlockContext::velocity_roles).
+  // field_only: EvaluateField (BlockContext::field_only).
   void EvaluatePoint(const ConstVectorRef& y, const ConstVectorRef& z, Derivatives derivatives,
-                     const std::vector<PairRole>* velocity_roles, PointEvaluation* out) const;
+                     const std::vector<PairRole>* velocity_roles, PointEvaluation* out,
+                     bool field_only = false) const;
   // Completes sparse accumulation (DerivativeMatrix::Finalize) of the requested blocks.
   void FinalizeEvaluation(Derivatives derivatives, PointEvaluation* out) const;
 
