@@ -433,11 +433,13 @@ double FesdRun::IndicatorResolution() const {
   };
   // The interpolant on a fine grid of the element, for dips of a free side below zero between
   // the nodes (below).
-  Matrix dense_weights(kDipSamples, static_cast<Eigen::Index>(n));
   Vector basis;
-  for (int m = 0; m < kDipSamples; ++m) {
-    lagrange((m + 0.5) / kDipSamples, &basis);
-    dense_weights.row(m) = basis.transpose();
+  if (dip_weights_.rows() != kDipSamples) {
+    dip_weights_.resize(kDipSamples, static_cast<Eigen::Index>(n));
+    for (int m = 0; m < kDipSamples; ++m) {
+      lagrange((m + 0.5) / kDipSamples, &basis);
+      dip_weights_.row(m) = basis.transpose();
+    }
   }
   double worst = 0.0;
   IndicatorEvaluation at;
@@ -471,7 +473,7 @@ double FesdRun::IndicatorResolution() const {
     // in t, pass through each other). Where the interpolant's minimum over the element is below
     // zero, the free side is evaluated there; negative, it is a switch that was not located.
     // Where it is not, the interpolant was wrong there and its miss counts as resolution.
-    dense.noalias() = dense_weights * node_values;
+    dense.noalias() = dip_weights_ * node_values;
     tests_here = tests;
     for (int k : continuous) {
       Eigen::Index lowest = 0;

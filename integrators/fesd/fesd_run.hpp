@@ -542,7 +542,10 @@ class FesdRun {
   mutable Vector closed_theta_;       // and its relays' theta (RelayTheta)
   mutable Vector consistent_z_;       // ConsistentGuess's result
   mutable Vector relay_stage_z_;      // RelayStageAlgebraic's result
-  Vector boundary_scaled_;            // DecideAtBoundary's scaled indicators
+  // IndicatorResolution's interpolation weights of the element's nodes at the dip search's
+  // sample points (kDipSamples x (s + 1); they depend on the tableau only: made once per run).
+  mutable Matrix dip_weights_;
+  Vector boundary_scaled_;  // DecideAtBoundary's scaled indicators
   // The consistent velocity level and indicators that EndViolation solved at an element's end
   // state, which is its last stage (c_s = 1), from that stage's evaluation and algebraic
   // values: the element's certificates need the same solve there (ConsistentFreeSides with the
