@@ -55,33 +55,11 @@ SmoothCollocationSolver::Outcome SmoothCollocationSolver::Solve(double h, const 
     if (factorize || h != factorized_h_) {
       // Newton matrix: delta_ij I - h a_ij F_y(Y_j).
       matrix_.Reset(s_ * n_, solver_->wants_sparse());
-      bool dense = !matrix_.sparse();
-      for (const PointEvaluation& eval : stage_eval_) dense = dense && !eval.F_y.is_sparse();
-      if (dense) {
-        // Written in place: the entries AddDiagonal and AddDerivative give (each entry of the
-        // zeroed matrix receives 1 on the diagonal first, then its one product), for a
-        // fraction of their calls' cost on these small blocks (s^2 blocks of n x n).
-        Matrix& m = matrix_.MutableDense();
-        for (int i = 0; i < s_; ++i) {
-          for (int d = 0; d < n_; ++d) m(i * n_ + d, i * n_ + d) += 1.0;
-          for (int j = 0; j < s_; ++j) {
-            const Matrix& f_y = stage_eval_[static_cast<std::size_t>(j)].F_y.dense();
-            const double scale = -h * tableau_.a(i, j);
-            for (int c = 0; c < n_; ++c) {
-              double* target =
-                  m.data() + static_cast<std::ptrdiff_t>(j * n_ + c) * m.rows() + i * n_;
-              const double* source = f_y.data() + static_cast<std::ptrdiff_t>(c) * n_;
-              for (int r = 0; r < n_; ++r) target[r] += scale * source[r];
-            }
-          }
-        }
-      } else {
-        for (int i = 0; i < s_; ++i) {
-          matrix_.AddDiagonal(i * n_, i * n_, n_, 1.0);
-          for (int j = 0; j < s_; ++j) {
-            matrix_.AddDerivative(i * n_, j * n_, stage_eval_[static_cast<std::size_t>(j)].F_y,
-                                  -h * tableau_.a(i, j));
-          }
+      for (int i = 0; i < s_; ++i) {
+        matrix_.AddDiagonal(i * n_, i * n_, n_, 1.0);
+        for (int j = 0; j < s_; ++j) {
+          matrix_.AddDerivative(i * n_, j * n_, stage_eval_[static_cast<std::size_t>(j)].F_y,
+                                -h * tableau_.a(i, j));
         }
       }
       matrix_.Finalize();

@@ -62,18 +62,25 @@ void SystemMatrix::Reset(int n, bool sparse) {
   }
 }
 
+void SystemMatrix::AddDenseColumns(int row0, int col0, const double* data, Eigen::Index rows,
+                                   Eigen::Index cols, Eigen::Index stride, double scale) {
+  MOREAU_ASSERT(row0 >= 0 && col0 >= 0 && row0 + rows <= n_ && col0 + cols <= n_,
+                "block outside the system matrix");
+  // Plain loops: the blocks are small, where Eigen's block expressions cost more in set-up
+  // than in arithmetic.
+  for (Eigen::Index j = 0; j < cols; ++j) {
+    double* target = dense_.data() + (col0 + j) * n_ + row0;
+    const double* source = data + j * stride;
+    for (Eigen::Index i = 0; i < rows; ++i) target[i] += scale * source[i];
+  }
+}
+
 void SystemMatrix::AddBlock(int row0, int col0, const ConstMatrixRef& block, double scale) {
   MOREAU_ASSERT(row0 >= 0 && col0 >= 0 && row0 + block.rows() <= n_ && col0 + block.cols() <= n_,
                 "block outside the system matrix");
   if (!sparse_) {
-    // Plain loops: the blocks are small, where Eigen's block expressions cost more in set-up
-    // than in arithmetic.
-    const Eigen::Index rows = block.rows();
-    for (Eigen::Index j = 0; j < block.cols(); ++j) {
-      double* target = dense_.data() + (col0 + j) * n_ + row0;
-      const double* source = block.data() + j * block.outerStride();
-      for (Eigen::Index i = 0; i < rows; ++i) target[i] += scale * source[i];
-    }
+    AddDenseColumns(row0, col0, block.data(), block.rows(), block.cols(), block.outerStride(),
+                    scale);
     return;
   }
   for (Eigen::Index j = 0; j < block.cols(); ++j) {
@@ -101,6 +108,11 @@ void SystemMatrix::AddSparseBlock(int row0, int col0, const SparseMatrix& block,
 void SystemMatrix::AddDerivative(int row0, int col0, const DerivativeMatrix& m, double scale) {
   if (m.is_sparse()) {
     AddSparseBlock(row0, col0, m.sparse(), scale);
+  } else if (!sparse_) {
+    // Straight from the matrix: small blocks (the stage Jacobians of the smooth Radau kernel)
+    // are added in every Newton matrix, where building a Ref costs about as much as the adds.
+    const Matrix& block = m.dense();
+    AddDenseColumns(row0, col0, block.data(), block.rows(), block.cols(), block.rows(), scale);
   } else {
     AddBlock(row0, col0, m.dense(), scale);
   }
@@ -172,7 +184,11 @@ void SystemMatrix::AddScaledRow(int row, int col0, int k, double weight,
 
 void SystemMatrix::AddDiagonal(int row0, int col0, int count, double value) {
   MOREAU_ASSERT(row0 + count <= n_ && col0 + count <= n_, "diagonal outside the system matrix");
-  for (int i = 0; i < count; ++i) AddEntry(row0 + i, col0 + i, value);
+  if (!sparse_) {
+    for (int i = 0; i < count; ++i) dense_(row0 + i, col0 + i) += value;
+    return;
+  }
+  for (int i = 0; i < count; ++i) triplets_.emplace_back(row0 + i, col0 + i, value);
 }
 
 void SystemMatrix::AddEntry(int row, int col, double value) {

@@ -70,9 +70,6 @@ class SystemMatrix {
   void Finalize();
 
   const Matrix& dense() const { return dense_; }
-  /// Dense storage: the matrix to write in place after Reset (small systems assembled from a
-  /// few small blocks, where the calls above cost more than their arithmetic).
-  Matrix& MutableDense() { return dense_; }
   const SparseMatrix& sparse_matrix() const { return sparse_matrix_; }
   /// y = A x (after Finalize).
   Vector Multiply(const Vector& x) const;
@@ -84,6 +81,10 @@ class SystemMatrix {
   double InfinityNorm() const;
 
  private:
+  // Dense storage: A(row0 + i, col0 + j) += scale * data[i + j stride], i < rows, j < cols.
+  void AddDenseColumns(int row0, int col0, const double* data, Eigen::Index rows, Eigen::Index cols,
+                       Eigen::Index stride, double scale);
+
   int n_ = 0;
   bool sparse_ = false;
   Matrix dense_;
