@@ -45,6 +45,7 @@ constexpr double kIndicatorFloor = 1e-8;
 // most three local minima in an element; 64 points find a dip narrower than 2% of the element,
 // where it is deeper than the interpolant's change over 1/64 of the element.
 constexpr int kDipSamples = 64;
+double DipSample(int m) { return (m + 0.5) / kDipSamples; }
 // Steps below this many ulps of the time cannot be told apart from zero-length steps.
 constexpr double kMinStepUlps = 64.0;
 
@@ -404,51 +405,53 @@ FesdRun::ErrorEstimate FesdRun::EstimateError(double fraction, std::size_t first
   return estimate;
 }
 
-double FesdRun::IndicatorResolution() const {
-  if (np_ == 0) return 0.0;
+const FesdRun::ResolutionGrid& FesdRun::Resolution() const {
+  ResolutionGrid& grid = resolution_grid_;
+  if (!grid.nodes.empty()) return grid;
   // Nodes: the element start and the stages; test points: the midpoints of the two widest gaps
   // between nodes, where the interpolation error of a function the element does not resolve
   // is largest.
-  std::vector<double> nodes = {0.0};
-  for (int i = 0; i < s_; ++i) nodes.push_back(tableau_.c[i]);
+  grid.nodes = {0.0};
+  for (int i = 0; i < s_; ++i) grid.nodes.push_back(tableau_.c[i]);
+  const std::vector<double>& nodes = grid.nodes;
   std::vector<std::pair<double, double>> gaps;  // (width, midpoint)
   for (std::size_t j = 0; j + 1 < nodes.size(); ++j) {
     gaps.emplace_back(nodes[j + 1] - nodes[j], 0.5 * (nodes[j] + nodes[j + 1]));
   }
   std::sort(gaps.rbegin(), gaps.rend());
-  std::vector<double> tests;
   for (std::size_t j = 0; j < std::min<std::size_t>(2, gaps.size()); ++j) {
-    tests.push_back(gaps[j].second);
+    grid.tests.push_back(gaps[j].second);
   }
-  const std::size_t n = nodes.size();
-  // The interpolation weights of the nodes at theta.
-  auto lagrange = [&](double theta, Vector* basis) {
-    basis->setOnes(static_cast<Eigen::Index>(n));
-    for (std::size_t j = 0; j < n; ++j) {
-      for (std::size_t l = 0; l < n; ++l) {
-        if (l != j)
-          (*basis)[static_cast<Eigen::Index>(j)] *= (theta - nodes[l]) / (nodes[j] - nodes[l]);
+  const auto n = static_cast<Eigen::Index>(nodes.size());
+  // Row: the Lagrange weights of the nodes at theta.
+  auto lagrange = [&](double theta, Matrix* weights, Eigen::Index row) {
+    for (Eigen::Index j = 0; j < n; ++j) {
+      double basis = 1.0;
+      for (Eigen::Index l = 0; l < n; ++l) {
+        if (l != j) basis *= (theta - nodes[l]) / (nodes[j] - nodes[l]);
       }
+      (*weights)(row, j) = basis;
     }
   };
-  // The interpolant on a fine grid of the element, for dips of a free side below zero between
-  // the nodes (below).
-  Vector basis;
-  if (dip_weights_.rows() != kDipSamples) {
-    dip_weights_.resize(kDipSamples, static_cast<Eigen::Index>(n));
-    for (int m = 0; m < kDipSamples; ++m) {
-      lagrange((m + 0.5) / kDipSamples, &basis);
-      dip_weights_.row(m) = basis.transpose();
-    }
+  grid.test_weights.resize(static_cast<Eigen::Index>(grid.tests.size()), n);
+  for (std::size_t t = 0; t < grid.tests.size(); ++t) {
+    lagrange(grid.tests[t], &grid.test_weights, static_cast<Eigen::Index>(t));
   }
+  grid.dip_weights.resize(kDipSamples, n);
+  for (int m = 0; m < kDipSamples; ++m) lagrange(DipSample(m), &grid.dip_weights, m);
+  return grid;
+}
+
+double FesdRun::IndicatorResolution() const {
+  if (np_ == 0) return 0.0;
+  const ResolutionGrid& grid = Resolution();
+  const auto n = static_cast<Eigen::Index>(grid.nodes.size());
   double worst = 0.0;
   IndicatorEvaluation at;
   // Kept across elements (no allocation per element and test point).
   std::vector<int> continuous;
-  Vector v, y, actual, predicted;
-  std::vector<Vector> values(n);
-  Matrix node_values(static_cast<Eigen::Index>(n), np_), dense;
-  std::vector<double> tests_here;
+  Vector v, y, predicted;
+  Matrix node_values(n, np_), dense;
   for (const ElementPolynomial& element : piece_) {
     continuous.clear();
     for (int k = 0; k < np_; ++k) {
@@ -459,55 +462,59 @@ double FesdRun::IndicatorResolution() const {
     }
     if (continuous.empty()) continue;
     v = element.algebraic.col(0);
-    auto indicators = [&](double theta, Vector* out) {
+    auto indicators = [&](double theta) -> const Vector& {
       y = element.y0 + element.increments * tableau_.InterpolationWeights(theta);
       system_.EvaluateEventIndicators(y, v, element.a_zero, Derivatives::kNone, &at);
-      *out = at.values;
+      return at.values;
     };
-    for (std::size_t j = 0; j < n; ++j) {
-      indicators(nodes[j], &values[j]);
-      node_values.row(static_cast<Eigen::Index>(j)) = values[j].transpose();
+    for (Eigen::Index j = 0; j < n; ++j) {
+      node_values.row(j) = indicators(grid.nodes[static_cast<std::size_t>(j)]).transpose();
     }
-    // A free side positive at every node can still dip below zero between them: a contact that
-    // begins and ends inside one element (two bodies in free flight, whose distance is quadratic
-    // in t, pass through each other). Where the interpolant's minimum over the element is below
-    // zero, the free side is evaluated there; negative, it is a switch that was not located.
-    // Where it is not, the interpolant was wrong there and its miss counts as resolution.
-    dense.noalias() = dip_weights_ * node_values;
-    tests_here = tests;
-    for (int k : continuous) {
-      Eigen::Index lowest = 0;
-      const double minimum = dense.col(k).minCoeff(&lowest);
-      if (minimum < -options_.event_tolerance * std::max(1.0, std::fabs(values[0][k]))) {
-        tests_here.push_back((static_cast<double>(lowest) + 0.5) / kDipSamples);
-      }
-    }
-    for (double theta : tests_here) {
-      indicators(theta, &actual);
-      // Lagrange interpolation through the nodes.
-      lagrange(theta, &basis);
+    // The free sides at theta against their interpolant through the nodes (`weights`, a row
+    // of Lagrange weights). Returns false at a negative value: a switch that was not located.
+    auto test = [&](double theta, const auto& weights) {
+      const Vector& actual = indicators(theta);
       predicted.setZero(np_);
-      for (std::size_t j = 0; j < n; ++j) {
-        predicted += basis[static_cast<Eigen::Index>(j)] * values[j];
-      }
+      for (Eigen::Index j = 0; j < n; ++j) predicted += weights[j] * node_values.row(j).transpose();
       for (int k : continuous) {
         double low = actual[k], high = actual[k], size = std::fabs(actual[k]);
         double nearest = std::fabs(actual[k]);  // closest approach to zero
-        for (const Vector& value : values) {
-          low = std::min(low, value[k]);
-          high = std::max(high, value[k]);
-          size = std::max(size, std::fabs(value[k]));
-          nearest = std::min(nearest, std::fabs(value[k]));
+        for (Eigen::Index j = 0; j < n; ++j) {
+          const double value = node_values(j, k);
+          low = std::min(low, value);
+          high = std::max(high, value);
+          size = std::max(size, std::fabs(value));
+          nearest = std::min(nearest, std::fabs(value));
         }
         // A free side negative between the checked points: a switch that was not located.
-        if (actual[k] < -options_.event_tolerance * std::max(1.0, std::fabs(values[0][k]))) {
-          return std::numeric_limits<double>::infinity();
+        if (actual[k] < -options_.event_tolerance * std::max(1.0, std::fabs(node_values(0, k)))) {
+          return false;
         }
         // Relative to the variation over the element, or to the distance from zero where that
         // is larger (a free side that stays far from zero cannot hide a pair of roots).
         worst =
             std::max(worst, std::fabs(actual[k] - predicted[k]) /
                                 (std::max(high - low, nearest) + kIndicatorFloor * (1.0 + size)));
+      }
+      return true;
+    };
+    for (std::size_t t = 0; t < grid.tests.size(); ++t) {
+      if (!test(grid.tests[t], grid.test_weights.row(static_cast<Eigen::Index>(t)))) {
+        return std::numeric_limits<double>::infinity();
+      }
+    }
+    // A free side positive at every node can still dip below zero between them: a contact that
+    // begins and ends inside one element (two bodies in free flight, whose distance is quadratic
+    // in t, pass through each other). Where the interpolant's minimum over the element is below
+    // zero, the free side is evaluated there; negative, it is a switch that was not located.
+    // Where it is not, the interpolant was wrong there and its miss counts as resolution.
+    dense.noalias() = grid.dip_weights * node_values;
+    for (int k : continuous) {
+      Eigen::Index lowest = 0;
+      const double minimum = dense.col(k).minCoeff(&lowest);
+      if (minimum < -options_.event_tolerance * std::max(1.0, std::fabs(node_values(0, k))) &&
+          !test(DipSample(static_cast<int>(lowest)), grid.dip_weights.row(lowest))) {
+        return std::numeric_limits<double>::infinity();
       }
     }
   }

@@ -15,14 +15,6 @@ namespace moreau::internal {
 // Captures the elements of the system just solved (group_ holds its stage data and Newton
 // its factorization). a0, b0: pair sides at the last stage before it (boundary values).
 // `remaining` is the element count that fixed the lengths (h = rest / remaining).
-SolveRecord FesdRun::Record(const Vector& w, double h, bool ends_at_switch,
-                            const SemismoothNewtonResult& solved, int remaining, const Vector& a0,
-                            const Vector& b0) {
-  SolveRecord record;
-  Record(w, h, ends_at_switch, solved, remaining, a0, b0, &record);
-  return record;
-}
-
 // Overwrites every part of *out that a record sets, reusing its vectors (a kept record: no
 // allocation per element once their sizes are reached).
 void FesdRun::Record(const Vector& w, double h, bool ends_at_switch,

@@ -347,10 +347,8 @@ class FesdRun {
 
   // Captures the elements of the system just solved (group_ holds its stage data and Newton
   // its factorization). a0, b0: pair sides at the last stage before it (boundary values).
-  // `remaining` is the element count that fixed the lengths (h = rest / remaining).
-  SolveRecord Record(const Vector& w, double h, bool ends_at_switch,
-                     const SemismoothNewtonResult& solved, int remaining, const Vector& a0,
-                     const Vector& b0);
+  // `remaining` is the element count that fixed the lengths (h = rest / remaining). Fills
+  // *out, reusing its vectors (a kept record: no allocation per element).
   void Record(const Vector& w, double h, bool ends_at_switch, const SemismoothNewtonResult& solved,
               int remaining, const Vector& a0, const Vector& b0, SolveRecord* out);
 
@@ -431,6 +429,8 @@ class FesdRun {
   // the interpolant through the start and the stages, the range over all of them. Infinity
   // if a free side is negative at a test point (a switch between the checked points).
   double IndicatorResolution() const;
+  struct ResolutionGrid;
+  const ResolutionGrid& Resolution() const;
 
   // Solves one fixed-length element from y0 with the given statuses (comparison solutions of
   // EstimateError), initial guess from the piece's collocation polynomials. Returns false if
@@ -542,9 +542,15 @@ class FesdRun {
   mutable Vector closed_theta_;       // and its relays' theta (RelayTheta)
   mutable Vector consistent_z_;       // ConsistentGuess's result
   mutable Vector relay_stage_z_;      // RelayStageAlgebraic's result
-  // IndicatorResolution's interpolation weights of the element's nodes at the dip search's
-  // sample points (kDipSamples x (s + 1); they depend on the tableau only: made once per run).
-  mutable Matrix dip_weights_;
+  // IndicatorResolution's points in an element (fractions of it) and the Lagrange weights of
+  // the nodes there; they depend on the tableau only (Resolution: made once per run).
+  struct ResolutionGrid {
+    std::vector<double> nodes;  // 0, c_1, ..., c_s
+    std::vector<double> tests;  // the midpoints of the two widest gaps between nodes
+    Matrix test_weights;        // row t: the weights at tests[t]
+    Matrix dip_weights;         // row m: the weights at the dip search's sample m
+  };
+  mutable ResolutionGrid resolution_grid_;
   Vector boundary_scaled_;  // DecideAtBoundary's scaled indicators
   // The consistent velocity level and indicators that EndViolation solved at an element's end
   // state, which is its last stage (c_s = 1), from that stage's evaluation and algebraic

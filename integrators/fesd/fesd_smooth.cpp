@@ -322,7 +322,7 @@ bool FesdRun::ReducedSwitchGuess(const std::vector<Vector>& trial_w, const Vecto
     // m elements, to the elements' local error), so f'(h) = weight (d iota/dy) m F(y_end) /
     // (h / h_trial)^p - p f(h) / h.
     PointEvaluation& field = switch_field_;
-    system_.Evaluate(y_end, relay_field_z_, Derivatives::kNone, &field);
+    system_.EvaluateField(y_end, relay_field_z_, Derivatives::kNone, &field);
     system_.EvaluateEventIndicators(y_end, level, a_zero_, Derivatives::kStates, &indicator);
     const double rate = m * indicator.d_y.Row(pair).dot(field.F);
     const double slope = weight * rate / std::pow(b / h_trial, power) - power * fb / b;
