@@ -48,6 +48,39 @@ void TypedFunction::SparseHessianDirection(const ConstVectorRef& x, const ConstV
   sparse_->HessianDirection(this, x, u, t, p, wrt, direction, rows_matrix, rows);
 }
 
+void TypedFunction::DenseHessianDirection(const ConstVectorRef& x, const ConstVectorRef& u,
+                                          double t, const ConstVectorRef& p, Wrt wrt,
+                                          const ConstVectorRef& direction, Matrix* rows) {
+  const int nx = static_cast<int>(x.size()), nu = static_cast<int>(u.size()),
+            np = static_cast<int>(p.size());
+  const int columns = wrt.Columns(nx, nu, np);
+  MOREAU_ASSERT(columns <= Dual1::kCapacity && direction.size() == columns,
+                "dense Hessian direction: too many columns or a direction of the wrong size");
+  rows->setZero(num_outputs_, columns);
+  if (space2_ == nullptr) space2_ = std::make_unique<Space<Dual2>>();
+  Space<Dual2>& space2 = *space2_;
+  // Selected input `column`: outer derivative direction `column`, inner derivative its
+  // direction entry (a constant inner part where that entry is zero, as the sparse path).
+  auto seed = [&](double value, int column) {
+    const double d = direction[column];
+    Dual1 inner(value);
+    if (d != 0.0) {
+      inner = Dual1(value, 1);
+      inner.d(0) = d;
+    }
+    return Dual2::Variable(inner, columns, column);
+  };
+  SeedInputs(&space2, x, u, t, p, wrt, seed);
+  Call(space2.x.data(), nx, space2.u.data(), nu, space2.t, space2.p.data(), np, space2.out.data());
+  for (int k = 0; k < num_outputs_; ++k) {
+    const Dual2& value = space2.out[static_cast<std::size_t>(k)];
+    for (int j = 0; j < value.size(); ++j) {
+      const Dual1& column = value.d(j);
+      if (column.size() > 0) (*rows)(k, j) = column.d(0);
+    }
+  }
+}
+
 SparseDerivativeStats TypedFunction::sparse_derivative_stats() const {
   return sparse_ ? sparse_->stats() : SparseDerivativeStats{};
 }
@@ -119,6 +152,8 @@ void TypedFunction::WeightedHessian(const ConstVectorRef& x, const ConstVectorRe
     hessian_support_ = {nx, nu, np, !pattern.point_dependent && pattern.hess_first.empty()};
   }
   if (hessian_support_.empty) return;  // every output is affine: the Hessian is zero
+  if (space2_ == nullptr) space2_ = std::make_unique<Space<Dual2>>();
+  Space<Dual2>& space2 = *space2_;
   constexpr int kChunk = Dual1::kCapacity;
   // Outer level seeds rows [row0, row0 + rows), inner level columns [col0, col0 + cols).
   for (int row0 = 0; row0 < columns; row0 += kChunk) {
@@ -134,11 +169,11 @@ void TypedFunction::WeightedHessian(const ConstVectorRef& x, const ConstVectorRe
         }
         return Dual2(inner);
       };
-      SeedInputs(&space2_, x, u, t, p, wrt, seed);
-      Call(space2_.x.data(), nx, space2_.u.data(), nu, space2_.t, space2_.p.data(), np,
-           space2_.out.data());
+      SeedInputs(&space2, x, u, t, p, wrt, seed);
+      Call(space2.x.data(), nx, space2.u.data(), nu, space2.t, space2.p.data(), np,
+           space2.out.data());
       for (int k = 0; k < num_outputs_; ++k) {
-        const Dual2& value = space2_.out[static_cast<std::size_t>(k)];
+        const Dual2& value = space2.out[static_cast<std::size_t>(k)];
         if (weights[k] == 0.0) continue;
         for (int i = 0; i < value.size(); ++i) {
           const Dual1& row = value.d(i);

@@ -89,6 +89,25 @@ void ArgumentMatrix::HessianDirections(const BlockContext& context, const Smooth
   direction_.setZero(wrt.Columns(nx_, nu_, np_));
   direction_.head(nx_) = direction.head(nx_);
   direction_[all_ ? nx_ + nu_ : nx_] = direction[clock_];
+  TypedFunction* typed = function.typed();
+  if (!is_sparse_ && typed != nullptr && direction_.size() <= Dual1::kCapacity) {
+    // Few columns: one dense Dual2 pass, without the sparse path's per-function set-up
+    // (sparsity detection, colouring, plans: F1's one switch spent more on it than on the
+    // group solve). Rows outside `outputs` are zero, as in the sparse path.
+    typed->DenseHessianDirection(x_, *context.inputs, t, *context.parameters, wrt, direction_,
+                                 &dense_);
+    if (outputs != nullptr) {
+      std::size_t next = 0;
+      for (int k = 0; k < rows_; ++k) {
+        if (next < outputs->size() && (*outputs)[next] == k) {
+          ++next;
+        } else {
+          dense_.row(k).setZero();
+        }
+      }
+    }
+    return;
+  }
   // Second derivatives along one direction by compressed Dual2 passes (one per 16 colours of
   // the outputs' Hessian supports) in both storages: a dense Hessian per output would cost
   // m times (inputs / 16)^2 passes.

@@ -56,7 +56,7 @@ class ArgumentMatrix {
   // The time column's entry of row k.
   double TimeEntry(int k) const;
   // Row k = (d^2 g_k / d(args)^2 . d)^T, d the direction in y-space (x and clock components
-  // taken), for the outputs in `outputs` (nullptr: all; dense storage computes them all).
+  // taken), for the outputs in `outputs` (nullptr: all; the other rows are zero).
   void HessianDirections(const BlockContext& context, const SmoothFunction& function,
                          const ConstVectorRef& y, const ConstVectorRef& direction,
                          Derivatives derivatives, const std::vector<int>* outputs = nullptr);

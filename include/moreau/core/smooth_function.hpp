@@ -282,6 +282,15 @@ class TypedFunction : public SmoothFunction::Concept {
                               const ConstVectorRef& p, Wrt wrt, const ConstVectorRef& direction,
                               SparseMatrix* rows_matrix, const std::vector<int>* rows) override;
   SparseDerivativeStats sparse_derivative_stats() const;
+  // Dense counterpart of SparseHessianDirection for at most Dual1::kCapacity selected columns:
+  // rows(k, j) = (d^2 g_k / d(selected)^2 . direction)_j for every output, from one Dual2
+  // evaluation (outer directions: the selected columns; inner: the direction). No sparsity
+  // detection or colouring: for small functions that set-up would cost many evaluations. The
+  // entries are those of the sparse path, whose colours of one output are distinct columns
+  // (the outer derivatives add the same products); its structural zeros are computed zeros.
+  void DenseHessianDirection(const ConstVectorRef& x, const ConstVectorRef& u, double t,
+                             const ConstVectorRef& p, Wrt wrt, const ConstVectorRef& direction,
+                             Matrix* rows);
 
   // out[0..num_outputs()) = g(x, u, t, p) in the scalar type; `out` is zeroed by the caller.
   virtual void Call(const double* x, int nx, const double* u, int nu, const double& t,
@@ -310,7 +319,9 @@ class TypedFunction : public SmoothFunction::Concept {
   void SeedInputs(Space<T>* space, const ConstVectorRef& x, const ConstVectorRef& u, double t,
                   const ConstVectorRef& p, Wrt wrt, Seed&& seed);
   Space<Dual1> space1_;
-  Space<Dual2> space2_;
+  // Made at the first dense WeightedHessian: its scalar t alone is a Dual2 (~2.3 kB), which
+  // would make every function object, and every copy of a scene, a large allocation.
+  std::unique_ptr<Space<Dual2>> space2_;
   // Whether every output has a zero Hessian (all of them affine in the arguments), from the
   // traced pattern for the argument sizes of the last WeightedHessian call; such a Hessian
   // needs no Dual2 evaluation (a moving set's linear constraint, as S3's floor). Patterns
