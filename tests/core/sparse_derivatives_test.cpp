@@ -114,6 +114,43 @@ void CompareWithDense(const SmoothFunction& f, const Point& point, Wrt wrt,
   ASSERT_NO_FATAL_FAILURE(ExpectClose(Matrix(*hess), dense_hess, where + " Hessian"));
 }
 
+// The dense Hessian direction (functions of at most 16 columns, used by the lowered blocks in
+// dense storage) against the sparse one and against the Hessian of each output times the
+// direction. The sparse path seeds one input per colour of an output's support, the dense one
+// every column: the same products, the other colours' contributions being exact zeros, so the
+// two agree exactly (== treats -0 and +0 alike); the per-output Hessians sum in another order
+// (kDerivativeTolerance).
+void CompareHessianDirections(const SmoothFunction& f, const Point& point, Wrt wrt,
+                              const Vector& direction, const std::string& where) {
+  internal::TypedFunction* typed = f.typed();
+  const int columns =
+      wrt.Columns(static_cast<int>(point.x.size()), static_cast<int>(point.u.size()),
+                  static_cast<int>(point.p.size()));
+  if (typed == nullptr || columns > internal::Dual1::kCapacity) return;
+  Matrix dense;
+  typed->DenseHessianDirection(point.x, point.u, point.t, point.p, wrt, direction, &dense);
+  SparseMatrix sparse;
+  f.SparseHessianDirection(point.x, point.u, point.t, point.p, wrt, direction, &sparse);
+  const Matrix from_sparse(sparse);
+  ASSERT_EQ(dense.rows(), from_sparse.rows()) << where;
+  ASSERT_EQ(dense.cols(), from_sparse.cols()) << where;
+  for (Eigen::Index k = 0; k < dense.rows(); ++k) {
+    for (Eigen::Index j = 0; j < dense.cols(); ++j) {
+      ASSERT_EQ(dense(k, j), from_sparse(k, j))
+          << where << ": Hessian direction entry (" << k << ", " << j << ")";
+    }
+  }
+  Matrix expected(f.num_outputs(), columns), hessian;
+  Vector unit = Vector::Zero(f.num_outputs());
+  for (int k = 0; k < f.num_outputs(); ++k) {
+    unit.setZero();
+    unit[k] = 1.0;
+    f.WeightedHessian(point.x, point.u, point.t, point.p, wrt, unit, &hessian);
+    expected.row(k) = (hessian * direction).transpose();
+  }
+  ASSERT_NO_FATAL_FAILURE(ExpectClose(dense, expected, where + " Hessian direction"));
+}
+
 // A point near the scene's initial data: states and inputs perturbed by up to 10% of their
 // scale, time inside the horizon, parameters by up to 1% (keeps every catalog function in its
 // domain: positive densities, speeds and radii stay positive).
@@ -194,6 +231,11 @@ void CheckScene(const Scene& scene, unsigned seed) {
           EXPECT_TRUE(SamePattern(hess_first, hess_second)) << what << ": Hessian pattern moved";
         }
         if (f.typed() == nullptr) continue;
+        Vector direction(jac_first.cols());
+        for (Eigen::Index j = 0; j < direction.size(); ++j) {
+          direction[j] = coin(rng) ? weight(rng) : 0.0;  // some zero: inner constants
+        }
+        ASSERT_NO_FATAL_FAILURE(CompareHessianDirections(f, first, wrt, direction, what));
         // Zero weights: the same pattern, all zero, and no second-order evaluation.
         f.SparseWeightedHessian(second.x, second.u, second.t, second.p, wrt, Vector::Zero(m),
                                 &hess_zero, rows);
@@ -443,21 +485,21 @@ TEST(SparseCostTest, ManyColoursSpanSeveralChunksOfDirections) {
   // chunk pairs (0,0), (0,1), (1,1)). A coupled and a diagonal Hessian per window.
   constexpr int kInputs = 64, kWindow = 24, kStride = 4;
   constexpr int kOutputs = (kInputs - kWindow) / kStride + 1;
-  const SmoothFunction coupled = MakeSmoothFunction(
-      "windows", 2 * kOutputs,
-      [](const auto& x, const auto&, const auto& t, const auto&, auto& out) {
-        using std::exp;
-        for (int k = 0; k < kOutputs; ++k) {
-          auto sum = 0.0 * t;
-          auto squares = 0.0 * t;
-          for (int i = k * kStride; i < k * kStride + kWindow; ++i) {
-            sum += (0.01 * i + 0.1) * x[i];
-            squares += x[i] * x[i];
-          }
-          out[2 * k] = exp(sum) * x[k * kStride] + t * x[k * kStride + 1];
-          out[2 * k + 1] = squares;
-        }
-      });
+  const SmoothFunction coupled =
+      MakeSmoothFunction("windows", 2 * kOutputs,
+                         [](const auto& x, const auto&, const auto& t, const auto&, auto& out) {
+                           using std::exp;
+                           for (int k = 0; k < kOutputs; ++k) {
+                             auto sum = 0.0 * t;
+                             auto squares = 0.0 * t;
+                             for (int i = k * kStride; i < k * kStride + kWindow; ++i) {
+                               sum += (0.01 * i + 0.1) * x[i];
+                               squares += x[i] * x[i];
+                             }
+                             out[2 * k] = exp(sum) * x[k * kStride] + t * x[k * kStride + 1];
+                             out[2 * k + 1] = squares;
+                           }
+                         });
   Point at;
   at.x = Vector::LinSpaced(kInputs, -0.8, 0.9);
   at.t = 0.4;
