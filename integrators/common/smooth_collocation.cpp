@@ -37,7 +37,8 @@ SmoothCollocationSolver::Outcome SmoothCollocationSolver::Solve(double h, const 
           with_jacobian ? stage_eval_[static_cast<std::size_t>(j)] : value_eval_;
       // F and F_y alone (the algebraic unknowns are fixed: G, A, B are not read).
       system_->EvaluateField(point_, fixed_algebraic_,
-                             with_jacobian ? Derivatives::kStates : Derivatives::kNone, &eval);
+                             with_jacobian ? Derivatives::kStates : Derivatives::kNone, &eval,
+                             switching_mode_);
       ++function_evaluations_;
       if (!eval.F.allFinite()) return Outcome::kNonFinite;
       stage_f_.col(j) = eval.F;

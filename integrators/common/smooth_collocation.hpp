@@ -61,6 +61,13 @@ class SmoothCollocationSolver {
     have_jacobian_ = false;  // another field
   }
 
+  // Collocates the field of Stewart mode `mode` alone (LoweredSystem::EvaluateField's
+  // switching_mode; -1, the default: the system's field). Fixed for the solver's lifetime.
+  void SetSwitchingMode(int mode) {
+    switching_mode_ = mode;
+    have_jacobian_ = false;
+  }
+
   // Solves from the stage increments in z (n_y x s, column j = Z_j); z holds the result.
   Outcome Solve(double h, const Vector& y0, const Stopping& stopping, Matrix* z, int* iterations);
 
@@ -76,6 +83,7 @@ class SmoothCollocationSolver {
                          const Stopping& stopping) const;
 
   LoweredSystem* system_;
+  int switching_mode_ = -1;  // SetSwitchingMode
   const RadauTableau& tableau_;
   int n_, s_;
   std::unique_ptr<LinearSolver> solver_;

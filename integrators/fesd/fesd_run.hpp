@@ -495,8 +495,9 @@ class FesdRun {
   long factorizations_ = 0;
   Matrix sensitivity_;                                         // d(y, tau) / d(x0, p, u)
   std::unique_ptr<internal::SmoothCollocationSolver> smooth_;  // elements without pairs
-  // Smooth elements: per field its own lowered system and Radau IIA solver, built on first
-  // use; empty if the scene does not reduce.
+  // Smooth elements: per field a Radau IIA solver, built on first use, and for free moving sets
+  // the lowered system of the dynamics alone (Stewart modes and relays evaluate their fields
+  // on system_ itself); empty if the scene does not reduce.
   struct FieldSolver {
     std::unique_ptr<LoweredSystem> system;
     std::unique_ptr<internal::SmoothCollocationSolver> solver;

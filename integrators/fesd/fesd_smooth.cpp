@@ -158,6 +158,18 @@ internal::SmoothCollocationSolver* FesdRun::SmoothFieldSolver(const std::vector<
     field.solver->SetFixedAlgebraic(relay_field_z_);
     return field.solver.get();
   }
+  if (reduction_ == Reduction::kStewartMode) {
+    // The lowered system itself, evaluating mode `index`'s field alone (EvaluateField's
+    // switching_mode): the same F and F_y as a system lowered from that mode's dynamics, without
+    // lowering one per mode in every run. The algebraic unknowns are not read.
+    if (field.solver == nullptr) {
+      field.solver = std::make_unique<internal::SmoothCollocationSolver>(
+          &system_, s_, options_.newton.linear_solver);
+      field.solver->SetFixedAlgebraic(Vector::Zero(nz_));
+      field.solver->SetSwitchingMode(index);
+    }
+    return field.solver.get();
+  }
   if (field.solver == nullptr) {
     // The scene without its effects, built member by member: copying it whole would clone
     // every effect's functions only to drop them (SmoothFunction copies are deep).
@@ -171,10 +183,7 @@ internal::SmoothCollocationSolver* FesdRun::SmoothFieldSolver(const std::vector<
     smooth.parameters = scene.parameters;
     smooth.inputs = scene.inputs;
     smooth.time_scale_input = scene.time_scale_input;
-    smooth.dynamics = reduction_ == Reduction::kStewartMode
-                          ? std::get<SwitchingSurfaces>(scene.effects.front())
-                                .modes[static_cast<std::size_t>(index)]
-                          : scene.dynamics;
+    smooth.dynamics = scene.dynamics;  // kFreeMovingSets: the dynamics without the sets
     field.system = std::make_unique<LoweredSystem>(smooth, Lowering(options_));
     if (field.system->num_states() != ny_ || field.system->num_algebraic() != 0) {
       reduction_ = Reduction::kNone;  // another layout: never reduce

@@ -167,6 +167,18 @@ class StewartBlock final : public SwitchingBlockBase {
     const int z0 = layout.z_offset;  // theta at z0, lambda at z0 + m, mu at z0 + 2m
     const int g0 = layout.g_offset;
     const int k0 = layout.pair_offset;
+    if (context.switching_mode >= 0) {
+      // EvaluateField of one mode (theta = e_mode): x' = f_mode, added with its Jacobian rows
+      // of weight 1 exactly as a system lowered from the dynamics f_mode adds them (FESD's
+      // smooth elements; G, A, B are not read).
+      const auto i = static_cast<std::size_t>(context.switching_mode);
+      mode_field_.Jacobian(context, effect_.modes[i], y, derivatives, &mode_values_);
+      out->F.head(nx) += mode_values_;
+      if (derivatives != Derivatives::kNone) {
+        mode_field_.AddRows(0, nx, 1.0, 0, &out->F_y, &out->F_u, &out->F_p);
+      }
+      return;
+    }
     EvaluateSurfacesAndModes(context, y, derivatives);
     const auto theta = z.segment(z0, m);
     const auto lambda = z.segment(z0 + m, m);
@@ -316,6 +328,8 @@ class StewartBlock final : public SwitchingBlockBase {
 
  private:
   Vector guess_g_;  // InitialGuess's g, kept (it is called for every stage of every element)
+  ArgumentMatrix mode_field_;  // one mode's field (BlockContext::switching_mode)
+  Vector mode_values_;
 };
 
 // Heaviside step form: one alpha_j in [0, 1] per surface,

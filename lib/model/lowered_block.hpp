@@ -38,6 +38,9 @@ struct BlockContext {
   // Set by LoweredSystem::EvaluateField: only F and its derivatives are wanted; a block may
   // leave its G, A, B rows and their derivatives unwritten (they are not read).
   bool field_only = false;
+  // With field_only, >= 0: the field of Stewart mode `switching_mode` alone (theta held at the
+  // unit vector e_mode; LoweredSystem::EvaluateField).
+  int switching_mode = -1;
 };
 
 // A matrix whose columns follow a smooth model function's argument layout x, [u], t, [p]

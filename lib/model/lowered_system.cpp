@@ -507,7 +507,7 @@ std::vector<Event> LoweredSystem::StatusEvents(double t, const std::vector<bool>
 void LoweredSystem::EvaluatePoint(const ConstVectorRef& y, const ConstVectorRef& z,
                                   Derivatives derivatives,
                                   const std::vector<PairRole>* velocity_roles, PointEvaluation* out,
-                                  bool field_only) const {
+                                  bool field_only, int switching_mode) const {
   MOREAU_ASSERT(y.size() == num_states_ && z.size() == num_algebraic_,
                 "LoweredSystem::Evaluate: wrong point size");
   const int nx = scene_.num_states();
@@ -518,35 +518,52 @@ void LoweredSystem::EvaluatePoint(const ConstVectorRef& y, const ConstVectorRef&
   const int clock = clock_index();
 
   out->F.setZero(ny);
-  out->G.setZero(num_equations_);
-  out->A.setZero(num_pairs_);
-  out->B.setZero(num_pairs_);
   const bool with_states = derivatives != Derivatives::kNone;
   const bool with_all = derivatives == Derivatives::kAll;
+  if (field_only) {
+    // EvaluateField: G, A, B and their derivatives are sized but not read (blocks may still
+    // write them), so they are not zeroed: at FESD's smooth elements this zeroing cost more
+    // than the field.
+    out->G.resize(num_equations_);
+    out->A.resize(num_pairs_);
+    out->B.resize(num_pairs_);
+  } else {
+    out->G.setZero(num_equations_);
+    out->A.setZero(num_pairs_);
+    out->B.setZero(num_pairs_);
+  }
+  auto unread = [this, field_only](DerivativeMatrix* m, int rows, int cols) {
+    if (field_only) {
+      m->SetShape(rows, cols, sparse_);
+    } else {
+      m->SetZero(rows, cols, sparse_);
+    }
+  };
   if (with_states) {
     out->F_y.SetZero(ny, ny, sparse_);
     out->F_z.SetZero(ny, nz, sparse_);
-    out->G_y.SetZero(num_equations_, ny, sparse_);
-    out->G_z.SetZero(num_equations_, nz, sparse_);
-    out->A_y.SetZero(num_pairs_, ny, sparse_);
-    out->A_z.SetZero(num_pairs_, nz, sparse_);
-    out->B_y.SetZero(num_pairs_, ny, sparse_);
-    out->B_z.SetZero(num_pairs_, nz, sparse_);
+    unread(&out->G_y, num_equations_, ny);
+    unread(&out->G_z, num_equations_, nz);
+    unread(&out->A_y, num_pairs_, ny);
+    unread(&out->A_z, num_pairs_, nz);
+    unread(&out->B_y, num_pairs_, ny);
+    unread(&out->B_z, num_pairs_, nz);
   }
   if (with_all) {
     out->F_u.SetZero(ny, nu, sparse_);
-    out->G_u.SetZero(num_equations_, nu, sparse_);
-    out->A_u.SetZero(num_pairs_, nu, sparse_);
-    out->B_u.SetZero(num_pairs_, nu, sparse_);
+    unread(&out->G_u, num_equations_, nu);
+    unread(&out->A_u, num_pairs_, nu);
+    unread(&out->B_u, num_pairs_, nu);
     out->F_p.SetZero(ny, np, sparse_);
-    out->G_p.SetZero(num_equations_, np, sparse_);
-    out->A_p.SetZero(num_pairs_, np, sparse_);
-    out->B_p.SetZero(num_pairs_, np, sparse_);
+    unread(&out->G_p, num_equations_, np);
+    unread(&out->A_p, num_pairs_, np);
+    unread(&out->B_p, num_pairs_, np);
   }
 
   internal::BlockContext context{nx, clock, &inputs_, &parameters_};
   context.sparse = sparse_;
   context.field_only = field_only;
+  context.switching_mode = field_only ? switching_mode : -1;
   // Smooth dynamics: x' = f(x, u, clock, p); clock' = 1.
   out->F[clock] = 1.0;
   if (!scene_.dynamics.empty()) {

@@ -24,6 +24,19 @@ class DerivativeMatrix {
  public:
   /// A rows x cols matrix of zeros in the given storage (true: sparse).
   void SetZero(int rows, int cols, bool sparse);
+  /// SetZero's shape and storage without zeroing the dense entries (their values are then
+  /// unspecified): for blocks that will be written but not read (LoweredSystem::EvaluateField's
+  /// G, A, B derivatives). Sparse storage starts empty, as after SetZero.
+  void SetShape(int rows, int cols, bool sparse) {
+    if (sparse || dense_.rows() != rows || dense_.cols() != cols) {
+      SetZero(rows, cols, sparse);
+      return;
+    }
+    rows_ = rows;
+    cols_ = cols;
+    sparse_ = false;
+    finalized_ = true;
+  }
   int rows() const { return rows_; }
   int cols() const { return cols_; }
   bool is_sparse() const { return sparse_; }

@@ -261,9 +261,14 @@ class LoweredSystem {
   /// G, A, B and their derivatives are sized but unspecified (blocks may skip them). For
   /// integrators of the field with the algebraic unknowns held fixed (the smooth elements of
   /// FESD: Radau IIA steps of the field the statuses leave).
+  ///
+  /// switching_mode >= 0 (a scene whose only effect is one switching effect in Stewart's form,
+  /// without other dynamics): F is the field f_mode of that mode alone, x' = f_mode(x), as if
+  /// theta were the unit vector e_mode (z is not read). Bitwise the F and F_y of a system
+  /// lowered from the dynamics f_mode, without lowering one per mode.
   void EvaluateField(const ConstVectorRef& y, const ConstVectorRef& z, Derivatives derivatives,
-                     PointEvaluation* out) const {
-    EvaluatePoint(y, z, derivatives, nullptr, out, /*field_only=*/true);
+                     PointEvaluation* out, int switching_mode = -1) const {
+    EvaluatePoint(y, z, derivatives, nullptr, out, /*field_only=*/true, switching_mode);
   }
 
   /// Velocity-level structure: continuous algebraic unknowns (rates at velocity level) and
@@ -393,10 +398,10 @@ class LoweredSystem {
   bool VelocityLevelIsLinear() const;
   // Evaluate; with `velocity_roles` (EvaluateVelocityLevel, z = v) blocks see the roles and v
   // in their context (BlockContext::velocity_roles).
-  // field_only: EvaluateField (BlockContext::field_only).
+  // field_only, switching_mode: EvaluateField (BlockContext::field_only, switching_mode).
   void EvaluatePoint(const ConstVectorRef& y, const ConstVectorRef& z, Derivatives derivatives,
                      const std::vector<PairRole>* velocity_roles, PointEvaluation* out,
-                     bool field_only = false) const;
+                     bool field_only = false, int switching_mode = -1) const;
   // Completes sparse accumulation (DerivativeMatrix::Finalize) of the requested blocks.
   void FinalizeEvaluation(Derivatives derivatives, PointEvaluation* out) const;
 
