@@ -437,6 +437,14 @@ const FesdRun::ResolutionGrid& FesdRun::Resolution() const {
   for (std::size_t t = 0; t < grid.tests.size(); ++t) {
     lagrange(grid.tests[t], &grid.test_weights, static_cast<Eigen::Index>(t));
   }
+  for (double theta : grid.nodes)
+    grid.node_state_weights.push_back(tableau_.InterpolationWeights(theta));
+  for (double theta : grid.tests)
+    grid.test_state_weights.push_back(tableau_.InterpolationWeights(theta));
+  grid.differences.resize(n, n);
+  for (Eigen::Index j = 0; j < n; ++j) {
+    for (Eigen::Index l = 0; l < n; ++l) grid.differences(l, j) = nodes[j] - nodes[l];
+  }
   grid.dip_weights.resize(kDipSamples, n);
   for (int m = 0; m < kDipSamples; ++m) lagrange(DipSample(m), &grid.dip_weights, m);
   return grid;
@@ -462,18 +470,22 @@ double FesdRun::IndicatorResolution() const {
     }
     if (continuous.empty()) continue;
     v = element.algebraic.col(0);
-    auto indicators = [&](double theta) -> const Vector& {
-      y = element.y0 + element.increments * tableau_.InterpolationWeights(theta);
+    // The free sides at the point of the element's collocation polynomial whose interpolation
+    // weights (RadauTableau::InterpolationWeights) are `state_weights`.
+    auto indicators = [&](const Vector& state_weights) -> const Vector& {
+      y = element.y0 + element.increments * state_weights;
       system_.EvaluateEventIndicators(y, v, element.a_zero, Derivatives::kNone, &at);
       return at.values;
     };
     for (Eigen::Index j = 0; j < n; ++j) {
-      node_values.row(j) = indicators(grid.nodes[static_cast<std::size_t>(j)]).transpose();
+      node_values.row(j) =
+          indicators(grid.node_state_weights[static_cast<std::size_t>(j)]).transpose();
     }
-    // The free sides at theta against their interpolant through the nodes (`weights`, a row
-    // of Lagrange weights). Returns false at a negative value: a switch that was not located.
-    auto test = [&](double theta, const auto& weights) {
-      const Vector& actual = indicators(theta);
+    // The free sides at a point (`state_weights` as above) against their interpolant through
+    // the nodes (`weights`, a row of Lagrange weights). Returns false at a negative value: a
+    // switch that was not located.
+    auto test = [&](const Vector& state_weights, const auto& weights) {
+      const Vector& actual = indicators(state_weights);
       predicted.setZero(np_);
       for (Eigen::Index j = 0; j < n; ++j) predicted += weights[j] * node_values.row(j).transpose();
       for (int k : continuous) {
@@ -499,7 +511,7 @@ double FesdRun::IndicatorResolution() const {
       return true;
     };
     for (std::size_t t = 0; t < grid.tests.size(); ++t) {
-      if (!test(grid.tests[t], grid.test_weights.row(static_cast<Eigen::Index>(t)))) {
+      if (!test(grid.test_state_weights[t], grid.test_weights.row(static_cast<Eigen::Index>(t)))) {
         return std::numeric_limits<double>::infinity();
       }
     }
@@ -513,7 +525,8 @@ double FesdRun::IndicatorResolution() const {
       Eigen::Index lowest = 0;
       const double minimum = dense.col(k).minCoeff(&lowest);
       if (minimum < -options_.event_tolerance * std::max(1.0, std::fabs(node_values(0, k))) &&
-          !test(DipSample(static_cast<int>(lowest)), grid.dip_weights.row(lowest))) {
+          !test(tableau_.InterpolationWeights(DipSample(static_cast<int>(lowest))),
+                grid.dip_weights.row(lowest))) {
         return std::numeric_limits<double>::infinity();
       }
     }

@@ -515,6 +515,7 @@ class FesdRun {
   Matrix smooth_z_, last_z_matrix_, extrapolation_;
   // ReducedSwitchGuess's stage increments per element and field evaluation (kept across groups).
   std::vector<Matrix> switch_z_;
+  std::vector<double> crossing_values_;  // CrossingGuess's node values (kept: no allocation)
   PointEvaluation switch_field_;
   double extrapolation_ratio_ = -1.0;
   // Adaptive steps and dense output.
@@ -549,6 +550,10 @@ class FesdRun {
     std::vector<double> tests;  // the midpoints of the two widest gaps between nodes
     Matrix test_weights;        // row t: the weights at tests[t]
     Matrix dip_weights;         // row m: the weights at the dip search's sample m
+    // The collocation polynomial's weights (RadauTableau::InterpolationWeights) at the nodes
+    // and the tests.
+    std::vector<Vector> node_state_weights, test_state_weights;
+    Matrix differences;  // (l, j): nodes[j] - nodes[l] (CrossingGuess's denominators)
   };
   mutable ResolutionGrid resolution_grid_;
   Vector boundary_scaled_;  // DecideAtBoundary's scaled indicators

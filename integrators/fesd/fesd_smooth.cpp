@@ -410,22 +410,34 @@ double FesdRun::CrossingGuess(const std::vector<Vector>& trial_w, const Vector& 
   for (int e = 0; e < element; ++e) {
     y0 += trial_w[static_cast<std::size_t>(e)].segment(stages.state_offset(s_ - 1), ny_);
   }
-  std::vector<double> nodes = {0.0}, values;
+  // The nodes 0, c_1, ..., c_s and their differences are the tableau's (Resolution: made once
+  // per run); the node values are kept across calls (no allocation per switch).
+  const ResolutionGrid& grid = Resolution();
+  const std::vector<double>& nodes = grid.nodes;
+  std::vector<double>& values = crossing_values_;
+  values.clear();
   IndicatorEvaluation& at = indicators_;
   system_.EvaluateEventIndicators(y0, v(), a_zero_, Derivatives::kNone, &at);
   values.push_back(at.values[pair]);
   for (int i = 0; i < s_; ++i) {
     stage_y_ = y0 + w.segment(stages.state_offset(i), ny_);
     system_.EvaluateEventIndicators(stage_y_, v(), a_zero_, Derivatives::kNone, &at);
-    nodes.push_back(tableau_.c[i]);
     values.push_back(at.values[pair]);
   }
+  // The Lagrange interpolant through the nodes: the basis of node j is the product over l != j
+  // of (theta - nodes[l]) / (nodes[j] - nodes[l]), in the order of l; theta - nodes[l] is formed
+  // once per theta (the same value in every basis).
+  const std::size_t count = nodes.size();
+  std::array<double, kMaxRadauStages + 1> offsets{};
+  MOREAU_ASSERT(count <= offsets.size(), "CrossingGuess: more nodes than stages + 1");
   auto interpolant = [&](double theta) {
+    for (std::size_t l = 0; l < count; ++l) offsets[l] = theta - nodes[l];
     double sum = 0.0;
-    for (std::size_t j = 0; j < nodes.size(); ++j) {
+    for (std::size_t j = 0; j < count; ++j) {
+      const double* difference = grid.differences.col(static_cast<Eigen::Index>(j)).data();
       double basis = 1.0;
-      for (std::size_t l = 0; l < nodes.size(); ++l) {
-        if (l != j) basis *= (theta - nodes[l]) / (nodes[j] - nodes[l]);
+      for (std::size_t l = 0; l < count; ++l) {
+        if (l != j) basis *= offsets[l] / difference[l];
       }
       sum += basis * values[j];
     }
