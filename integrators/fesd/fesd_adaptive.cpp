@@ -49,6 +49,20 @@ double DipSample(int m) { return (m + 0.5) / kDipSamples; }
 // Steps below this many ulps of the time cannot be told apart from zero-length steps.
 constexpr double kMinStepUlps = 64.0;
 
+// y = y0 + increments * weights (a point of a collocation polynomial) with the arithmetic Eigen
+// uses for that expression (its matrix-vector product sums each row from zero over the columns
+// in order, and the sum is then added to y0; no fused multiply-add on our targets), so the
+// bits are the expression's, without its temporary. y must not be y0.
+void PolynomialPoint(const Vector& y0, const Matrix& increments, const Vector& weights, Vector* y) {
+  const Eigen::Index n = y0.size(), s = increments.cols();
+  y->resize(n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    double sum = 0.0;
+    for (Eigen::Index j = 0; j < s; ++j) sum += increments(i, j) * weights[j];
+    (*y)[i] = y0[i] + sum;
+  }
+}
+
 void Truncate(Trajectory* trajectory, std::size_t size) {
   trajectory->t.resize(size);
   trajectory->x.resize(size);
@@ -455,11 +469,13 @@ double FesdRun::IndicatorResolution() const {
   const ResolutionGrid& grid = Resolution();
   const auto n = static_cast<Eigen::Index>(grid.nodes.size());
   double worst = 0.0;
-  IndicatorEvaluation at;
-  // Kept across elements (no allocation per element and test point).
-  std::vector<int> continuous;
-  Vector v, y, predicted;
-  Matrix node_values(n, np_), dense;
+  // Kept across elements and calls (no allocation per step, element and test point).
+  ResolutionBuffers& buffers = resolution_;
+  IndicatorEvaluation& at = buffers.at;
+  std::vector<int>& continuous = buffers.continuous;
+  Vector &v = buffers.v, &y = buffers.y, &predicted = buffers.predicted;
+  Matrix &node_values = buffers.node_values, &dense = buffers.dense;
+  node_values.resize(n, np_);
   for (const ElementPolynomial& element : piece_) {
     continuous.clear();
     for (int k = 0; k < np_; ++k) {
@@ -473,7 +489,7 @@ double FesdRun::IndicatorResolution() const {
     // The free sides at the point of the element's collocation polynomial whose interpolation
     // weights (RadauTableau::InterpolationWeights) are `state_weights`.
     auto indicators = [&](const Vector& state_weights) -> const Vector& {
-      y = element.y0 + element.increments * state_weights;
+      PolynomialPoint(element.y0, element.increments, state_weights, &y);
       system_.EvaluateEventIndicators(y, v, element.a_zero, Derivatives::kNone, &at);
       return at.values;
     };
@@ -540,7 +556,8 @@ void FesdRun::PieceState(double offset, Vector* y, Vector* z) const {
   const int e = std::clamp(static_cast<int>(std::floor(offset / h)), 0, m - 1);
   const ElementPolynomial& element = piece_[static_cast<std::size_t>(e)];
   const double theta = offset / h - e;
-  *y = element.y0 + element.increments * tableau_.InterpolationWeights(theta);
+  tableau_.InterpolationWeights(theta, &piece_weights_);
+  PolynomialPoint(element.y0, element.increments, piece_weights_, y);
   if (nz_ == 0) {
     z->resize(0);
     return;

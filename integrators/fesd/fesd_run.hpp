@@ -515,6 +515,12 @@ class FesdRun {
   Matrix smooth_z_, last_z_matrix_, extrapolation_;
   // ReducedSwitchGuess's stage increments per element and field evaluation (kept across groups).
   std::vector<Matrix> switch_z_;
+  struct SwitchBuffers {  // ReducedSwitchGuess's workspace, kept across groups
+    Vector level, solved_v, y_end, weights;
+    Matrix rescale, product;
+  };
+  SwitchBuffers switch_buffers_;
+  mutable Vector piece_weights_;         // PieceState's interpolation weights (kept: no allocation)
   std::vector<double> crossing_values_;  // CrossingGuess's node values (kept: no allocation)
   PointEvaluation switch_field_;
   double extrapolation_ratio_ = -1.0;
@@ -530,6 +536,13 @@ class FesdRun {
     Matrix increments;
   };
   ComparisonBuffers comparison_;
+  struct ResolutionBuffers {  // IndicatorResolution's workspace, kept across steps
+    IndicatorEvaluation at;
+    std::vector<int> continuous;
+    Vector v, y, predicted;
+    Matrix node_values, dense;
+  };
+  mutable ResolutionBuffers resolution_;
   Eigen::RowVectorXd d_step_end_;     // d(step end)/d(x0, p, u) of the last step
   bool dense_output_ = false;         // output times replace element ends
   std::vector<double> output_times_;  // sorted, in (t0, tf]

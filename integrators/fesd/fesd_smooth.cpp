@@ -264,7 +264,10 @@ bool FesdRun::ReducedSwitchGuess(const std::vector<Vector>& trial_w, const Vecto
     }
   }
   double z_h = h_trial;
-  Vector level = v(), solved_v, y_end;
+  // (kept across groups: no allocation per group)
+  SwitchBuffers& buffers = switch_buffers_;
+  Vector &level = buffers.level, &solved_v = buffers.solved_v, &y_end = buffers.y_end;
+  level = v();
   IndicatorEvaluation& indicator = indicators_;
   // A continuous free side is a function of the state (the velocity level does not enter it
   // for the blocks at hand, and where it would, the last iterate is checked with it below):
@@ -286,15 +289,19 @@ bool FesdRun::ReducedSwitchGuess(const std::vector<Vector>& trial_w, const Vecto
   // element evaluated at the new stage times c_i h / z_h (a guess accurate to the change in h
   // times the element's local error, where rescaling the increments is accurate to first order
   // only; the secant steps change h by ever less).
-  Matrix rescale(s_, s_);
+  Matrix& rescale = buffers.rescale;
+  rescale.resize(s_, s_);
   auto solve = [&](double h) {
     for (int i = 0; i < s_; ++i) {
-      rescale.col(i) = tableau_.InterpolationWeights(tableau_.c[i] * h / z_h);
+      tableau_.InterpolationWeights(tableau_.c[i] * h / z_h, &buffers.weights);
+      rescale.col(i) = buffers.weights;
     }
     y_end = y_start;
     for (int e = 0; e < m; ++e) {
       Matrix& ze = z[static_cast<std::size_t>(e)];
-      ze = ze * rescale;
+      // ze = ze * rescale, through a kept matrix (the same product, without a temporary).
+      buffers.product.noalias() = ze * rescale;
+      ze.swap(buffers.product);
       int its = 0;
       const auto outcome = solver->Solve(h, y_end, stopping, &ze, &its);
       *iterations += its;
