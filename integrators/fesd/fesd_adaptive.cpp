@@ -79,8 +79,8 @@ std::string Text(double value) {
 
 }  // namespace
 
-FesdRun::Snapshot FesdRun::Save() const {
-  Snapshot s;
+void FesdRun::Save(Snapshot* snapshot) const {
+  Snapshot& s = *snapshot;  // every member assigned (a kept snapshot: no allocation per step)
   s.y = y_;
   s.velocity = velocity_;
   s.z_guess = z_guess_;
@@ -102,9 +102,9 @@ FesdRun::Snapshot FesdRun::Save() const {
   s.events = result_.events.size();
   s.elements = result_.elements.size();
   s.next_output = next_output_;
+  s.relay_jumps.clear();
   for (const RelaySignal& relay : result_.relays) s.relay_jumps.push_back(relay.jump_times.size());
   s.stats = result_.stats;
-  return s;
 }
 
 void FesdRun::Restore(const Snapshot& s) {
@@ -204,6 +204,7 @@ void FesdRun::IntegrateAdaptive(bool clock_targets) {
   double step = options_.step_size > 0.0 ? options_.step_size : StartingStep(horizon);
   std::size_t next_replay = 0;
   if (options_.sensitivities) d_step_end_ = Eigen::RowVectorXd::Zero(sensitivity_.cols());
+  Snapshot before;  // the state before the current attempt (kept across attempts)
   for (std::size_t segment = 0; segment + 1 < segment_ends_.size() && !failed(); ++segment) {
     segment_ = static_cast<int>(segment);
     system_.SetInputs(scene.InputValues(segment_ends_[segment]));
@@ -232,7 +233,7 @@ void FesdRun::IntegrateAdaptive(bool clock_targets) {
       }
       // Running clock at rate 1: landing in numerical time takes the clock distance.
       const double step_end = lands && !clock_targets ? segment_end : tau_ + length;
-      const Snapshot before = replay ? Snapshot() : Save();
+      if (!replay) Save(&before);  // (replay: not read)
       if (options_.sensitivities) {
         // Row n_y of sensitivity_ is d(tau - step_end). Step lengths are held fixed (internal
         // differentiation), so a step's end moves with its start, except a landing step whose
@@ -536,7 +537,11 @@ double FesdRun::IndicatorResolution() const {
     // in t, pass through each other). Where the interpolant's minimum over the element is below
     // zero, the free side is evaluated there; negative, it is a switch that was not located.
     // Where it is not, the interpolant was wrong there and its miss counts as resolution.
-    dense.noalias() = grid.dip_weights * node_values;
+    // Only the continuous free sides' columns are read: each is the matrix-vector product of
+    // the weights with its node values (the same sums, from zero over the nodes in order, as
+    // the matrix product of all columns; no fused multiply-add on our targets).
+    dense.resize(kDipSamples, np_);
+    for (int k : continuous) dense.col(k).noalias() = grid.dip_weights * node_values.col(k);
     for (int k : continuous) {
       Eigen::Index lowest = 0;
       const double minimum = dense.col(k).minCoeff(&lowest);

@@ -153,11 +153,12 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
   bool reduced_tried = false;
   for (int attempt = 0; attempt <= options_.max_event_retries; ++attempt) {
     if (attempt > 0) ++result_.stats.num_event_retries;
-    GroupSetup setup;
+    GroupSetup& setup = buffers.group_setup;  // every member set (kept: no allocation)
     setup.y_start = y_start;
     setup.a_zero = a_zero_;
     setup.elements = m;
     setup.with_event = true;
+    setup.h_fixed = 0.0;
     setup.h_max = rest / m;
     setup.h_reference = h_trial;
     setup.indicator_weights = scales.cwiseInverse();
@@ -165,7 +166,7 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
     group_.Configure(setup);
     // First attempt: the reduced switch group where the statuses leave a smooth field, checked
     // on the full group system (its Newton continues from there if it does not hold).
-    Vector guess;
+    Vector& guess = buffers.group_guess;
     int reduced_iterations = 0;
     long reduced_factorizations = 0;
     const int pair = violation.pair;

@@ -401,7 +401,7 @@ class FesdRun {
     std::vector<std::size_t> relay_jumps;
     FesdStats stats;
   };
-  Snapshot Save() const;
+  void Save(Snapshot* snapshot) const;
   void Restore(const Snapshot& snapshot);
 
   // Hairer-Wanner's starting step for order p = 2s - 1 from F at y_ and at an Euler step,
@@ -593,6 +593,8 @@ class FesdRun {
     EndVelocity v_end;
     GroupSetup trial_setup;  // only y_start, a_zero and h_fixed are ever set
     Vector guess;
+    GroupSetup group_setup;  // a switch group's (every member set per attempt)
+    Vector group_guess;
   };
   AdvanceBuffers advance_;
 };
