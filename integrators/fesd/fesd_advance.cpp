@@ -454,17 +454,6 @@ Vector FesdRun::GroupGuess(const std::vector<Vector>& trial_w, const Vector& y_s
   return w;
 }
 
-// True if pair k's free side (the side its status does not keep at zero) is a jump variable
-// (an active constraint's multiplier, a sliding mode's theta or alpha). Stage values of those
-// are order-s approximations of the consistent (velocity-level) values; they are never
-// used for sign decisions.
-bool FesdRun::FreeSideIsJump(int k) const {
-  const ContinuousSide side = system_.pairs()[static_cast<std::size_t>(k)].continuous;
-  if (side == ContinuousSide::kBoth) return false;  // index-1 pairs: both sides continuous
-  const bool continuous_a = side == ContinuousSide::kA;
-  return a_zero_[static_cast<std::size_t>(k)] == continuous_a;
-}
-
 // The first stage at which a continuous free side is negative beyond tolerance, with the
 // crossing fraction (jump free sides are checked at element ends, see EndViolation).
 Violation FesdRun::StageViolation(const internal::CollocationStages& stages, const Vector& scales,
