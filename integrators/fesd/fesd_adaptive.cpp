@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 #include <sstream>
+#include <utility>
 
 #include "fesd_run.hpp"
 #include "moreau/core/error.hpp"
@@ -188,9 +189,9 @@ Violation FesdRun::JumpStageViolation(const CollocationStages& stages, const Vec
   return first;
 }
 
-void FesdRun::OnCommittedElement(const ElementPolynomial& element) {
-  if (capture_piece_) piece_.push_back(element);
-  DenseOutput(element);
+void FesdRun::OnCommittedElement(ElementPolynomial&& element) {
+  DenseOutput(element);  // (reads the element alone, not the piece)
+  if (capture_piece_) piece_.push_back(std::move(element));
 }
 
 void FesdRun::IntegrateAdaptive(bool clock_targets) {

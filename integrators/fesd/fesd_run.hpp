@@ -449,7 +449,8 @@ class FesdRun {
 
   // Called for every committed element (Commit, AdvanceSmooth) when keep_polynomials_: the
   // adaptive attempt's piece and the dense output.
-  void OnCommittedElement(const ElementPolynomial& element);
+  // Takes the element (a record's polynomials are not read after Commit).
+  void OnCommittedElement(ElementPolynomial&& element);
 
   // --- dense output (dense_output.cpp) ------------------------------------------------------
   // Sorts and checks the output times (output_times and the output_step grid), throws
