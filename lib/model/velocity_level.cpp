@@ -499,21 +499,30 @@ class VelocitySystem final : public MixedComplementaritySystem {
     const Matrix& equations_v = rows.equations_v.dense();
     const Matrix& a_v = rows.a_v.dense();
     const Matrix& b_v = rows.b_v.dense();
+    // Row copies as plain strided loops (Eigen's row expressions cost more in set-up than the
+    // nz entries they copy).
+    const Eigen::Index out_rows = out.rows();
+    auto copy_row = [&](const Matrix& source, int from_row, int to_row) {
+      const Eigen::Index source_rows = source.rows();
+      const double* from = source.data() + from_row;
+      double* to = out.data() + to_row;
+      for (int c = 0; c < nz; ++c) to[c * out_rows] = from[c * source_rows];
+    };
     evaluation_.equations.head(ng) = rows.equations.head(ng);
-    out.topRows(ng) = equations_v.topRows(ng);
+    for (int r = 0; r < ng; ++r) copy_row(equations_v, r, r);
     int row = ng, source_row = ng, pair_row = 0;
     for (std::size_t k = 0; k < roles_.size(); ++k) {
       MOREAU_ASSERT(roles_[k] != PairRole::kComplementary, "ResetFromRows: undecided pair");
       if (rows_roles[k] != PairRole::kComplementary) {
         evaluation_.equations[row] = rows.equations[source_row];
-        out.row(row++) = equations_v.row(source_row++);
+        copy_row(equations_v, source_row++, row++);
         continue;
       }
       // The kept side: its rate if continuous (the b row), its value if a jump variable (a).
       const bool continuous_a = pairs[k].continuous != ContinuousSide::kB;
       const bool rate = (roles_[k] == PairRole::kAZero) == continuous_a;
       evaluation_.equations[row] = rate ? rows.b[pair_row] : rows.a[pair_row];
-      out.row(row++) = rate ? b_v.row(pair_row) : a_v.row(pair_row);
+      copy_row(rate ? b_v : a_v, pair_row, row++);
       ++pair_row;
     }
     evaluation_.a.resize(0);
