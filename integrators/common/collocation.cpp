@@ -53,12 +53,20 @@ void CollocationStages::Evaluate(const ConstVectorRef& y0, const ConstVectorRef&
 void CollocationStages::Residual(double h, const ConstVectorRef& w, VectorRef equations,
                                  VectorRef a, VectorRef b) const {
   const Matrix& coefficients = tableau_.a;
+  const int ny = ny_;
   for (int i = 0; i < s_; ++i) {
     const int row = i * (ny_ + ng_);
-    // (Radau IIA collocation) Z_i - h sum_j a_ij F(Y_j, z_j) = 0.
-    auto collocation = equations.segment(row, ny_);
-    collocation = w.segment(state_offset(i), ny_);
-    for (int j = 0; j < s_; ++j) collocation -= h * coefficients(i, j) * stage(j).F;
+    // (Radau IIA collocation) Z_i - h sum_j a_ij F(Y_j, z_j) = 0. Plain loops over the states
+    // (the expressions' set-up cost more than their arithmetic), with the operations, in the
+    // order, of collocation = Z_i; collocation -= (h a_ij) F_j (same bits).
+    double* collocation = equations.data() + row;
+    const double* z_i = w.data() + state_offset(i);
+    for (int d = 0; d < ny; ++d) collocation[d] = z_i[d];
+    for (int j = 0; j < s_; ++j) {
+      const double c = h * coefficients(i, j);
+      const double* f_j = stage(j).F.data();
+      for (int d = 0; d < ny; ++d) collocation[d] -= c * f_j[d];
+    }
     // algebraic equations of the lowered system at stage i: G(Y_i, z_i) = 0.
     equations.segment(row + ny_, ng_) = stage(i).G;
     // complementarity pairs of stage i.

@@ -124,16 +124,21 @@ RadauTableau ComputeTableau(int s) {
 }  // namespace
 
 Vector RadauTableau::InterpolationWeights(double theta) const {
+  Vector w;
+  InterpolationWeights(theta, &w);
+  return w;
+}
+
+void RadauTableau::InterpolationWeights(double theta, Vector* w) const {
   // Lagrange basis on the nodes {0, c_1, ..., c_s}; the value at node 0 is y0 (Z_0 = 0).
-  Vector w(stages);
+  w->resize(stages);
   for (int j = 0; j < stages; ++j) {
     double l = theta / c[j];
     for (int k = 0; k < stages; ++k) {
       if (k != j) l *= (theta - c[k]) / (c[j] - c[k]);
     }
-    w[j] = l;
+    (*w)[j] = l;
   }
-  return w;
 }
 
 Vector RadauTableau::InterpolationDerivativeWeights(double theta) const {

@@ -26,13 +26,19 @@ SmoothCollocationSolver::Outcome SmoothCollocationSolver::Solve(double h, const 
   bool simplified = stopping.simplified;
   bool evaluate_jacobian = !(simplified && stopping.reuse_jacobian && have_jacobian_);
   bool factorize = true;
+  // The small vector operations below are plain loops over the n states (Eigen's expressions
+  // cost more in set-up than in arithmetic at these sizes); each entry is computed with the
+  // operations, in the order, of the expressions they replace (same bits).
+  const int n = n_;
+  point_.resize(n);
   for (int k = 1; k <= stopping.max_iterations; ++k) {
     *iterations = k;
     ++newton_iterations_;
     const bool with_jacobian = evaluate_jacobian || !simplified;
     if (with_jacobian) have_jacobian_ = false;  // until factorized
     for (int j = 0; j < s_; ++j) {
-      point_ = y0 + z->col(j);
+      const double* z_j = z->col(j).data();
+      for (int d = 0; d < n; ++d) point_[d] = y0[d] + z_j[d];  // y0 + Z_j
       PointEvaluation& eval =
           with_jacobian ? stage_eval_[static_cast<std::size_t>(j)] : value_eval_;
       // F and F_y alone (the algebraic unknowns are fixed: G, A, B are not read).
@@ -41,7 +47,8 @@ SmoothCollocationSolver::Outcome SmoothCollocationSolver::Solve(double h, const 
                              switching_mode_);
       ++function_evaluations_;
       if (!eval.F.allFinite()) return Outcome::kNonFinite;
-      stage_f_.col(j) = eval.F;
+      double* f_j = stage_f_.col(j).data();
+      for (int d = 0; d < n; ++d) f_j[d] = eval.F[d];
     }
     if (with_jacobian) {
       factorize = true;
@@ -49,9 +56,14 @@ SmoothCollocationSolver::Outcome SmoothCollocationSolver::Solve(double h, const 
     }
     // (Radau IIA collocation) residual -(Z_i - h sum_j a_ij F_j), stacked stage by stage.
     for (int i = 0; i < s_; ++i) {
-      auto r = rhs_.segment(i * n_, n_);
-      r = -z->col(i);
-      for (int j = 0; j < s_; ++j) r += h * tableau_.a(i, j) * stage_f_.col(j);
+      double* r = rhs_.data() + static_cast<std::ptrdiff_t>(i) * n;
+      const double* z_i = z->col(i).data();
+      for (int d = 0; d < n; ++d) r[d] = -z_i[d];
+      for (int j = 0; j < s_; ++j) {
+        const double c = h * tableau_.a(i, j);  // r += (h a_ij) F_j
+        const double* f_j = stage_f_.col(j).data();
+        for (int d = 0; d < n; ++d) r[d] += c * f_j[d];
+      }
     }
     if (factorize || h != factorized_h_) {
       // Newton matrix: delta_ij I - h a_ij F_y(Y_j).
@@ -75,7 +87,9 @@ SmoothCollocationSolver::Outcome SmoothCollocationSolver::Solve(double h, const 
     if (!rhs_.allFinite()) return Outcome::kNonFinite;
     double increment = 0.0;
     for (int j = 0; j < s_; ++j) {
-      z->col(j) += rhs_.segment(j * n_, n_);
+      double* z_j = z->col(j).data();
+      const double* dz = rhs_.data() + static_cast<std::ptrdiff_t>(j) * n;
+      for (int d = 0; d < n; ++d) z_j[d] += dz[d];
       increment = std::max(increment, ScaledIncrement(rhs_.segment(j * n_, n_), y0, stopping));
     }
     last_increment_ = increment;

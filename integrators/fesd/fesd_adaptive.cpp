@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 #include <sstream>
+#include <utility>
 
 #include "fesd_run.hpp"
 #include "moreau/core/error.hpp"
@@ -49,6 +50,20 @@ double DipSample(int m) { return (m + 0.5) / kDipSamples; }
 // Steps below this many ulps of the time cannot be told apart from zero-length steps.
 constexpr double kMinStepUlps = 64.0;
 
+// y = y0 + increments * weights (a point of a collocation polynomial) with the arithmetic Eigen
+// uses for that expression (its matrix-vector product sums each row from zero over the columns
+// in order, and the sum is then added to y0; no fused multiply-add on our targets), so the
+// bits are the expression's, without its temporary. y must not be y0.
+void PolynomialPoint(const Vector& y0, const Matrix& increments, const Vector& weights, Vector* y) {
+  const Eigen::Index n = y0.size(), s = increments.cols();
+  y->resize(n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    double sum = 0.0;
+    for (Eigen::Index j = 0; j < s; ++j) sum += increments(i, j) * weights[j];
+    (*y)[i] = y0[i] + sum;
+  }
+}
+
 void Truncate(Trajectory* trajectory, std::size_t size) {
   trajectory->t.resize(size);
   trajectory->x.resize(size);
@@ -65,8 +80,8 @@ std::string Text(double value) {
 
 }  // namespace
 
-FesdRun::Snapshot FesdRun::Save() const {
-  Snapshot s;
+void FesdRun::Save(Snapshot* snapshot) const {
+  Snapshot& s = *snapshot;  // every member assigned (a kept snapshot: no allocation per step)
   s.y = y_;
   s.velocity = velocity_;
   s.z_guess = z_guess_;
@@ -88,9 +103,9 @@ FesdRun::Snapshot FesdRun::Save() const {
   s.events = result_.events.size();
   s.elements = result_.elements.size();
   s.next_output = next_output_;
+  s.relay_jumps.clear();
   for (const RelaySignal& relay : result_.relays) s.relay_jumps.push_back(relay.jump_times.size());
   s.stats = result_.stats;
-  return s;
 }
 
 void FesdRun::Restore(const Snapshot& s) {
@@ -174,9 +189,9 @@ Violation FesdRun::JumpStageViolation(const CollocationStages& stages, const Vec
   return first;
 }
 
-void FesdRun::OnCommittedElement(const ElementPolynomial& element) {
-  if (capture_piece_) piece_.push_back(element);
-  DenseOutput(element);
+void FesdRun::OnCommittedElement(ElementPolynomial&& element) {
+  DenseOutput(element);  // (reads the element alone, not the piece)
+  if (capture_piece_) piece_.push_back(std::move(element));
 }
 
 void FesdRun::IntegrateAdaptive(bool clock_targets) {
@@ -190,6 +205,7 @@ void FesdRun::IntegrateAdaptive(bool clock_targets) {
   double step = options_.step_size > 0.0 ? options_.step_size : StartingStep(horizon);
   std::size_t next_replay = 0;
   if (options_.sensitivities) d_step_end_ = Eigen::RowVectorXd::Zero(sensitivity_.cols());
+  Snapshot before;  // the state before the current attempt (kept across attempts)
   for (std::size_t segment = 0; segment + 1 < segment_ends_.size() && !failed(); ++segment) {
     segment_ = static_cast<int>(segment);
     system_.SetInputs(scene.InputValues(segment_ends_[segment]));
@@ -218,7 +234,7 @@ void FesdRun::IntegrateAdaptive(bool clock_targets) {
       }
       // Running clock at rate 1: landing in numerical time takes the clock distance.
       const double step_end = lands && !clock_targets ? segment_end : tau_ + length;
-      const Snapshot before = replay ? Snapshot() : Save();
+      if (!replay) Save(&before);  // (replay: not read)
       if (options_.sensitivities) {
         // Row n_y of sensitivity_ is d(tau - step_end). Step lengths are held fixed (internal
         // differentiation), so a step's end moves with its start, except a landing step whose
@@ -437,6 +453,22 @@ const FesdRun::ResolutionGrid& FesdRun::Resolution() const {
   for (std::size_t t = 0; t < grid.tests.size(); ++t) {
     lagrange(grid.tests[t], &grid.test_weights, static_cast<Eigen::Index>(t));
   }
+  for (double theta : grid.nodes)
+    grid.node_state_weights.push_back(tableau_.InterpolationWeights(theta));
+  for (double theta : grid.tests)
+    grid.test_state_weights.push_back(tableau_.InterpolationWeights(theta));
+  grid.differences.resize(n, n);
+  for (Eigen::Index j = 0; j < n; ++j) {
+    for (Eigen::Index l = 0; l < n; ++l) grid.differences(l, j) = nodes[j] - nodes[l];
+  }
+  grid.basis_scales.resize(n);
+  for (Eigen::Index j = 0; j < n; ++j) {
+    double product = 1.0;
+    for (Eigen::Index l = 0; l < n; ++l) {
+      if (l != j) product *= grid.differences(l, j);
+    }
+    grid.basis_scales[j] = 1.0 / product;
+  }
   grid.dip_weights.resize(kDipSamples, n);
   for (int m = 0; m < kDipSamples; ++m) lagrange(DipSample(m), &grid.dip_weights, m);
   return grid;
@@ -447,11 +479,13 @@ double FesdRun::IndicatorResolution() const {
   const ResolutionGrid& grid = Resolution();
   const auto n = static_cast<Eigen::Index>(grid.nodes.size());
   double worst = 0.0;
-  IndicatorEvaluation at;
-  // Kept across elements (no allocation per element and test point).
-  std::vector<int> continuous;
-  Vector v, y, predicted;
-  Matrix node_values(n, np_), dense;
+  // Kept across elements and calls (no allocation per step, element and test point).
+  ResolutionBuffers& buffers = resolution_;
+  IndicatorEvaluation& at = buffers.at;
+  std::vector<int>& continuous = buffers.continuous;
+  Vector &v = buffers.v, &y = buffers.y, &predicted = buffers.predicted;
+  Matrix &node_values = buffers.node_values, &dense = buffers.dense;
+  node_values.resize(n, np_);
   for (const ElementPolynomial& element : piece_) {
     continuous.clear();
     for (int k = 0; k < np_; ++k) {
@@ -462,18 +496,22 @@ double FesdRun::IndicatorResolution() const {
     }
     if (continuous.empty()) continue;
     v = element.algebraic.col(0);
-    auto indicators = [&](double theta) -> const Vector& {
-      y = element.y0 + element.increments * tableau_.InterpolationWeights(theta);
+    // The free sides at the point of the element's collocation polynomial whose interpolation
+    // weights (RadauTableau::InterpolationWeights) are `state_weights`.
+    auto indicators = [&](const Vector& state_weights) -> const Vector& {
+      PolynomialPoint(element.y0, element.increments, state_weights, &y);
       system_.EvaluateEventIndicators(y, v, element.a_zero, Derivatives::kNone, &at);
       return at.values;
     };
     for (Eigen::Index j = 0; j < n; ++j) {
-      node_values.row(j) = indicators(grid.nodes[static_cast<std::size_t>(j)]).transpose();
+      node_values.row(j) =
+          indicators(grid.node_state_weights[static_cast<std::size_t>(j)]).transpose();
     }
-    // The free sides at theta against their interpolant through the nodes (`weights`, a row
-    // of Lagrange weights). Returns false at a negative value: a switch that was not located.
-    auto test = [&](double theta, const auto& weights) {
-      const Vector& actual = indicators(theta);
+    // The free sides at a point (`state_weights` as above) against their interpolant through
+    // the nodes (`weights`, a row of Lagrange weights). Returns false at a negative value: a
+    // switch that was not located.
+    auto test = [&](const Vector& state_weights, const auto& weights) {
+      const Vector& actual = indicators(state_weights);
       predicted.setZero(np_);
       for (Eigen::Index j = 0; j < n; ++j) predicted += weights[j] * node_values.row(j).transpose();
       for (int k : continuous) {
@@ -499,7 +537,7 @@ double FesdRun::IndicatorResolution() const {
       return true;
     };
     for (std::size_t t = 0; t < grid.tests.size(); ++t) {
-      if (!test(grid.tests[t], grid.test_weights.row(static_cast<Eigen::Index>(t)))) {
+      if (!test(grid.test_state_weights[t], grid.test_weights.row(static_cast<Eigen::Index>(t)))) {
         return std::numeric_limits<double>::infinity();
       }
     }
@@ -508,12 +546,17 @@ double FesdRun::IndicatorResolution() const {
     // in t, pass through each other). Where the interpolant's minimum over the element is below
     // zero, the free side is evaluated there; negative, it is a switch that was not located.
     // Where it is not, the interpolant was wrong there and its miss counts as resolution.
-    dense.noalias() = grid.dip_weights * node_values;
+    // Only the continuous free sides' columns are read: each is the matrix-vector product of
+    // the weights with its node values (the same sums, from zero over the nodes in order, as
+    // the matrix product of all columns; no fused multiply-add on our targets).
+    dense.resize(kDipSamples, np_);
+    for (int k : continuous) dense.col(k).noalias() = grid.dip_weights * node_values.col(k);
     for (int k : continuous) {
       Eigen::Index lowest = 0;
       const double minimum = dense.col(k).minCoeff(&lowest);
       if (minimum < -options_.event_tolerance * std::max(1.0, std::fabs(node_values(0, k))) &&
-          !test(DipSample(static_cast<int>(lowest)), grid.dip_weights.row(lowest))) {
+          !test(tableau_.InterpolationWeights(DipSample(static_cast<int>(lowest))),
+                grid.dip_weights.row(lowest))) {
         return std::numeric_limits<double>::infinity();
       }
     }
@@ -527,7 +570,8 @@ void FesdRun::PieceState(double offset, Vector* y, Vector* z) const {
   const int e = std::clamp(static_cast<int>(std::floor(offset / h)), 0, m - 1);
   const ElementPolynomial& element = piece_[static_cast<std::size_t>(e)];
   const double theta = offset / h - e;
-  *y = element.y0 + element.increments * tableau_.InterpolationWeights(theta);
+  tableau_.InterpolationWeights(theta, &piece_weights_);
+  PolynomialPoint(element.y0, element.increments, piece_weights_, y);
   if (nz_ == 0) {
     z->resize(0);
     return;

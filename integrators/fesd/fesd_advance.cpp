@@ -153,11 +153,12 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
   bool reduced_tried = false;
   for (int attempt = 0; attempt <= options_.max_event_retries; ++attempt) {
     if (attempt > 0) ++result_.stats.num_event_retries;
-    GroupSetup setup;
+    GroupSetup& setup = buffers.group_setup;  // every member set (kept: no allocation)
     setup.y_start = y_start;
     setup.a_zero = a_zero_;
     setup.elements = m;
     setup.with_event = true;
+    setup.h_fixed = 0.0;
     setup.h_max = rest / m;
     setup.h_reference = h_trial;
     setup.indicator_weights = scales.cwiseInverse();
@@ -165,7 +166,7 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
     group_.Configure(setup);
     // First attempt: the reduced switch group where the statuses leave a smooth field, checked
     // on the full group system (its Newton continues from there if it does not hold).
-    Vector guess;
+    Vector& guess = buffers.group_guess;
     int reduced_iterations = 0;
     long reduced_factorizations = 0;
     const int pair = violation.pair;
@@ -451,17 +452,6 @@ Vector FesdRun::GroupGuess(const std::vector<Vector>& trial_w, const Vector& y_s
   w.segment(group_.v_offset(), nz_) = v_end;
   w[group_.h_index()] = h_guess;
   return w;
-}
-
-// True if pair k's free side (the side its status does not keep at zero) is a jump variable
-// (an active constraint's multiplier, a sliding mode's theta or alpha). Stage values of those
-// are order-s approximations of the consistent (velocity-level) values; they are never
-// used for sign decisions.
-bool FesdRun::FreeSideIsJump(int k) const {
-  const ContinuousSide side = system_.pairs()[static_cast<std::size_t>(k)].continuous;
-  if (side == ContinuousSide::kBoth) return false;  // index-1 pairs: both sides continuous
-  const bool continuous_a = side == ContinuousSide::kA;
-  return a_zero_[static_cast<std::size_t>(k)] == continuous_a;
 }
 
 // The first stage at which a continuous free side is negative beyond tolerance, with the

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <limits>
 #include <sstream>
+#include <utility>
 
 #include "fesd_run.hpp"
 #include "moreau/complementarity/ncp_function.hpp"
@@ -89,7 +90,7 @@ void FesdRun::Record(const Vector& w, double h, bool ends_at_switch,
 
 void FesdRun::Commit(SolveRecord& record) {
   for (std::size_t e = 0; e < record.elements.size(); ++e) {
-    if (!record.polynomials.empty()) OnCommittedElement(record.polynomials[e]);
+    if (!record.polynomials.empty()) OnCommittedElement(std::move(record.polynomials[e]));
     FesdElement element = record.elements[e];
     element.t_start = tau_;
     tau_ += element.length;

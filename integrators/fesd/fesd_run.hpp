@@ -293,8 +293,13 @@ class FesdRun {
   // True if pair k's free side (the side its status does not keep at zero) is a jump variable
   // (an active constraint's multiplier, a sliding mode's theta or alpha). Stage values of those
   // are order-s approximations of the consistent (velocity-level) values; they are never
-  // used for sign decisions.
-  bool FreeSideIsJump(int k) const;
+  // used for sign decisions. (Inline: the per-stage checks ask for every pair.)
+  bool FreeSideIsJump(int k) const {
+    const ContinuousSide side = system_.pairs()[static_cast<std::size_t>(k)].continuous;
+    if (side == ContinuousSide::kBoth) return false;  // index-1 pairs: both sides continuous
+    const bool continuous_a = side == ContinuousSide::kA;
+    return a_zero_[static_cast<std::size_t>(k)] == continuous_a;
+  }
 
   // The first stage at which a continuous free side is negative beyond tolerance, with the
   // crossing fraction (jump free sides are checked at element ends, see EndViolation).
@@ -401,7 +406,7 @@ class FesdRun {
     std::vector<std::size_t> relay_jumps;
     FesdStats stats;
   };
-  Snapshot Save() const;
+  void Save(Snapshot* snapshot) const;
   void Restore(const Snapshot& snapshot);
 
   // Hairer-Wanner's starting step for order p = 2s - 1 from F at y_ and at an Euler step,
@@ -444,7 +449,8 @@ class FesdRun {
 
   // Called for every committed element (Commit, AdvanceSmooth) when keep_polynomials_: the
   // adaptive attempt's piece and the dense output.
-  void OnCommittedElement(const ElementPolynomial& element);
+  // Takes the element (a record's polynomials are not read after Commit).
+  void OnCommittedElement(ElementPolynomial&& element);
 
   // --- dense output (dense_output.cpp) ------------------------------------------------------
   // Sorts and checks the output times (output_times and the output_step grid), throws
@@ -516,6 +522,13 @@ class FesdRun {
   Matrix smooth_z_, last_z_matrix_, extrapolation_;
   // ReducedSwitchGuess's stage increments per element and field evaluation (kept across groups).
   std::vector<Matrix> switch_z_;
+  struct SwitchBuffers {  // ReducedSwitchGuess's workspace, kept across groups
+    Vector level, solved_v, y_end, weights;
+    Matrix rescale, product;
+  };
+  SwitchBuffers switch_buffers_;
+  mutable Vector piece_weights_;         // PieceState's interpolation weights (kept: no allocation)
+  std::vector<double> crossing_values_;  // CrossingGuess's node values (kept: no allocation)
   PointEvaluation switch_field_;
   double extrapolation_ratio_ = -1.0;
   // Adaptive steps and dense output.
@@ -530,6 +543,13 @@ class FesdRun {
     Matrix increments;
   };
   ComparisonBuffers comparison_;
+  struct ResolutionBuffers {  // IndicatorResolution's workspace, kept across steps
+    IndicatorEvaluation at;
+    std::vector<int> continuous;
+    Vector v, y, predicted;
+    Matrix node_values, dense;
+  };
+  mutable ResolutionBuffers resolution_;
   Eigen::RowVectorXd d_step_end_;     // d(step end)/d(x0, p, u) of the last step
   bool dense_output_ = false;         // output times replace element ends
   std::vector<double> output_times_;  // sorted, in (t0, tf]
@@ -550,6 +570,11 @@ class FesdRun {
     std::vector<double> tests;  // the midpoints of the two widest gaps between nodes
     Matrix test_weights;        // row t: the weights at tests[t]
     Matrix dip_weights;         // row m: the weights at the dip search's sample m
+    // The collocation polynomial's weights (RadauTableau::InterpolationWeights) at the nodes
+    // and the tests.
+    std::vector<Vector> node_state_weights, test_state_weights;
+    Matrix differences;   // (l, j): nodes[j] - nodes[l] (CrossingGuess's denominators)
+    Vector basis_scales;  // j: 1 / prod_{l != j} (nodes[j] - nodes[l]) (its sign screen)
   };
   mutable ResolutionGrid resolution_grid_;
   Vector boundary_scaled_;  // DecideAtBoundary's scaled indicators
@@ -576,6 +601,8 @@ class FesdRun {
     EndVelocity v_end;
     GroupSetup trial_setup;  // only y_start, a_zero and h_fixed are ever set
     Vector guess;
+    GroupSetup group_setup;  // a switch group's (every member set per attempt)
+    Vector group_guess;
   };
   AdvanceBuffers advance_;
 };

@@ -273,7 +273,10 @@ bool FesdRun::ReducedSwitchGuess(const std::vector<Vector>& trial_w, const Vecto
     }
   }
   double z_h = h_trial;
-  Vector level = v(), solved_v, y_end;
+  // (kept across groups: no allocation per group)
+  SwitchBuffers& buffers = switch_buffers_;
+  Vector &level = buffers.level, &solved_v = buffers.solved_v, &y_end = buffers.y_end;
+  level = v();
   IndicatorEvaluation& indicator = indicators_;
   // A continuous free side is a function of the state (the velocity level does not enter it
   // for the blocks at hand, and where it would, the last iterate is checked with it below):
@@ -295,15 +298,19 @@ bool FesdRun::ReducedSwitchGuess(const std::vector<Vector>& trial_w, const Vecto
   // element evaluated at the new stage times c_i h / z_h (a guess accurate to the change in h
   // times the element's local error, where rescaling the increments is accurate to first order
   // only; the secant steps change h by ever less).
-  Matrix rescale(s_, s_);
+  Matrix& rescale = buffers.rescale;
+  rescale.resize(s_, s_);
   auto solve = [&](double h) {
     for (int i = 0; i < s_; ++i) {
-      rescale.col(i) = tableau_.InterpolationWeights(tableau_.c[i] * h / z_h);
+      tableau_.InterpolationWeights(tableau_.c[i] * h / z_h, &buffers.weights);
+      rescale.col(i) = buffers.weights;
     }
     y_end = y_start;
     for (int e = 0; e < m; ++e) {
       Matrix& ze = z[static_cast<std::size_t>(e)];
-      ze = ze * rescale;
+      // ze = ze * rescale, through a kept matrix (the same product, without a temporary).
+      buffers.product.noalias() = ze * rescale;
+      ze.swap(buffers.product);
       int its = 0;
       const auto outcome = solver->Solve(h, y_end, stopping, &ze, &its);
       *iterations += its;
@@ -419,33 +426,84 @@ double FesdRun::CrossingGuess(const std::vector<Vector>& trial_w, const Vector& 
   for (int e = 0; e < element; ++e) {
     y0 += trial_w[static_cast<std::size_t>(e)].segment(stages.state_offset(s_ - 1), ny_);
   }
-  std::vector<double> nodes = {0.0}, values;
+  // The nodes 0, c_1, ..., c_s and their differences are the tableau's (Resolution: made once
+  // per run); the node values are kept across calls (no allocation per switch).
+  const ResolutionGrid& grid = Resolution();
+  const std::vector<double>& nodes = grid.nodes;
+  std::vector<double>& values = crossing_values_;
+  values.clear();
   IndicatorEvaluation& at = indicators_;
   system_.EvaluateEventIndicators(y0, v(), a_zero_, Derivatives::kNone, &at);
   values.push_back(at.values[pair]);
   for (int i = 0; i < s_; ++i) {
     stage_y_ = y0 + w.segment(stages.state_offset(i), ny_);
     system_.EvaluateEventIndicators(stage_y_, v(), a_zero_, Derivatives::kNone, &at);
-    nodes.push_back(tableau_.c[i]);
     values.push_back(at.values[pair]);
   }
+  // The Lagrange interpolant through the nodes: the basis of node j is the product over l != j
+  // of (theta - nodes[l]) / (nodes[j] - nodes[l]), in the order of l; theta - nodes[l] is formed
+  // once per theta (the same value in every basis).
+  const std::size_t count = nodes.size();
+  std::array<double, kMaxRadauStages + 1> offsets{};
+  MOREAU_ASSERT(count <= offsets.size(), "CrossingGuess: more nodes than stages + 1");
   auto interpolant = [&](double theta) {
+    for (std::size_t l = 0; l < count; ++l) offsets[l] = theta - nodes[l];
     double sum = 0.0;
-    for (std::size_t j = 0; j < nodes.size(); ++j) {
+    for (std::size_t j = 0; j < count; ++j) {
+      const double* difference = grid.differences.col(static_cast<Eigen::Index>(j)).data();
       double basis = 1.0;
-      for (std::size_t l = 0; l < nodes.size(); ++l) {
-        if (l != j) basis *= (theta - nodes[l]) / (nodes[j] - nodes[l]);
+      for (std::size_t l = 0; l < count; ++l) {
+        if (l != j) basis *= offsets[l] / difference[l];
       }
       sum += basis * values[j];
     }
     return sum;
+  };
+  // The bisection reads only the interpolant's sign. A screen decides it without divisions:
+  // the same sum with the basis as (prod_{l != j} (theta - nodes[l])) / prod_{l != j} (nodes[j] -
+  // nodes[l]) (the second factor made once per run). Both are the real sum over j of values[j]
+  // prod_l (offsets[l] / differences(l, j)) (the same rounded offsets and differences) with at
+  // most 3n roundings per term, so each is within gamma_{3n} sum_j |term_j| of it (Higham,
+  // Accuracy and Stability of Numerical Algorithms, sec. 3.1; n <= 8 nodes: 2.7e-15). Where
+  // the screen exceeds kSignMargin (20 times their distance) times its terms' magnitudes, the
+  // interpolant above has the screen's sign, bitwise the same decision; elsewhere (near the
+  // root), or where the terms could be subnormal (kSignFloor) or are not finite, it is
+  // evaluated.
+  constexpr double kSignMargin = 1e-13;
+  constexpr double kSignFloor = 1e-250;
+  std::array<double, kMaxRadauStages + 1> before{}, after{};
+  auto sign_is_nonnegative = [&](double theta) {
+    for (std::size_t l = 0; l < count; ++l) offsets[l] = theta - nodes[l];
+    // before[j] = prod_{l < j} offsets[l], after[j] = prod_{l > j} offsets[l]
+    double product = 1.0;
+    for (std::size_t j = 0; j < count; ++j) {
+      before[j] = product;
+      product *= offsets[j];
+    }
+    product = 1.0;
+    for (std::size_t j = count; j-- > 0;) {
+      after[j] = product;
+      product *= offsets[j];
+    }
+    double sum = 0.0, size = 0.0;
+    for (std::size_t j = 0; j < count; ++j) {
+      const double term =
+          values[j] * grid.basis_scales[static_cast<Eigen::Index>(j)] * (before[j] * after[j]);
+      sum += term;
+      size += std::fabs(term);
+    }
+    if (std::isfinite(sum) && std::isfinite(size) && size > kSignFloor &&
+        std::fabs(sum) > kSignMargin * size) {
+      return sum > 0.0;
+    }
+    return interpolant(theta) >= 0.0;
   };
   for (std::size_t j = 1; j < nodes.size(); ++j) {
     if (!(values[j - 1] >= 0.0 && values[j] < 0.0)) continue;
     double low = nodes[j - 1], high = nodes[j];
     for (int k = 0; k < kBisections; ++k) {
       const double middle = 0.5 * (low + high);
-      (interpolant(middle) >= 0.0 ? low : high) = middle;
+      (sign_is_nonnegative(middle) ? low : high) = middle;
     }
     const double h = (element + 0.5 * (low + high)) * h_trial / m;
     return h > 0.0 && h <= group_.setup().h_max ? h : h_guess;

@@ -35,6 +35,11 @@ void GroupSystem::Configure(const GroupSetup& setup) {
   MOREAU_ASSERT(setup.elements >= 1, "a group needs at least one element");
   MOREAU_ASSERT(static_cast<int>(setup.a_zero.size()) == np_, "wrong number of statuses");
   setup_ = setup;
+  // The velocity level's roles of the group's statuses (LoweredSystem::RolesFor, kept).
+  velocity_roles_.resize(setup.a_zero.size());
+  for (std::size_t k = 0; k < setup.a_zero.size(); ++k) {
+    velocity_roles_[k] = setup.a_zero[k] ? PairRole::kAZero : PairRole::kBZero;
+  }
   while (static_cast<int>(elements_.size()) < setup.elements) {
     elements_.emplace_back(system_, s_);
     value_elements_.emplace_back(system_, s_);
@@ -163,8 +168,7 @@ bool GroupSystem::Evaluate(const Vector& w, bool with_jacobian, Vector* r, Vecto
     // for the line search), so that no evaluation allocates.
     VelocityLevelEvaluation& velocity = with_jacobian ? velocity_ : value_velocity_;
     IndicatorEvaluation& indicators = with_jacobian ? indicators_ : value_indicators_;
-    system_->EvaluateVelocityLevel(y_end, v, LoweredSystem::RolesFor(setup_.a_zero), level,
-                                   &velocity);
+    system_->EvaluateVelocityLevel(y_end, v, velocity_roles_, level, &velocity);
     system_->EvaluateEventIndicators(y_end, v, setup_.a_zero, level, &indicators);
     // (velocity level) consistent multipliers at the group's end state.
     r->segment(setup_.elements * element_rows_, nz_) = velocity.equations;

@@ -100,9 +100,10 @@ class GroupSystem final : public MixedComplementaritySystem {
   // the group (index-1 indicators come from the state), so a relative tolerance costs no
   // accuracy. Other rows keep their absolute scale (their v locates switches).
   Vector velocity_scale_;
-  Vector start_scratch_;              // scratch: element start state
-  Vector end_scratch_;                // scratch: the group's end state (with the event)
-  VelocityLevelEvaluation velocity_;  // at the last with-Jacobian evaluation
+  std::vector<PairRole> velocity_roles_;  // RolesFor(setup_.a_zero), made by Configure
+  Vector start_scratch_;                  // scratch: element start state
+  Vector end_scratch_;                    // scratch: the group's end state (with the event)
+  VelocityLevelEvaluation velocity_;      // at the last with-Jacobian evaluation
   IndicatorEvaluation indicators_;
   VelocityLevelEvaluation value_velocity_;  // scratch of values-only evaluations
   IndicatorEvaluation value_indicators_;

@@ -499,21 +499,30 @@ class VelocitySystem final : public MixedComplementaritySystem {
     const Matrix& equations_v = rows.equations_v.dense();
     const Matrix& a_v = rows.a_v.dense();
     const Matrix& b_v = rows.b_v.dense();
+    // Row copies as plain strided loops (Eigen's row expressions cost more in set-up than the
+    // nz entries they copy).
+    const Eigen::Index out_rows = out.rows();
+    auto copy_row = [&](const Matrix& source, int from_row, int to_row) {
+      const Eigen::Index source_rows = source.rows();
+      const double* from = source.data() + from_row;
+      double* to = out.data() + to_row;
+      for (int c = 0; c < nz; ++c) to[c * out_rows] = from[c * source_rows];
+    };
     evaluation_.equations.head(ng) = rows.equations.head(ng);
-    out.topRows(ng) = equations_v.topRows(ng);
+    for (int r = 0; r < ng; ++r) copy_row(equations_v, r, r);
     int row = ng, source_row = ng, pair_row = 0;
     for (std::size_t k = 0; k < roles_.size(); ++k) {
       MOREAU_ASSERT(roles_[k] != PairRole::kComplementary, "ResetFromRows: undecided pair");
       if (rows_roles[k] != PairRole::kComplementary) {
         evaluation_.equations[row] = rows.equations[source_row];
-        out.row(row++) = equations_v.row(source_row++);
+        copy_row(equations_v, source_row++, row++);
         continue;
       }
       // The kept side: its rate if continuous (the b row), its value if a jump variable (a).
       const bool continuous_a = pairs[k].continuous != ContinuousSide::kB;
       const bool rate = (roles_[k] == PairRole::kAZero) == continuous_a;
       evaluation_.equations[row] = rate ? rows.b[pair_row] : rows.a[pair_row];
-      out.row(row++) = rate ? b_v.row(pair_row) : a_v.row(pair_row);
+      copy_row(rate ? b_v : a_v, pair_row, row++);
       ++pair_row;
     }
     evaluation_.a.resize(0);
@@ -707,6 +716,17 @@ class VelocitySolver {
     VelocityLevelEvaluation evaluation;
     VelocityLevelEvaluation check;  // a linear level's checked rows at the guess
     CurvatureTerms no_curvature;    // (rows without derivatives with respect to y)
+    // The consistent trials (the first num_valid entries are the current decision's; entries
+    // are reused, so that a decision allocates only for its result).
+    struct Valid {
+      std::vector<PairRole> roles;
+      Vector v;
+      Vector velocity;
+      int leaving = 0;  // candidates whose continuous side is free
+    };
+    std::vector<Valid> valid;
+    std::vector<PairRole> roles;
+    std::vector<int> candidates, enumerated, monotone, check_row;
   };
   Decision& decision(const LoweredSystem& system) {
     if (decision_ == nullptr) decision_ = std::make_unique<Decision>(system, linear_);
@@ -828,8 +848,10 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
   InitialAlgebraicGuess(y, nullptr, &guess);
   PointEvaluation& at_y = workspace.at_y;
   Evaluate(y, guess, Derivatives::kNone, &at_y);
-  std::vector<PairRole> roles(static_cast<std::size_t>(num_pairs_));
-  std::vector<int> candidates;
+  std::vector<PairRole>& roles = workspace.roles;  // (every entry set below)
+  roles.resize(static_cast<std::size_t>(num_pairs_));
+  std::vector<int>& candidates = workspace.candidates;
+  candidates.clear();
   for (int k = 0; k < num_pairs_; ++k) {
     const ContinuousSide side = pairs_[static_cast<std::size_t>(k)].continuous;
     const bool continuous_a = side != ContinuousSide::kB;
@@ -885,22 +907,24 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
   SemismoothNewton& newton = workspace.newton;
   // Row of each complementary pair among the a, b rows of a velocity-level evaluation (they
   // follow the pair order).
-  auto complementary_rows = [&](const std::vector<PairRole>& r) {
-    std::vector<int> row(static_cast<std::size_t>(num_pairs_), -1);
+  auto complementary_rows = [&](const std::vector<PairRole>& r, std::vector<int>* row) {
+    row->assign(static_cast<std::size_t>(num_pairs_), -1);
     int next = 0;
     for (int k = 0; k < num_pairs_; ++k) {
       if (r[static_cast<std::size_t>(k)] == PairRole::kComplementary) {
-        row[static_cast<std::size_t>(k)] = next++;
+        (*row)[static_cast<std::size_t>(k)] = next++;
       }
     }
-    return row;
   };
   // Candidates of monotone blocks (moving sets: the velocity-level problem in their
   // multipliers is an LCP with the symmetric positive semidefinite matrix J P J^T, so every
   // solution has the same velocity) need no enumeration: they stay complementary in every
   // trial, and the semismooth Newton solution decides them. Only the other candidates are
   // enumerated (their assignments can give different velocities: ambiguity).
-  std::vector<int> enumerated, monotone;
+  std::vector<int>& enumerated = workspace.enumerated;
+  std::vector<int>& monotone = workspace.monotone;
+  enumerated.clear();
+  monotone.clear();
   for (int k : candidates) {
     const auto& block =
         *blocks_[static_cast<std::size_t>(pairs_[static_cast<std::size_t>(k)].block)];
@@ -948,13 +972,18 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
 
   // Enumerate: every candidate keeps either its jump side at zero (the continuous side may
   // leave zero) or its continuous side's rate at zero (it stays at zero).
-  struct Valid {
-    std::vector<PairRole> roles;
-    Vector v;
-    Vector velocity;
-    int leaving = 0;  // candidates whose continuous side is free
+  using Valid = internal::VelocitySolver::Decision::Valid;
+  std::vector<Valid>& valid = workspace.valid;
+  std::size_t num_valid = 0;
+  auto add_valid = [&](const std::vector<PairRole>& trial, const Vector& v, const auto& velocity,
+                       int leaving) {
+    if (valid.size() == num_valid) valid.emplace_back();
+    Valid& entry = valid[num_valid++];
+    entry.roles = trial;
+    entry.v = v;
+    entry.velocity = velocity;
+    entry.leaving = leaving;
   };
-  std::vector<Valid> valid;
   const double sign_tolerance = candidate_tolerance;
   PointEvaluation& point = workspace.point;
   // A linear velocity level is the expansion of one evaluation at (y, guess), which the blocks
@@ -972,7 +1001,8 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
                          &check_rows);
   }
   // Every trial's check has the roles `roles` (its candidates complementary again).
-  const std::vector<int> check_row = complementary_rows(roles);
+  std::vector<int>& check_row = workspace.check_row;
+  complementary_rows(roles, &check_row);
   Vector& solution = workspace.solution;
   for (unsigned mask = 0; mask < (1u << candidates.size()); ++mask) {
     std::vector<PairRole>& trial = workspace.trial;
@@ -1028,20 +1058,20 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
     if (linear) {
       workspace.field = expansion.F;
       expansion.F_z.MultiplyAdd(workspace.step, workspace.field);
-      valid.push_back({trial, solution, workspace.field.head(nx), leaving});
+      add_valid(trial, solution, workspace.field.head(nx), leaving);
     } else {
       EvaluatePoint(y, solution, Derivatives::kNone, &trial, &point);
-      valid.push_back({trial, solution, point.F.head(nx), leaving});
+      add_valid(trial, solution, point.F.head(nx), leaving);
     }
   }
-  if (valid.empty()) {
+  if (num_valid == 0) {
     decision.message = "no consistent continuation of the " + std::to_string(candidates.size()) +
                        " pairs that are zero at this state";
     return decision;
   }
   // Slow solution: least velocity norm; among equal velocities, the most pairs leaving zero.
   std::size_t best = 0;
-  for (std::size_t i = 1; i < valid.size(); ++i) {
+  for (std::size_t i = 1; i < num_valid; ++i) {
     const double difference = (valid[i].velocity - valid[best].velocity).norm();
     const double scale = 1.0 + valid[best].velocity.norm();
     if (difference <= 1e-9 * scale) {
@@ -1050,7 +1080,8 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
       best = i;
     }
   }
-  for (const Valid& other : valid) {
+  for (std::size_t i = 0; i < num_valid; ++i) {
+    const Valid& other = valid[i];
     if ((other.velocity - valid[best].velocity).norm() >
         1e-9 * (1.0 + valid[best].velocity.norm())) {
       decision.ambiguous = true;
@@ -1058,7 +1089,7 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
   }
   if (decision.ambiguous) {
     std::ostringstream s;
-    s << valid.size() << " consistent continuations with different velocities; the slow one "
+    s << num_valid << " consistent continuations with different velocities; the slow one "
       << "(least |x'| = " << valid[best].velocity.norm() << ") is taken";
     decision.message = s.str();
   }
@@ -1069,7 +1100,8 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
   }
   if (!monotone.empty()) {
     EvaluateVelocityLevel(y, decision.v, valid[best].roles, Derivatives::kNone, &e);
-    const std::vector<int> row = complementary_rows(valid[best].roles);
+    std::vector<int> row;
+    complementary_rows(valid[best].roles, &row);
     for (int k : monotone) decide_complementary(k, e, row[static_cast<std::size_t>(k)]);
   }
   decision.solved = true;

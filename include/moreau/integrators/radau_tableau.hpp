@@ -30,6 +30,8 @@ struct RadauTableau {
   int order() const { return 2 * stages - 1; }
   /// Weights w_j(theta) of the collocation polynomial: u(t0 + theta h) = y0 + sum_j w_j Z_j.
   Vector InterpolationWeights(double theta) const;
+  /// The same weights into *w (resized to the stages; no allocation once sized).
+  void InterpolationWeights(double theta, Vector* w) const;
   /// Weights of its derivative: h u'(t0 + theta h) = sum_j w'_j Z_j.
   Vector InterpolationDerivativeWeights(double theta) const;
 };
