@@ -523,10 +523,10 @@ void LoweredSystem::EvaluatePoint(const ConstVectorRef& y, const ConstVectorRef&
   if (field_only) {
     // EvaluateField: G, A, B and their derivatives are sized but not read (blocks may still
     // write them), so they are not zeroed: at FESD's smooth elements this zeroing cost more
-    // than the field.
-    out->G.resize(num_equations_);
-    out->A.resize(num_pairs_);
-    out->B.resize(num_pairs_);
+    // than the field. Storage of a new size is zeroed (nothing holds indeterminate values).
+    if (out->G.size() != num_equations_) out->G.setZero(num_equations_);
+    if (out->A.size() != num_pairs_) out->A.setZero(num_pairs_);
+    if (out->B.size() != num_pairs_) out->B.setZero(num_pairs_);
   } else {
     out->G.setZero(num_equations_);
     out->A.setZero(num_pairs_);
