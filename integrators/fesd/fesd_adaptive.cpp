@@ -461,14 +461,6 @@ const FesdRun::ResolutionGrid& FesdRun::Resolution() const {
   for (Eigen::Index j = 0; j < n; ++j) {
     for (Eigen::Index l = 0; l < n; ++l) grid.differences(l, j) = nodes[j] - nodes[l];
   }
-  grid.basis_scales.resize(n);
-  for (Eigen::Index j = 0; j < n; ++j) {
-    double product = 1.0;
-    for (Eigen::Index l = 0; l < n; ++l) {
-      if (l != j) product *= grid.differences(l, j);
-    }
-    grid.basis_scales[j] = 1.0 / product;
-  }
   grid.dip_weights.resize(kDipSamples, n);
   for (int m = 0; m < kDipSamples; ++m) lagrange(DipSample(m), &grid.dip_weights, m);
   return grid;

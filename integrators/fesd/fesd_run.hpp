@@ -573,8 +573,7 @@ class FesdRun {
     // The collocation polynomial's weights (RadauTableau::InterpolationWeights) at the nodes
     // and the tests.
     std::vector<Vector> node_state_weights, test_state_weights;
-    Matrix differences;   // (l, j): nodes[j] - nodes[l] (CrossingGuess's denominators)
-    Vector basis_scales;  // j: 1 / prod_{l != j} (nodes[j] - nodes[l]) (its sign screen)
+    Matrix differences;  // (l, j): nodes[j] - nodes[l] (CrossingGuess's denominators)
   };
   mutable ResolutionGrid resolution_grid_;
   Vector boundary_scaled_;  // DecideAtBoundary's scaled indicators

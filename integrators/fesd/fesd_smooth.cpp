@@ -459,51 +459,12 @@ double FesdRun::CrossingGuess(const std::vector<Vector>& trial_w, const Vector& 
     }
     return sum;
   };
-  // The bisection reads only the interpolant's sign. A screen decides it without divisions:
-  // the same sum with the basis as (prod_{l != j} (theta - nodes[l])) / prod_{l != j} (nodes[j] -
-  // nodes[l]) (the second factor made once per run). Both are the real sum over j of values[j]
-  // prod_l (offsets[l] / differences(l, j)) (the same rounded offsets and differences) with at
-  // most 3n roundings per term, so each is within gamma_{3n} sum_j |term_j| of it (Higham,
-  // Accuracy and Stability of Numerical Algorithms, sec. 3.1; n <= 8 nodes: 2.7e-15). Where
-  // the screen exceeds kSignMargin (20 times their distance) times its terms' magnitudes, the
-  // interpolant above has the screen's sign, bitwise the same decision; elsewhere (near the
-  // root), or where the terms could be subnormal (kSignFloor) or are not finite, it is
-  // evaluated.
-  constexpr double kSignMargin = 1e-13;
-  constexpr double kSignFloor = 1e-250;
-  std::array<double, kMaxRadauStages + 1> before{}, after{};
-  auto sign_is_nonnegative = [&](double theta) {
-    for (std::size_t l = 0; l < count; ++l) offsets[l] = theta - nodes[l];
-    // before[j] = prod_{l < j} offsets[l], after[j] = prod_{l > j} offsets[l]
-    double product = 1.0;
-    for (std::size_t j = 0; j < count; ++j) {
-      before[j] = product;
-      product *= offsets[j];
-    }
-    product = 1.0;
-    for (std::size_t j = count; j-- > 0;) {
-      after[j] = product;
-      product *= offsets[j];
-    }
-    double sum = 0.0, size = 0.0;
-    for (std::size_t j = 0; j < count; ++j) {
-      const double term =
-          values[j] * grid.basis_scales[static_cast<Eigen::Index>(j)] * (before[j] * after[j]);
-      sum += term;
-      size += std::fabs(term);
-    }
-    if (std::isfinite(sum) && std::isfinite(size) && size > kSignFloor &&
-        std::fabs(sum) > kSignMargin * size) {
-      return sum > 0.0;
-    }
-    return interpolant(theta) >= 0.0;
-  };
   for (std::size_t j = 1; j < nodes.size(); ++j) {
     if (!(values[j - 1] >= 0.0 && values[j] < 0.0)) continue;
     double low = nodes[j - 1], high = nodes[j];
     for (int k = 0; k < kBisections; ++k) {
       const double middle = 0.5 * (low + high);
-      (sign_is_nonnegative(middle) ? low : high) = middle;
+      (interpolant(middle) >= 0.0 ? low : high) = middle;
     }
     const double h = (element + 0.5 * (low + high)) * h_trial / m;
     return h > 0.0 && h <= group_.setup().h_max ? h : h_guess;
