@@ -1,5 +1,6 @@
 #include "moreau/linalg/derivative_matrix.hpp"
 
+#include "dense_columns.hpp"
 #include "moreau/core/error.hpp"
 
 namespace moreau {
@@ -28,14 +29,9 @@ void DerivativeMatrix::AddBlock(int row0, int col0, const ConstMatrixRef& block,
       row0 >= 0 && col0 >= 0 && row0 + block.rows() <= rows_ && col0 + block.cols() <= cols_,
       "block outside the derivative matrix");
   if (!sparse_) {
-    // Plain loops: the blocks are small, where Eigen's block expressions cost more in set-up
-    // than in arithmetic.
-    const Eigen::Index rows = block.rows();
-    for (Eigen::Index j = 0; j < block.cols(); ++j) {
-      double* target = dense_.data() + (col0 + j) * dense_.rows() + row0;
-      const double* source = block.data() + j * block.outerStride();
-      for (Eigen::Index i = 0; i < rows; ++i) target[i] += scale * source[i];
-    }
+    internal::AddScaledColumns(dense_.data() + col0 * dense_.rows() + row0, dense_.rows(),
+                               block.data(), block.outerStride(), block.rows(), block.cols(),
+                               scale);
     return;
   }
   for (Eigen::Index j = 0; j < block.cols(); ++j) {

@@ -11,6 +11,7 @@
 #include <utility>
 #include <vector>
 
+#include "dense_columns.hpp"
 #include "moreau/core/error.hpp"
 
 namespace moreau {
@@ -66,13 +67,8 @@ void SystemMatrix::AddDenseColumns(int row0, int col0, const double* data, Eigen
                                    Eigen::Index cols, Eigen::Index stride, double scale) {
   MOREAU_ASSERT(row0 >= 0 && col0 >= 0 && row0 + rows <= n_ && col0 + cols <= n_,
                 "block outside the system matrix");
-  // Plain loops: the blocks are small, where Eigen's block expressions cost more in set-up
-  // than in arithmetic.
-  for (Eigen::Index j = 0; j < cols; ++j) {
-    double* target = dense_.data() + (col0 + j) * n_ + row0;
-    const double* source = data + j * stride;
-    for (Eigen::Index i = 0; i < rows; ++i) target[i] += scale * source[i];
-  }
+  internal::AddScaledColumns(dense_.data() + static_cast<Eigen::Index>(col0) * n_ + row0, n_, data,
+                             stride, rows, cols, scale);
 }
 
 void SystemMatrix::AddBlock(int row0, int col0, const ConstMatrixRef& block, double scale) {
