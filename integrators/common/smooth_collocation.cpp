@@ -7,8 +7,12 @@
 namespace moreau::internal {
 
 SmoothCollocationSolver::SmoothCollocationSolver(LoweredSystem* system, int stages,
-                                                 LinearSolverKind kind)
-    : system_(system), tableau_(RadauIIA(stages)), n_(system->num_states()), s_(stages) {
+                                                 LinearSolverKind kind, int switching_mode)
+    : system_(system),
+      switching_mode_(switching_mode),
+      tableau_(RadauIIA(stages)),
+      n_(system->num_states()),
+      s_(stages) {
   const double nonzeros = s_ * static_cast<double>(s_) * system->EstimatedNonzerosFy() + s_ * n_;
   solver_ = MakeLinearSolver(kind, s_ * n_, nonzeros);
   stage_f_.resize(n_, s_);

@@ -49,7 +49,10 @@ class SmoothCollocationSolver {
   // d * r / (1 - r) <= d / 9, within the tolerance that d met.
   static constexpr double kRefreshContraction = 0.1;
 
-  SmoothCollocationSolver(LoweredSystem* system, int stages, LinearSolverKind kind);
+  // switching_mode >= 0: collocates the field of that Stewart mode alone
+  // (LoweredSystem::EvaluateField's switching_mode); -1: the system's field.
+  SmoothCollocationSolver(LoweredSystem* system, int stages, LinearSolverKind kind,
+                          int switching_mode = -1);
 
   // Holds the algebraic unknowns at z (size n_z of the system) in every evaluation: the
   // collocation is then that of y' = F(y, z). Required before Solve when n_z > 0.
@@ -59,13 +62,6 @@ class SmoothCollocationSolver {
     }
     fixed_algebraic_ = z;
     have_jacobian_ = false;  // another field
-  }
-
-  // Collocates the field of Stewart mode `mode` alone (LoweredSystem::EvaluateField's
-  // switching_mode; -1, the default: the system's field). Fixed for the solver's lifetime.
-  void SetSwitchingMode(int mode) {
-    switching_mode_ = mode;
-    have_jacobian_ = false;
   }
 
   // Solves from the stage increments in z (n_y x s, column j = Z_j); z holds the result.
@@ -83,7 +79,7 @@ class SmoothCollocationSolver {
                          const Stopping& stopping) const;
 
   LoweredSystem* system_;
-  int switching_mode_ = -1;  // SetSwitchingMode
+  const int switching_mode_;
   const RadauTableau& tableau_;
   int n_, s_;
   std::unique_ptr<LinearSolver> solver_;

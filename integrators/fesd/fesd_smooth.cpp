@@ -164,9 +164,8 @@ internal::SmoothCollocationSolver* FesdRun::SmoothFieldSolver(const std::vector<
     // lowering one per mode in every run. The algebraic unknowns are not read.
     if (field.solver == nullptr) {
       field.solver = std::make_unique<internal::SmoothCollocationSolver>(
-          &system_, s_, options_.newton.linear_solver);
+          &system_, s_, options_.newton.linear_solver, index);
       field.solver->SetFixedAlgebraic(Vector::Zero(nz_));
-      field.solver->SetSwitchingMode(index);
     }
     return field.solver.get();
   }
