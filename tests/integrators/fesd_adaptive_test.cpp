@@ -427,13 +427,13 @@ TEST(StepControllerTest, ProposalsFollowTheDocumentedFactors) {
   using internal::StepController;
   constexpr double kExact = 1e-15;
   StepController controller(5);  // s = 3: p = 5
-  // err = 1: the safety factor; err = 0: the first step grows by kSafety kMinError^(-1/p)
-  // (below kMaxFirstFactor), later ones by at most kMaxFactor.
+  // err = 1: the safety factor; err = 0: every step, the first included, grows by at most
+  // kMaxFactor (kSafety kMinError^(-1/p) would be far more).
   EXPECT_NEAR(controller.Accept(0.1, 0.1, 1.0, false), 0.1 * StepController::kSafety, kExact);
   StepController fresh(5);
-  const double first = StepController::kSafety * std::pow(StepController::kMinError, -0.2);
-  ASSERT_LT(first, StepController::kMaxFirstFactor);
-  EXPECT_NEAR(fresh.Accept(0.1, 0.1, 0.0, false), 0.1 * first, 1e-12);
+  ASSERT_GT(StepController::kSafety * std::pow(StepController::kMinError, -0.2),
+            StepController::kMaxFactor);
+  EXPECT_NEAR(fresh.Accept(0.1, 0.1, 0.0, false), 0.1 * StepController::kMaxFactor, kExact);
   EXPECT_NEAR(fresh.Accept(0.1, 0.1, 0.0, false), 0.1 * StepController::kMaxFactor, kExact);
   // Gustafsson: an error that grew from the previous step shrinks the proposal further.
   StepController gustafsson(5);
@@ -449,9 +449,10 @@ TEST(StepControllerTest, ProposalsFollowTheDocumentedFactors) {
               0.1 * StepController::kMinFactor, kExact);
   EXPECT_LE(rejecting.Accept(0.1, 0.1, 1e-6, false), 0.1);
   // A step cut short by a switch: growth from the piece, bounded by kMaxFactor times the
-  // attempted step (after the first step).
+  // attempted step.
   StepController switching(5);
-  EXPECT_NEAR(switching.Accept(1e-6, 0.1, 0.0, true), 1e-6 * first, 1e-12);
+  const double from_piece = StepController::kSafety * std::pow(StepController::kMinError, -0.2);
+  EXPECT_NEAR(switching.Accept(1e-6, 0.1, 0.0, true), 1e-6 * from_piece, 1e-12);
   EXPECT_NEAR(switching.Accept(0.1, 0.1, 0.0, true), 0.1 * StepController::kMaxFactor, kExact);
 }
 
