@@ -49,6 +49,11 @@ constexpr int kDipSamples = 64;
 double DipSample(int m) { return (m + 0.5) / kDipSamples; }
 // Steps below this many ulps of the time cannot be told apart from zero-length steps.
 constexpr double kMinStepUlps = 64.0;
+// An attempt whose crossing search stayed unresolved (the indicator bounds admit a zero between
+// an element's nodes that neither samples nor halvings decided, FesdRun::InsideViolation) is
+// retried with half the step (the search's resolution in time halves with it), at most this
+// many times in a row; then it is accepted and the run warns (FesdResult::warnings).
+constexpr int kMaxUnresolvedRetries = 6;
 
 // y = y0 + increments * weights (a point of a collocation polynomial) with the arithmetic Eigen
 // uses for that expression (its matrix-vector product sums each row from zero over the columns
@@ -91,6 +96,7 @@ void FesdRun::Save(Snapshot* snapshot) const {
   s.last_w = last_w_;
   s.tau = tau_;
   s.last_h = last_h_;
+  s.first_unresolved_time = first_unresolved_time_;
   s.have_last_w = have_last_w_;
   s.a_zero = a_zero_;
   s.working = filter_.working();
@@ -125,6 +131,7 @@ void FesdRun::Restore(const Snapshot& s) {
   last_w_ = s.last_w;
   tau_ = s.tau;
   last_h_ = s.last_h;
+  first_unresolved_time_ = s.first_unresolved_time;
   have_last_w_ = s.have_last_w;
   a_zero_ = s.a_zero;
   last_z_matrix_ = s.last_z_matrix;
@@ -148,6 +155,7 @@ void FesdRun::Restore(const Snapshot& s) {
   result_.stats.num_event_retries = work.num_event_retries;
   result_.stats.num_rejected_steps = work.num_rejected_steps;
   result_.stats.num_failed_steps = work.num_failed_steps;
+  result_.stats.num_bound_evaluations = work.num_bound_evaluations;
   result_.status = FesdStatus::kSuccess;
   result_.message.clear();
 }
@@ -205,11 +213,12 @@ void FesdRun::IntegrateAdaptive(bool clock_targets) {
   double step = options_.step_size > 0.0 ? options_.step_size : StartingStep(horizon);
   std::size_t next_replay = 0;
   if (options_.sensitivities) d_step_end_ = Eigen::RowVectorXd::Zero(sensitivity_.cols());
-  Snapshot before;  // the state before the current attempt (kept across attempts)
+  Snapshot before;             // the state before the current attempt (kept across attempts)
+  int unresolved_retries = 0;  // consecutive attempts retried for an unresolved crossing
   for (std::size_t segment = 0; segment + 1 < segment_ends_.size() && !failed(); ++segment) {
-    segment_ = static_cast<int>(segment);
+    segment_ = segment_control_[segment];
     system_.SetInputs(scene.InputValues(segment_ends_[segment]));
-    if (segment > 0 && !smooth_ && !DecideAtBreakpoint()) break;
+    if (StartsControlSegment(segment) && !smooth_ && !DecideAtBreakpoint()) break;
     const double segment_end = segment_ends_[segment + 1];
     const double reached =
         clock_targets ? kClockTolerance * std::max(1.0, std::fabs(segment_end)) : 0.0;
@@ -295,6 +304,16 @@ void FesdRun::IntegrateAdaptive(bool clock_targets) {
                "inside it was not located");
         }
       }
+      if (!failed() &&
+          result_.stats.num_unresolved_crossings > before.stats.num_unresolved_crossings &&
+          unresolved_retries < kMaxUnresolvedRetries && kFailureFactor * length >= minimum) {
+        ++unresolved_retries;
+        Restore(before);
+        ++result_.stats.num_failed_steps;
+        controller.Failed();
+        step = kFailureFactor * length;
+        continue;
+      }
       if (!failed()) {
         estimate = EstimateError(piece_length / horizon, before.elements);
         if (!std::isfinite(estimate.acceptance)) {
@@ -339,6 +358,7 @@ void FesdRun::IntegrateAdaptive(bool clock_targets) {
       result_.step_sequence.push_back(lands ? 0.0 : length);
       ++result_.stats.num_steps;
       step = controller.Accept(piece_length, length, proposal, switched);
+      unresolved_retries = 0;
       if (progress_) progress_(y_[clock]);
     }
   }

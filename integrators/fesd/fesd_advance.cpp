@@ -110,6 +110,9 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
     const Vector& y_next = buffers.y_next;
     if (!violation.found) violation = EndViolation(group_.element(0), y_next, scales, e, &v_end);
     if (!violation.found) {
+      violation = InsideViolation(group_.element(0), y, solved.solution, scales, e);
+    }
+    if (!violation.found) {
       if (records.size() == num_records) records.emplace_back();  // before taking a0, b0
       const Vector& a0 = num_records == 0 ? boundary_a_ : records[num_records - 1].a_last;
       const Vector& b0 = num_records == 0 ? boundary_b_ : records[num_records - 1].b_last;
@@ -221,6 +224,11 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
       }
       if (!inner.found && k + 1 < m) {
         inner = EndViolation(group_.element(k), group_.ElementStart(w, k + 1), scales, k, &v_inner);
+      }
+      if (!inner.found) {
+        inner =
+            InsideViolation(group_.element(k), group_.ElementStart(w, k),
+                            w.segment(group_.element_offset(k), group_.element_size()), scales, k);
       }
     }
     if (inner.found && trajectory_try) {

@@ -1,5 +1,4 @@
 #include "moreau/integrators/radau.hpp"
-#include "moreau/integrators/simulate.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -9,6 +8,7 @@
 #include "../common/smooth_collocation.hpp"
 #include "moreau/core/error.hpp"
 #include "moreau/integrators/radau_tableau.hpp"
+#include "moreau/integrators/simulate.hpp"
 #include "moreau/model/lowered_system.hpp"
 
 namespace moreau {
@@ -31,6 +31,9 @@ void RadauOptions::Validate() const {
   RequireArgument(max_newton_iterations >= 1, "max Newton iterations must be >= 1, got ",
                   max_newton_iterations);
   RequireArgument(max_steps >= 1, "max steps must be >= 1, got ", max_steps);
+  for (double t : stop_times) {
+    RequireArgument(std::isfinite(t), "stop times (tstops) must be finite, got ", t);
+  }
 }
 
 std::string ToString(RadauStatus status) {
@@ -95,13 +98,14 @@ class RadauRun {
     result.trajectory.Append(scene.initial_time, y.head(nx), Vector(), 0.0);
 
     const std::vector<double> ends =
-        SegmentEnds(scene.initial_time, scene.final_time, scene.ControlBreakpoints());
+        StretchEnds(scene.initial_time, scene.final_time, scene.ControlBreakpoints(),
+                    options_.stop_times, nullptr);
     double h_next = options_.step_size;
     for (std::size_t segment = 0; segment + 1 < ends.size(); ++segment) {
       const double t_begin = ends[segment];
       const double t_end = ends[segment + 1];
       system_.SetInputs(scene.InputValues(t_begin));
-      have_previous_ = false;  // no extrapolation across a control breakpoint
+      have_previous_ = false;  // no extrapolation across a breakpoint
       const bool ok = options_.adaptive ? RunAdaptive(t_begin, t_end, &y, &h_next, &result)
                                         : RunFixed(t_begin, t_end, &y, &result);
       if (!ok) break;

@@ -22,6 +22,7 @@ IntegratorEntry RadauEntry() {
       BindReal("atol", &O::absolute_tolerance, "absolute local-error tolerance (adaptive), > 0"),
       BindReal("h_min", &O::min_step_size, "smallest step of the controller (adaptive), > 0"),
       BindReal("h_max", &O::max_step_size, "largest step of the controller (adaptive), > 0"),
+      BindStopTimes(&O::stop_times),
       BindReal("newton_tol", &O::newton_tolerance,
                "Newton tolerance on max |dZ_i| / (1 + |y_i|) (fixed step), > 0"),
       BindInteger("max_newton_iterations", &O::max_newton_iterations,

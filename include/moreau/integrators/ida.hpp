@@ -73,6 +73,10 @@ struct IdaOptions {
   long max_events = 100000;
   /// Largest internal step (0: no limit).
   double max_step = 0.0;
+  /// Stop times (breakpoints): IDA stops exactly at these times (IDASetStopTime) and never
+  /// steps across them (any order; times outside (t0, tf) are ignored). The remedy for a root
+  /// the bounds on the interpolant cannot resolve, at a time the user knows.
+  std::vector<double> stop_times;
   /// Record every internal step in the trajectory (false: events, breakpoints and the
   /// output times only).
   bool record_steps = true;
@@ -117,6 +121,10 @@ struct IdaStats {
   /// Largest |P| (position-level conditions of the phase) at the end of a phase, before the
   /// projection: the drift certificate.
   double max_drift = 0.0;
+  /// Steps in which the bounds of a root function on IDA's interpolant admit a zero that the
+  /// crossing search could not resolve (each one a warning; docs/ida.md, "Contacts inside a
+  /// step").
+  long num_unresolved_crossings = 0;
   double cpu_seconds = 0.0;
 
   std::string Summary() const;
@@ -131,6 +139,9 @@ struct IdaResult {
   std::vector<Event> events;
   std::vector<RelaySignal> relays;  ///< each relay's memory w(t)
   IdaStats stats;
+  /// What the run suspects but could not resolve, one sentence each (a root inside a step
+  /// that the bounds admit and the search left undecided).
+  std::vector<std::string> warnings;
 };
 
 /// Simulates `scene` over [t0, tf]. Throws std::invalid_argument for invalid options, an

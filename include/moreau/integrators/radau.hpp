@@ -47,6 +47,9 @@ struct RadauOptions {
   /// Accepted steps before the run stops with RadauStatus::kMaxStepsReached, >= 1.
   long max_steps = 10'000'000;
   LinearSolverKind linear_solver = LinearSolverKind::kAutomatic;
+  /// Stop times (breakpoints): steps end at these times and never cross them (any order;
+  /// times outside (t0, tf) are ignored), e.g. where a forcing term changes abruptly.
+  std::vector<double> stop_times;
   /// Record every accepted step in the trajectory (false: only the initial and final point).
   bool record_trajectory = true;
 

@@ -136,6 +136,9 @@ struct SimulationResult {
   std::optional<SimulationSensitivities> sensitivities;
   /// Adaptive FESD: the accepted steps, in the form its option `step_sequence` replays them.
   std::vector<double> step_sequence;
+  /// What the run suspects but could not resolve (the integrator's warnings), one sentence
+  /// each; a successful run with warnings is a result to check.
+  std::vector<std::string> warnings;
 
   /// The statistic with this name (std::invalid_argument if the integrator has none).
   double Stat(const std::string& name) const;

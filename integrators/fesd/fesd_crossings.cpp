@@ -1,0 +1,116 @@
+// Zeros of the continuous free sides between the nodes of an element (docs/fesd-formulation.md,
+// section 11): the crossing search of common/crossing_search.hpp on the element's collocation
+// polynomial, in fixed and adaptive steps.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "fesd_run.hpp"
+
+namespace moreau::internal {
+namespace {
+
+// Samples of the Hermite interpolant per element (free sides without bounds): a polynomial of
+// degree 2 s + 1 <= 15 has at most seven local minima in [0, 1]; 64 points find a dip wider
+// than 1/64 of the element and deeper than the interpolant's change over 1/64.
+constexpr int kHermiteSamples = 64;
+
+}  // namespace
+
+Violation FesdRun::InsideViolation(const CollocationStages& stages, const Vector& y0,
+                                   const ConstVectorRef& w_e, const Vector& scales, int element) {
+  Violation violation;
+  if (np_ == 0) return violation;
+  InsideBuffers& b = inside_;
+  b.watched.assign(static_cast<std::size_t>(np_), 0);
+  bool any = false;
+  for (int k = 0; k < np_; ++k) {
+    if (FreeSideIsJump(k)) continue;
+    b.watched[static_cast<std::size_t>(k)] = 1;
+    any = true;
+  }
+  if (!any) return violation;
+  b.increments.resize(ny_, s_);
+  for (int i = 0; i < s_; ++i) b.increments.col(i) = w_e.segment(stages.state_offset(i), ny_);
+  b.path.SetCollocation(tableau_, y0, b.increments);
+  b.thresholds.resize(np_);
+  for (int k = 0; k < np_; ++k) b.thresholds[k] = options_.event_tolerance * scales[k];
+  // Jump sides are not read for the watched pairs; the last stage's algebraic values fill v.
+  const Vector& v = stages.stage_algebraic(s_ - 1);
+  CrossingFunctions functions;
+  functions.values = [&](double theta, Vector* values) {
+    b.path.Point(theta, &b.y);
+    system_.EvaluateEventIndicators(b.y, v, a_zero_, Derivatives::kNone, &b.at);
+    *values = b.at.values;
+    return values->allFinite();
+  };
+  functions.bounds = [&](double a, double c, Vector* lower, Vector* upper) {
+    b.path.Box(a, c, &b.box_lower, &b.box_upper);
+    system_.BoundEventIndicators(b.box_lower, b.box_upper, a_zero_, lower, upper);
+  };
+  Crossing crossing = SearchCrossing(b.watched, b.thresholds, functions);
+  result_.stats.num_bound_evaluations += crossing.bound_evaluations;
+  if (crossing.outcome == CrossingOutcome::kNone) {
+    // Free sides without a bound (index-1 complementarity, functions without interval
+    // evaluation): the extremum of their Hermite interpolant from the values and exact
+    // derivatives at the element start and the stages, evaluated on the polynomial.
+    functions.bounds(0.0, 1.0, &b.box_lower, &b.box_upper);  // (-inf: no bound)
+    const std::vector<double>& nodes = Resolution().nodes;
+    for (int k = 0; k < np_; ++k) {
+      if (!b.watched[static_cast<std::size_t>(k)] || std::isfinite(b.box_lower[k])) continue;
+      if (b.node_values.empty()) {
+        // Values and d/dtheta = d_y . y'(theta) at every node, for all pairs at once.
+        b.node_values.assign(nodes.size(), Vector());
+        b.node_slopes.assign(nodes.size(), Vector());
+        for (std::size_t j = 0; j < nodes.size(); ++j) {
+          b.path.Point(nodes[j], &b.y);
+          b.path.Derivative(nodes[j], &b.dy);
+          system_.EvaluateEventIndicators(b.y, v, a_zero_, Derivatives::kStates, &b.at);
+          b.node_values[j] = b.at.values;
+          b.node_slopes[j].resize(np_);
+          for (int p = 0; p < np_; ++p) b.node_slopes[j][p] = b.at.d_y.Row(p).dot(b.dy);
+        }
+      }
+      b.values.resize(nodes.size());
+      b.slopes.resize(nodes.size());
+      for (std::size_t j = 0; j < nodes.size(); ++j) {
+        b.values[j] = b.node_values[j][k];
+        b.slopes[j] = b.node_slopes[j][k];
+      }
+      double theta = 0.5;
+      if (!(HermiteMinimum(nodes, b.values, b.slopes, kHermiteSamples, &theta) <
+            -b.thresholds[k])) {
+        continue;
+      }
+      Vector values;
+      if (functions.values(theta, &values) && values[k] < -b.thresholds[k]) {
+        // A crossing: its first zero before theta, as the bounded search would locate it.
+        std::vector<char> only(static_cast<std::size_t>(np_), 0);
+        only[static_cast<std::size_t>(k)] = 1;
+        double lo = 0.0, hi = theta;
+        for (int i = 0; i < CrossingSearchLimits{}.bisections; ++i) {
+          const double mid = 0.5 * (lo + hi);
+          (functions.values(mid, &values) && values[k] < 0.0 ? hi : lo) = mid;
+        }
+        crossing.outcome = CrossingOutcome::kFound;
+        crossing.function = k;
+        crossing.theta = hi;
+        break;
+      }
+    }
+    b.node_values.clear();
+  }
+  if (crossing.outcome == CrossingOutcome::kUnresolved) {
+    ++result_.stats.num_unresolved_crossings;
+    if (!std::isfinite(first_unresolved_time_)) {
+      first_unresolved_time_ = y0[system_.clock_index()];
+    }
+    return violation;
+  }
+  if (crossing.outcome != CrossingOutcome::kFound) return violation;
+  ++result_.stats.num_inside_crossings;
+  violation = {true, element, std::clamp(crossing.theta, 1e-3, 1.0), crossing.function};
+  return violation;
+}
+
+}  // namespace moreau::internal
