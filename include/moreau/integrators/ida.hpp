@@ -23,14 +23,17 @@
 /// the next phase are decided. Root functions watch the free side of every pair
 /// (LoweredSystem::EvaluateEventIndicators: c of inactive constraints, multipliers of active
 /// ones, lambda of inactive modes, theta of sliding ones) and the relays' switching functions;
-/// they are also sampled inside every step on IDA's interpolant, so that a contact that begins
-/// and ends within one step is found. At a root the new statuses come from the velocity-level
+/// they are also sampled inside every step on IDA's interpolant and bounded on it by interval
+/// arithmetic (docs/ida.md, "Contacts inside a step"), so that a contact or a pulse of a
+/// switching function that begins and ends within one step is found (or, where the bounds
+/// cannot decide, a warning says so). At a root the new statuses come from the velocity-level
 /// complementarity problem at the event state (LoweredSystem::DecideStatuses: the slow
 /// solution), a relay flips its memory, and IDA restarts from consistent values. Sliding modes
 /// are DAE phases, never chattering. Control breakpoints restart IDA with the new input values;
 /// an indicator that is zero at a breakpoint or at tf is decided there.
 ///
-/// Accuracy is tolerance-driven (rtol, atol); IdaOptions::Reference() (rtol = 1e-12) gives
+/// Step growth is SUNDIALS IDA's: at most a factor 2 per step. Accuracy is tolerance-driven
+/// (rtol, atol); IdaOptions::Reference() (rtol = 1e-12) gives
 /// the reference solutions that tests and benchmarks compare the other integrators with.
 ///
 /// Effects supported: moving sets, switching surfaces, hysteresis relays. Path constraints

@@ -11,8 +11,9 @@
 /// Step size: fixed (uniform grid between control breakpoints), or controlled by the
 /// embedded estimate err = (I - h gamma0 J)^{-1}(gamma0 h F(y_n) + sum_j e_j Z_j) of local
 /// order s + 1 (Hairer & Wanner II, Sec. IV.8) in the weighted RMS norm with weights
-/// atol + rtol max(|y_n|, |y_{n+1}|), h_new = h min(5, max(0.2, 0.9 err^{-1/(s+1)})).
-/// Steps never cross control breakpoints. Scenes with effects are refused (use the
+/// atol + rtol max(|y_n|, |y_{n+1}|), h_new = h min(5, max(0.2, 0.9 err^{-1/(s+1)})): a step
+/// grows by at most 5. Steps never cross control breakpoints or the stop times
+/// (RadauOptions::stop_times). Scenes with effects are refused (use the
 /// time-stepping, FESD, IDA or alpha-method integrators).
 
 #include <string>
