@@ -49,8 +49,8 @@ std::vector<Event> SnapshotEvents(const std::vector<Event>& events, int max_snap
 }  // namespace
 
 void AnimationOptions::Validate() const {
-  RequireArgument(std::isfinite(fps) && fps >= 1.0 && fps <= 120.0,
-                  "fps must be in [1, 120], got ", fps);
+  RequireArgument(std::isfinite(fps) && fps >= 1.0 && fps <= 120.0, "fps must be in [1, 120], got ",
+                  fps);
   RequireArgument(std::isfinite(duration) && duration > 0.0, "duration must be > 0 seconds, got ",
                   duration);
   RequireArgument(std::isfinite(speed) && speed >= 0.0,
@@ -95,18 +95,17 @@ AnimationStats Animate(const CompiledView& view, TrajectorySource* source,
     const std::string command =
         "ffmpeg -y -loglevel error -f rawvideo -pixel_format bgra -video_size " +
         std::to_string(renderer.width()) + "x" + std::to_string(renderer.height()) +
-        " -framerate " + rate + " -i - -c:v libx264 -pix_fmt yuv420p -crf 23 -movflags +faststart " +
-        Quote(mp4);
+        " -framerate " + rate +
+        " -i - -c:v libx264 -pix_fmt yuv420p -crf 23 -movflags +faststart " + Quote(mp4);
     pipe = popen(command.c_str(), "w");
     if (pipe == nullptr) throw std::runtime_error("cannot start ffmpeg: " + command);
   }
   if (!options.snapshot_directory.empty()) fs::create_directories(options.snapshot_directory);
   if (!options.frame_directory.empty()) fs::create_directories(options.frame_directory);
 
-  const std::vector<Event> snapshots =
-      options.snapshot_directory.empty()
-          ? std::vector<Event>()
-          : SnapshotEvents(events, options.max_snapshots, t0, tf);
+  const std::vector<Event> snapshots = options.snapshot_directory.empty()
+                                           ? std::vector<Event>()
+                                           : SnapshotEvents(events, options.max_snapshots, t0, tf);
   std::size_t next_snapshot = 0;
   Sampler sampler(source);
   Vector x;
@@ -171,8 +170,7 @@ AnimationStats Animate(const CompiledView& view, TrajectorySource* source,
     if (options.mp4_path.empty()) fs::remove(mp4);
     stats.files.push_back(options.gif_path);
   }
-  stats.seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return stats;
 }
 

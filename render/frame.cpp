@@ -35,6 +35,8 @@ void ClosestOnSegment(double px, double py, const double* s, double* qx, double*
 }
 
 constexpr double kMarginFraction = 0.05;  // of the window, on each side (FitWindow)
+// Windows of points and segments more elongated than this get a scale per axis.
+constexpr double kMaxUniformAspect = 3.0;
 
 }  // namespace
 
@@ -83,8 +85,7 @@ Image ReadPng(const std::string& path) {
   return image;
 }
 
-FrameRenderer::FrameRenderer(const CompiledView& view, const std::vector<double>& window,
-                             int width)
+FrameRenderer::FrameRenderer(const CompiledView& view, const std::vector<double>& window, int width)
     : view_(view), window_(window), cairo_(std::make_unique<Cairo>()) {
   RequireArgument(window.size() == 4 && window[0] < window[1] && window[2] < window[3],
                   "frame window must be {xmin, xmax, ymin, ymax} with xmin < xmax, ymin < ymax");
@@ -93,11 +94,23 @@ FrameRenderer::FrameRenderer(const CompiledView& view, const std::vector<double>
   const double w = window[1] - window[0], h = window[3] - window[2];
   width_ = RoundUpEven(width);
   scale_ = width_ / w;
-  height_ = std::max(16, RoundUpEven(scale_ * h));
+  scale_y_ = scale_;
+  bool round_shapes = false;  // discs or circles: only a uniform scale keeps them round
+  for (const Body& body : view.bodies()) round_shapes = round_shapes || body.radius > 0.0;
+  for (const ObstacleShape& o : view.Obstacles(view.initial_time())) {
+    round_shapes = round_shapes || o.shape == ViewObstacle::Shape::kCircle;
+  }
+  if (!round_shapes && (h > kMaxUniformAspect * w || w > kMaxUniformAspect * h)) {
+    height_ = RoundUpEven(0.75 * width_);
+    scale_y_ = height_ / h;
+    offset_y_ = 0.0;
+  } else {
+    height_ = std::max(16, RoundUpEven(scale_ * h));
+    offset_y_ = 0.5 * (height_ - scale_ * h);
+  }
   RequireArgument(height_ <= 8192, "frame height ", height_,
                   " pixels is too large: the window's aspect ratio is extreme");
   offset_x_ = 0.0;
-  offset_y_ = 0.5 * (height_ - scale_ * h);
   cairo_->surface = cairo_image_surface_create(CAIRO_FORMAT_RGB24, width_, height_);
   cairo_->cr = cairo_create(cairo_->surface);
   trails_.resize(view.bodies().size());
@@ -192,9 +205,9 @@ void FrameRenderer::Draw(double t, const Vector& x, bool trail_point) {
     for (std::int64_t di = -1; di <= 1; ++di) {
       for (std::int64_t dj = -1; dj <= 1; ++dj) {
         const std::int64_t k = key(i + di, j + dj);
-        auto range = std::equal_range(
-            keys.begin(), keys.end(), std::make_pair(k, 0),
-            [](const auto& a, const auto& c) { return a.first < c.first; });
+        auto range =
+            std::equal_range(keys.begin(), keys.end(), std::make_pair(k, 0),
+                             [](const auto& a, const auto& c) { return a.first < c.first; });
         for (auto it = range.first; it != range.second; ++it) {
           const auto other = static_cast<std::size_t>(it->second);
           if (other <= b) continue;
@@ -233,7 +246,7 @@ void FrameRenderer::Draw(double t, const Vector& x, bool trail_point) {
 
   // The time, top left.
   char text[64];
-  std::snprintf(text, sizeof text, "t = %.3f", t);
+  std::snprintf(text, sizeof text, "t = %.4g", t);
   cairo_select_font_face(cr, "sans-serif", CAIRO_FONT_SLANT_NORMAL, CAIRO_FONT_WEIGHT_NORMAL);
   cairo_set_font_size(cr, std::max(10.0, height_ / 40.0));
   SetColor(cr, 0x000000);

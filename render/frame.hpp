@@ -42,7 +42,8 @@ class FrameRenderer {
  public:
   // window = {xmin, xmax, ymin, ymax} in world units; the image is `width` pixels wide and as
   // high as the window's aspect ratio needs (both rounded up to even numbers, as video
-  // encoders want).
+  // encoders want). A view of points and segments only whose window is far from square (a
+  // phase plane of quantities in different units) gets a 4:3 image with a scale per axis.
   FrameRenderer(const CompiledView& view, const std::vector<double>& window, int width);
   ~FrameRenderer();
   FrameRenderer(const FrameRenderer&) = delete;
@@ -62,15 +63,15 @@ class FrameRenderer {
   void WritePng(const std::string& path) const;
   // Pixel coordinates (column, row; fractional, row 0 at the top) of world point (x, y).
   double Column(double x) const { return offset_x_ + scale_ * (x - window_[0]); }
-  double Row(double y) const { return offset_y_ + scale_ * (window_[3] - y); }
-  double scale() const { return scale_; }  // pixels per world unit
+  double Row(double y) const { return offset_y_ + scale_y_ * (window_[3] - y); }
+  double scale() const { return scale_; }  // pixels per world unit (x; y too unless stretched)
 
  private:
   struct Cairo;
   const CompiledView& view_;
   std::vector<double> window_;
   int width_ = 0, height_ = 0;
-  double scale_ = 1.0, offset_x_ = 0.0, offset_y_ = 0.0;
+  double scale_ = 1.0, scale_y_ = 1.0, offset_x_ = 0.0, offset_y_ = 0.0;
   std::unique_ptr<Cairo> cairo_;
   std::vector<std::vector<std::pair<double, double>>> trails_;
   int num_contacts_ = 0;

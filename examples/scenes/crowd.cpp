@@ -323,8 +323,8 @@ void AddCrowdView(const CrowdLayout& layout, Scene* scene) {
   SceneView& view = scene->view;
   view.bodies.reserve(static_cast<std::size_t>(n));
   for (int i = 0; i < n; ++i) {
-    view.bodies.push_back({"agent_" + std::to_string(i + 1), AgentName('x', i), AgentName('y', i),
-                           r, false});
+    view.bodies.push_back(
+        {"agent_" + std::to_string(i + 1), AgentName('x', i), AgentName('y', i), r, false});
   }
   const std::string half = Number(0.5 * layout.room_height);
   const std::string door = Number(layout.door_x);
@@ -702,8 +702,8 @@ void WriteCrowdSceneFile(const CrowdOptions& options, std::ostream& out) {
   }
   // The view: agents as discs, walls and jambs as obstacles (docs/visualization.md).
   const SceneView& view = scene.view;
-  out << "\n[view]\nwindow = [" << Number(view.window[0]) << ", " << Number(view.window[1])
-      << ", " << Number(view.window[2]) << ", " << Number(view.window[3]) << "]\n";
+  out << "\n[view]\nwindow = [" << Number(view.window[0]) << ", " << Number(view.window[1]) << ", "
+      << Number(view.window[2]) << ", " << Number(view.window[3]) << "]\n";
   for (const ViewBody& body : view.bodies) {
     out << "\n[[view.bodies]]\nname = \"" << body.name << "\"\nx = \"" << body.x << "\"\ny = \""
         << body.y << "\"\nradius = " << Number(body.radius) << "\n";

@@ -63,11 +63,12 @@ Scene MakeS2() {
   scene.effects.push_back(set);
   // The play: a point kept between the two ends of the moving interval.
   scene.view.bodies = {{"x", "x", "", 0.05, false}};
-  scene.view.obstacles = {
-      {"lower", ViewObstacle::Shape::kSegment,
-       {"amplitude*sin(t) - r", "-0.3", "amplitude*sin(t) - r", "0.3"}},
-      {"upper", ViewObstacle::Shape::kSegment,
-       {"amplitude*sin(t) + r", "-0.3", "amplitude*sin(t) + r", "0.3"}}};
+  scene.view.obstacles = {{"lower",
+                           ViewObstacle::Shape::kSegment,
+                           {"amplitude*sin(t) - r", "-0.3", "amplitude*sin(t) - r", "0.3"}},
+                          {"upper",
+                           ViewObstacle::Shape::kSegment,
+                           {"amplitude*sin(t) + r", "-0.3", "amplitude*sin(t) + r", "0.3"}}};
   scene.view.window = {-1.8, 1.8, -0.6, 0.6};
   return scene;
 }
@@ -139,9 +140,10 @@ Scene MakeS4() {
   constexpr double kWaveTop = 14.0;
   auto node = [](int k) { return std::to_string(kWaveTop * k / kWaveSegments); };
   for (int k = 0; k < kWaveSegments; ++k) {
-    scene.view.obstacles.push_back({"wave_" + std::to_string(k), ViewObstacle::Shape::kSegment,
-                                    {"-cos(" + node(k) + " - t)", node(k),
-                                     "-cos(" + node(k + 1) + " - t)", node(k + 1)}});
+    scene.view.obstacles.push_back(
+        {"wave_" + std::to_string(k),
+         ViewObstacle::Shape::kSegment,
+         {"-cos(" + node(k) + " - t)", node(k), "-cos(" + node(k + 1) + " - t)", node(k + 1)}});
   }
   scene.view.window = {-1.5, 2.0, 0.0, kWaveTop};
   return scene;

@@ -241,8 +241,7 @@ class SceneReader {
   void ReadView(const toml::table& table, Scene* scene);
   void ReadViewBody(const toml::table& table, const std::string& path, Scene* scene);
   void ReadViewObstacle(const toml::table& table, const std::string& path, Scene* scene);
-  std::string StateName(const toml::node& node, const std::string& path,
-                        const Scene& scene) const;
+  std::string StateName(const toml::node& node, const std::string& path, const Scene& scene) const;
   // A matrix of expressions given as `rows` arrays of `cols` entries, row-major.
   SmoothFunction MatrixFunction(const toml::node& node, const std::string& path,
                                 const std::string& name, std::size_t rows, std::size_t cols,
@@ -785,8 +784,8 @@ void SceneReader::ReadViewBody(const toml::table& table, const std::string& path
       Fail(name, Join(path, "name"), "duplicate body name '", body.name, "'");
     }
   }
-  body.x = StateName(Require(table, "x", path, "the state of the centre's x"), Join(path, "x"),
-                     *scene);
+  body.x =
+      StateName(Require(table, "x", path, "the state of the centre's x"), Join(path, "x"), *scene);
   if (const toml::node* y = table.get("y")) body.y = StateName(*y, Join(path, "y"), *scene);
   if (const toml::node* radius = table.get("radius")) {
     body.radius = Value(*radius, Join(path, "radius"));
@@ -837,7 +836,8 @@ void SceneReader::ReadViewObstacle(const toml::table& table, const std::string& 
                                             static_cast<Eigen::Index>(parameter_values_.size()));
   for (const auto& [key, count] : parts) {
     const std::string key_path = Join(path, key);
-    const toml::node& node = Require(table, key, path, key == "radius" ? "an expression" : "[x, y]");
+    const toml::node& node =
+        Require(table, key, path, key == "radius" ? "an expression" : "[x, y]");
     std::vector<const toml::node*> entries;
     if (count == 1) {
       entries.push_back(&node);

@@ -79,9 +79,8 @@ void ValidateView(const Scene& scene) {
                     body.name, "'");
     RequireState(scene, states, body.x, "body '" + body.name + "': x");
     if (!body.y.empty()) RequireState(scene, states, body.y, "body '" + body.name + "': y");
-    RequireArgument(std::isfinite(body.radius) && body.radius >= 0.0, scene.name,
-                    ": view: body '", body.name, "': radius must be finite and >= 0, got ",
-                    body.radius);
+    RequireArgument(std::isfinite(body.radius) && body.radius >= 0.0, scene.name, ": view: body '",
+                    body.name, "': radius must be finite and >= 0, got ", body.radius);
   }
   names.clear();
   for (const ViewObstacle& obstacle : view.obstacles) {
@@ -108,12 +107,13 @@ void ValidateView(const Scene& scene) {
   }
   if (!view.window.empty()) {
     const auto& w = view.window;
-    RequireArgument(w.size() == 4 && std::all_of(w.begin(), w.end(),
-                                                 [](double v) { return std::isfinite(v); }) &&
-                        w[0] < w[1] && w[2] < w[3],
-                    scene.name,
-                    ": view: window must be {xmin, xmax, ymin, ymax} with xmin < xmax and ymin < "
-                    "ymax (finite)");
+    RequireArgument(
+        w.size() == 4 &&
+            std::all_of(w.begin(), w.end(), [](double v) { return std::isfinite(v); }) &&
+            w[0] < w[1] && w[2] < w[3],
+        scene.name,
+        ": view: window must be {xmin, xmax, ymin, ymax} with xmin < xmax and ymin < "
+        "ymax (finite)");
   }
 }
 

@@ -41,7 +41,8 @@ def _label(view, name):
 
 
 def _bands(t, active):
-    """(start, width) of the runs of True in ``active`` on the times ``t``."""
+    """(start, width) of the runs of True in ``active``, a value per time of ``t`` that holds
+    on the interval ending there (t_{k-1}, t_k], as multipliers at stage points do."""
     spans = []
     k = 0
     n = len(t)
@@ -52,9 +53,9 @@ def _bands(t, active):
         j = k
         while j + 1 < n and active[j + 1]:
             j += 1
-        end = t[j + 1] if j + 1 < n else t[-1]
-        if end > t[k]:
-            spans.append((t[k], end - t[k]))
+        start = t[k - 1] if k > 0 else t[k]
+        if t[j] > start:
+            spans.append((start, t[j] - start))
         k = j + 1
     return spans
 

@@ -50,20 +50,20 @@ void BindView(py::module_& m) {
     return names;
   });
   // c(x_k, u(t), t, p) for the rows x_k of X: one row of outputs per point.
-  m.def("_effect_values", [](const Scene& scene, const std::string& effect, double t,
-                             const Matrix& points) {
-    const SmoothFunction& f = EffectFunction(scene, effect);
-    RequireArgument(points.cols() == scene.num_states(), "points must have ", scene.num_states(),
-                    " columns (one per state), got ", points.cols());
-    Matrix values(points.rows(), f.num_outputs());
-    const Vector p = scene.ParameterValues(), u = scene.InputValues(t);
-    Vector out;
-    for (Eigen::Index k = 0; k < points.rows(); ++k) {
-      f.Evaluate(points.row(k).transpose(), u, t, p, &out);
-      values.row(k) = out.transpose();
-    }
-    return values;
-  });
+  m.def("_effect_values",
+        [](const Scene& scene, const std::string& effect, double t, const Matrix& points) {
+          const SmoothFunction& f = EffectFunction(scene, effect);
+          RequireArgument(points.cols() == scene.num_states(), "points must have ",
+                          scene.num_states(), " columns (one per state), got ", points.cols());
+          Matrix values(points.rows(), f.num_outputs());
+          const Vector p = scene.ParameterValues(), u = scene.InputValues(t);
+          Vector out;
+          for (Eigen::Index k = 0; k < points.rows(); ++k) {
+            f.Evaluate(points.row(k).transpose(), u, t, p, &out);
+            values.row(k) = out.transpose();
+          }
+          return values;
+        });
   m.def(
       "_animate",
       [](const Scene& scene, const SimulationResult& result, const std::string& mp4,

@@ -439,20 +439,19 @@ TEST(SceneFileRobustnessTest, MutatedFilesAndGeneratedExpressionsAreRejectedClea
   EXPECT_GT(rejected, kFiles / 2);
 }
 
-
 // ---- [view]: names, units and planar geometry --------------------------------------------
 
 TEST(SceneFileViewTest, ReadsUnitsLabelsBodiesAndObstacles) {
   const Scene scene = ParseScene(std::string(kHeader) +
-                                 "[[parameters]]\nname = \"h\"\nvalue = 0.5\n"
-                                 "[view]\nunits = { x = \"m\", y = \"m\" }\n"
-                                 "labels = { x = \"position\" }\nwindow = [-2, 2, \"-h\", 3]\n"
-                                 "[[view.bodies]]\nname = \"ball\"\nx = \"x\"\ny = \"y\"\n"
-                                 "radius = \"h/5\"\ntrail = true\n"
-                                 "[[view.obstacles]]\nname = \"floor\"\nshape = \"segment\"\n"
-                                 "from = [-2, \"h*t\"]\nto = [2, \"h*t\"]\n"
-                                 "[[view.obstacles]]\nname = \"post\"\nshape = \"circle\"\n"
-                                 "center = [0, 1]\nradius = \"h\"\n",
+                                     "[[parameters]]\nname = \"h\"\nvalue = 0.5\n"
+                                     "[view]\nunits = { x = \"m\", y = \"m\" }\n"
+                                     "labels = { x = \"position\" }\nwindow = [-2, 2, \"-h\", 3]\n"
+                                     "[[view.bodies]]\nname = \"ball\"\nx = \"x\"\ny = \"y\"\n"
+                                     "radius = \"h/5\"\ntrail = true\n"
+                                     "[[view.obstacles]]\nname = \"floor\"\nshape = \"segment\"\n"
+                                     "from = [-2, \"h*t\"]\nto = [2, \"h*t\"]\n"
+                                     "[[view.obstacles]]\nname = \"post\"\nshape = \"circle\"\n"
+                                     "center = [0, 1]\nradius = \"h\"\n",
                                  "view.toml");
   const SceneView& view = scene.view;
   EXPECT_EQ(view.units.at("x"), "m");
@@ -475,7 +474,8 @@ TEST(SceneFileViewTest, ReadsUnitsLabelsBodiesAndObstacles) {
 }
 
 // A view error names file:line:column and what is wrong.
-void ExpectLocated(const std::string& text, const std::string& where, const std::string& what = "") {
+void ExpectLocated(const std::string& text, const std::string& where,
+                   const std::string& what = "") {
   ExpectError(text, where);
   if (!what.empty()) ExpectError(text, what);
 }
@@ -483,27 +483,29 @@ void ExpectLocated(const std::string& text, const std::string& where, const std:
 TEST(SceneFileViewTest, BadViewsAreLocatedErrors) {
   const std::string body = "[[view.bodies]]\nname = \"b\"\n";
   // Unknown state, with the closest name, at its line and column.
-  ExpectLocated(std::string(kHeader) + body + "x = \"x\"\ny = \"z\"\n",
-              "bad.toml:8:5", "unknown state 'z'");
+  ExpectLocated(std::string(kHeader) + body + "x = \"x\"\ny = \"z\"\n", "bad.toml:8:5",
+                "unknown state 'z'");
   ExpectLocated(std::string(kHeader) + body + "x = \"xx\"\n", "did you mean 'x'?");
   // Negative radius.
-  ExpectLocated(std::string(kHeader) + body + "x = \"x\"\nradius = -0.5\n",
-              "bad.toml:8:10", "radius must be >= 0, got -0.5");
-  ExpectLocated(std::string(kHeader) + "[view]\nunits = { q = \"m\" }\n",
-              "bad.toml:6:11", "unknown state 'q'");
+  ExpectLocated(std::string(kHeader) + body + "x = \"x\"\nradius = -0.5\n", "bad.toml:8:10",
+                "radius must be >= 0, got -0.5");
+  ExpectLocated(std::string(kHeader) + "[view]\nunits = { q = \"m\" }\n", "bad.toml:6:11",
+                "unknown state 'q'");
   ExpectLocated(std::string(kHeader) + body + "x = \"x\"\nsize = 1\n", "unknown key 'size'");
   // Obstacles: expressions of t and parameters only, the right shape, a radius >= 0.
   const std::string obstacle = "[[view.obstacles]]\nname = \"o\"\n";
-  ExpectLocated(std::string(kHeader) + obstacle + "shape = \"segment\"\nfrom = [\"x\", 0]\nto = [1, 1]\n",
-              "bad.toml:8:10", "unknown name 'x'");
+  ExpectLocated(
+      std::string(kHeader) + obstacle + "shape = \"segment\"\nfrom = [\"x\", 0]\nto = [1, 1]\n",
+      "bad.toml:8:10", "unknown name 'x'");
   ExpectLocated(std::string(kHeader) + obstacle + "shape = \"square\"\n",
-              "expected \"circle\" or \"segment\"");
-  ExpectLocated(std::string(kHeader) + obstacle + "shape = \"circle\"\ncenter = [0, 0]\nradius = -1\n",
-              "bad.toml:9:10", "radius must be >= 0, got -1 at t0");
+                "expected \"circle\" or \"segment\"");
+  ExpectLocated(
+      std::string(kHeader) + obstacle + "shape = \"circle\"\ncenter = [0, 0]\nradius = -1\n",
+      "bad.toml:9:10", "radius must be >= 0, got -1 at t0");
   ExpectLocated(std::string(kHeader) + obstacle + "shape = \"segment\"\nfrom = [0]\nto = [1, 1]\n",
-              "expected 2 entries");
-  ExpectLocated(std::string(kHeader) + "[view]\nwindow = [1, 0, 0, 1]\n",
-              "bad.toml:6:10", "expected xmin < xmax");
+                "expected 2 entries");
+  ExpectLocated(std::string(kHeader) + "[view]\nwindow = [1, 0, 0, 1]\n", "bad.toml:6:10",
+                "expected xmin < xmax");
 }
 
 TEST(SceneViewTest, ValidateSceneChecksBuiltViews) {

@@ -73,8 +73,8 @@ TEST(RunFigureTest, PhasePortraitOfS3HasTheFloorAtMinusOne) {
     if (x1 > -0.4 && x1 < 1.85) continue;
     const int column = static_cast<int>(column_of(x1));
     EXPECT_TRUE(ColourNear(image, column, row_of(-1.0), colour))
-        << "no floor at x1 = " << x1 << ", x2 = -1 (column " << column << ", row "
-        << row_of(-1.0) << ")";
+        << "no floor at x1 = " << x1 << ", x2 = -1 (column " << column << ", row " << row_of(-1.0)
+        << ")";
     // ... and not anywhere else in the column (only one boundary, at the floor).
     for (double x2 : {-1.25, -0.75, 0.0, 1.0}) {
       EXPECT_FALSE(ColourNear(image, column, row_of(x2), colour))
@@ -118,8 +118,10 @@ TEST(RunFigureTest, H1FigureHasNoInternalVariable) {
 
 TEST(AnimateCommandTest, WritesVideoGifAndSnapshots) {
   const fs::path dir = TempDir("S5");
-  const auto outcome = RunCli("run S5 --quiet --animate --fps 5 --duration 2 --width 160 "
-                              "--gif-width 80 --out " + dir.string());
+  const auto outcome = RunCli(
+      "run S5 --quiet --animate --fps 5 --duration 2 --width 160 "
+      "--gif-width 80 --out " +
+      dir.string());
   ASSERT_EQ(outcome.exit_code, 0) << outcome.output;
   for (const char* file : {"animation.mp4", "animation.gif", "view.json"}) {
     EXPECT_GT(fs::exists(dir / file) ? fs::file_size(dir / file) : 0u, 100u) << file;
@@ -131,7 +133,8 @@ TEST(AnimateCommandTest, WritesVideoGifAndSnapshots) {
   EXPECT_GT(snapshots, 0) << "S5 has contact events";
   // `moreau animate` on the run directory (the trajectory streamed from CSV) does the same.
   fs::remove(dir / "animation.gif");
-  const auto again = RunCli("animate " + dir.string() + " --fps 5 --duration 2 --width 160 "
+  const auto again = RunCli("animate " + dir.string() +
+                            " --fps 5 --duration 2 --width 160 "
                             "--gif-width 80 --no-mp4");
   ASSERT_EQ(again.exit_code, 0) << again.output;
   EXPECT_TRUE(fs::exists(dir / "animation.gif"));

@@ -126,8 +126,8 @@ TEST_F(CrowdFrameTest, EveryDiscIsAtItsComputedPosition) {
       const double mx = 0.5 * (x[2 * a] + x[2 * b]), my = 0.5 * (x[2 * a + 1] + x[2 * b + 1]);
       EXPECT_EQ(image.At(static_cast<int>(map.Column(mx)), static_cast<int>(map.Row(my))),
                 kContactColor)
-          << "active pair " << pairs.constraint_names[static_cast<std::size_t>(j)] << " at t = "
-          << t;
+          << "active pair " << pairs.constraint_names[static_cast<std::size_t>(j)]
+          << " at t = " << t;
       ++contacts_seen;
     }
   }

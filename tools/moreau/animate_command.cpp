@@ -26,10 +26,12 @@ void AddAnimateOptions(CLI::App* command, AnimateSettings* settings) {
                       "animation: most PNG snapshots at event times (default 12; 0: none)");
   command->add_option("--frames", o.frame_directory,
                       "animation: also write every frame as PNG into this directory");
-  command->add_flag("--no-mp4", [settings](std::int64_t) { settings->mp4 = false; },
-                    "animation: do not write animation.mp4");
-  command->add_flag("--no-gif", [settings](std::int64_t) { settings->gif = false; },
-                    "animation: do not write animation.gif");
+  command->add_flag(
+      "--no-mp4", [settings](std::int64_t) { settings->mp4 = false; },
+      "animation: do not write animation.mp4");
+  command->add_flag(
+      "--no-gif", [settings](std::int64_t) { settings->gif = false; },
+      "animation: do not write animation.gif");
 }
 
 namespace {
@@ -91,8 +93,8 @@ int RunAnimateCommand(const std::string& run_directory, AnimateSettings settings
         scene.final_time = t_final;
       }
     } catch (const nlohmann::json::exception& error) {
-      ThrowInvalidArgument(summary_path, ": not a summary written by `moreau run` (",
-                           error.what(), ")");
+      ThrowInvalidArgument(summary_path, ": not a summary written by `moreau run` (", error.what(),
+                           ")");
     }
   }
   const render::CompiledView view(scene);
@@ -110,8 +112,8 @@ int RunAnimateCommand(const std::string& run_directory, AnimateSettings settings
   return 0;
 }
 
-void AnimateResult(const Scene& scene, const SimulationResult& result,
-                   const std::string& directory, AnimateSettings settings) {
+void AnimateResult(const Scene& scene, const SimulationResult& result, const std::string& directory,
+                   AnimateSettings settings) {
   Scene drawn = scene;
   drawn.final_time = result.final_time;  // up to where the run got
   const render::CompiledView view(drawn);

@@ -27,7 +27,7 @@ void AddAnimateOptions(CLI::App* command, AnimateSettings* settings);
 int RunAnimateCommand(const std::string& run_directory, AnimateSettings settings);
 
 // Animates a simulation just run (its trajectory in memory) into `directory`; prints the files.
-void AnimateResult(const Scene& scene, const SimulationResult& result,
-                   const std::string& directory, AnimateSettings settings);
+void AnimateResult(const Scene& scene, const SimulationResult& result, const std::string& directory,
+                   AnimateSettings settings);
 
 }  // namespace moreau::tool

@@ -204,10 +204,9 @@ int Run(Scene scene, const moreau::SimulationSettings& settings, bool numerical_
   }
   tool::WriteSummaryJson(report, out_directory + "/summary.json");
   tool::WriteViewJson(scene, out_directory + "/view.json");
-  const std::string image =
-      plot ? tool::WritePlot(scene, report, trajectory, out_directory, numerical_time,
-                             plot_internal)
-           : "";
+  const std::string image = plot ? tool::WritePlot(scene, report, trajectory, out_directory,
+                                                   numerical_time, plot_internal)
+                                 : "";
 
   const auto& names = report.state_names;
   std::ostringstream state;
@@ -545,8 +544,7 @@ int main(int argc, char** argv) {
       run_animate_settings.options.Validate();
     }
     return Run(std::move(scene), settings, numerical_time, out_directory, !no_plot, plot_internal,
-               quiet,
-               run_animate ? &run_animate_settings : nullptr);
+               quiet, run_animate ? &run_animate_settings : nullptr);
   } catch (const std::invalid_argument& error) {
     std::fprintf(stderr, "moreau: error: %s\n", error.what());
     return 2;

@@ -65,15 +65,20 @@ struct Band {
 };
 const char* const kBandColors[] = {"#4C78A8", "#F58518", "#54A24B", "#B279A2"};
 
+// Bands from a state per recorded point: interval [t_k, t_{k+1}) gets the state both ends
+// share; where they differ, the later end's (a switch happens at the earlier point), unless
+// the later end is on a surface (2: sliding), which the earlier end then keeps. -1: no band.
 std::vector<Band> Bands(const std::vector<double>& t, const std::vector<int>& state) {
   std::vector<Band> bands;
-  std::size_t k = 0;
-  while (k < t.size()) {
-    std::size_t j = k;
-    while (j + 1 < t.size() && state[j + 1] == state[k]) ++j;
-    const double end = j + 1 < t.size() ? t[j + 1] : t.back();
-    if (state[k] >= 0 && end > t[k]) bands.push_back({t[k], end, state[k]});
-    k = j + 1;
+  for (std::size_t k = 0; k + 1 < t.size(); ++k) {
+    const int a = state[k], b = state[k + 1];
+    const int s = a == b ? a : (b != 2 ? b : a);
+    if (s < 0 || !(t[k + 1] > t[k])) continue;
+    if (!bands.empty() && bands.back().color == s && bands.back().end == t[k]) {
+      bands.back().end = t[k + 1];
+    } else {
+      bands.push_back({t[k], t[k + 1], s});
+    }
   }
   return bands;
 }
@@ -188,7 +193,7 @@ std::string WritePlot(const Scene& scene, const SimulationResult& report,
               kActiveTolerance * std::max(1.0, trajectory.x[k].lpNorm<Eigen::Infinity>());
           for (std::size_t j = 0; j < m; ++j) {
             if (c[k][static_cast<Eigen::Index>(j)] <= tolerance) {
-              active[j][k] = 0;
+              active[j][k] = 2;  // "on the boundary": see Bands
               count[k] += 1.0;
             }
           }
@@ -224,7 +229,8 @@ std::string WritePlot(const Scene& scene, const SimulationResult& report,
       std::vector<int> values{relay.initial_value};
       values.insert(values.end(), relay.values.begin(), relay.values.end());
       for (std::size_t k = 0; k + 1 < times.size(); ++k) {
-        if (values[k] == 1 && times[k + 1] > times[k]) row.bands.push_back({times[k], times[k + 1], 1});
+        if (values[k] == 1 && times[k + 1] > times[k])
+          row.bands.push_back({times[k], times[k + 1], 1});
       }
       band_rows.push_back(row);
     }
@@ -278,7 +284,8 @@ std::string WritePlot(const Scene& scene, const SimulationResult& report,
       }
     }
     for (int i = 0; i < 2; ++i) {
-      const double pad = hi[i] > lo[i] ? 0.12 * (hi[i] - lo[i]) : 0.5 * std::max(1.0, std::abs(lo[i]));
+      const double pad =
+          hi[i] > lo[i] ? 0.12 * (hi[i] - lo[i]) : 0.5 * std::max(1.0, std::abs(lo[i]));
       range[2 * i] = lo[i] - pad;
       range[2 * i + 1] = hi[i] + pad;
     }
@@ -323,8 +330,8 @@ std::string WritePlot(const Scene& scene, const SimulationResult& report,
           }
         }
         for (const auto& grid : grids) {
-          for (const auto& s : ZeroContour(grid, kContourGrid, range[0], range[1], range[2],
-                                           range[3])) {
+          for (const auto& s :
+               ZeroContour(grid, kContourGrid, range[0], range[1], range[2], range[3])) {
             out << s[0] << " " << s[1] << "\n" << s[2] << " " << s[3] << "\n\n";
           }
         }
@@ -333,8 +340,8 @@ std::string WritePlot(const Scene& scene, const SimulationResult& report,
   }
 
   // ---- the script -------------------------------------------------------------------------
-  const int time_panels = 1 + (effects_panel ? 1 : 0) + (band_rows.empty() ? 0 : 1) +
-                          (events.empty() ? 0 : 1);
+  const int time_panels =
+      1 + (effects_panel ? 1 : 0) + (band_rows.empty() ? 0 : 1) + (events.empty() ? 0 : 1);
   const int height = std::max(phase ? 560 : 0, 60 + kPanelHeight * time_panels);
   const double right = phase ? kTimeRightWithPhase : kTimeRightAlone;
   // Room on the left for the longest row name of the band and event panels (about 6.5 px a
@@ -352,13 +359,12 @@ std::string WritePlot(const Scene& scene, const SimulationResult& report,
     << "\nset datafile separator ','\nset grid\nset multiplot\n"
     << "set label 1 " << Quote(report.scene + " (" + report.integrator + ", " + report.status + ")")
     << " at screen 0.5, screen 0.985 center font 'sans,12'\n";
-  const std::string time_label =
-      numerical_time_axis ? "numerical time tau" : "t" + [&] {
-        for (const auto& [state, unit] : scene.view.units) {
-          if (state == "t") return " [" + unit + "]";
-        }
-        return std::string();
-      }();
+  const std::string time_label = numerical_time_axis ? "numerical time tau" : "t" + [&] {
+    for (const auto& [state, unit] : scene.view.units) {
+      if (state == "t") return " [" + unit + "]";
+    }
+    return std::string();
+  }();
   // Panels from the top: y in screen fractions.
   const double top = 1.0 - 30.0 / height, bottom = 45.0 / height;
   const double step = (top - bottom) / time_panels;
@@ -461,13 +467,11 @@ std::string WritePlot(const Scene& scene, const SimulationResult& report,
       int point;
       const char* color;
     };
-    const KindStyle styles[] = {{EventKind::kEnter, 9, "#E45756"},
-                                {EventKind::kLeave, 11, "#4C78A8"},
-                                {EventKind::kModeSwitch, 7, "#54A24B"},
-                                {EventKind::kSlideStart, 5, "#F58518"},
-                                {EventKind::kSlideEnd, 4, "#F58518"},
-                                {EventKind::kRelaySwitch, 13, "#B279A2"},
-                                {EventKind::kAmbiguous, 3, "#000000"}};
+    const KindStyle styles[] = {
+        {EventKind::kEnter, 9, "#E45756"},      {EventKind::kLeave, 11, "#4C78A8"},
+        {EventKind::kModeSwitch, 7, "#54A24B"}, {EventKind::kSlideStart, 5, "#F58518"},
+        {EventKind::kSlideEnd, 4, "#F58518"},   {EventKind::kRelaySwitch, 13, "#B279A2"},
+        {EventKind::kAmbiguous, 3, "#000000"}};
     bool first = true;
     for (const KindStyle& style : styles) {
       const bool present = std::any_of(events.begin(), events.end(),
@@ -508,13 +512,11 @@ std::string WritePlot(const Scene& scene, const SimulationResult& report,
     std::ofstream path(directory + "/phase_path.dat");
     path << std::setprecision(17);
     for (const Vector& x : trajectory.x) path << x[0] << " " << x[1] << "\n";
-    geometry["phase"] = {{"left", kPhaseLeft * kFigureWidth},
-                         {"right", kPhaseRight * kFigureWidth},
-                         {"top", (1.0 - phase_top) * height},
-                         {"bottom", (1.0 - phase_bottom) * height},
-                         {"xrange", {range[0], range[1]}},
-                         {"yrange", {range[2], range[3]}},
-                         {"boundary_color", "#D62728"}};
+    geometry["phase"] = {
+        {"left", kPhaseLeft * kFigureWidth}, {"right", kPhaseRight * kFigureWidth},
+        {"top", (1.0 - phase_top) * height}, {"bottom", (1.0 - phase_bottom) * height},
+        {"xrange", {range[0], range[1]}},    {"yrange", {range[2], range[3]}},
+        {"boundary_color", "#D62728"}};
   }
   s << "unset multiplot\n";
   s.close();

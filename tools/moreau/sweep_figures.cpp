@@ -21,6 +21,8 @@ constexpr double kConstantTolerance = 1e-12;
 // Bins of a histogram: about sqrt(runs), between these.
 constexpr int kMinBins = 10;
 constexpr int kMaxBins = 60;
+// Most failed-run ticks on a figure's bottom axis (distinct varied values).
+constexpr std::size_t kMaxFailedTicks = 500;
 
 std::string Quote(const std::string& text) {
   std::string quoted = "'";
@@ -98,8 +100,8 @@ void Header(std::ofstream& s, const std::string& image, int width, int height) {
     << " noenhanced font 'sans,10'\nset output " << Quote(image) << "\nset grid\n";
 }
 
-// Failed-run markers: red crosses at the quantity's value (where it has one), else on the
-// bottom axis.
+// Failed-run markers: red crosses at the quantity's value where it has one (and a red tick on
+// the bottom axis at the varied value).
 constexpr const char* kFailedStyle = "with points pt 2 ps 1.2 lw 2 lc rgb '#D62728'";
 constexpr const char* kOkStyle = "with points pt 7 ps 0.45 lc rgb '#4C78A8'";
 
@@ -131,6 +133,15 @@ std::vector<std::string> SweepFigures(const SweepResult& r, const SweepSpec& spe
     const int rows = static_cast<int>((quantities.size() + columns - 1) / columns);
     std::ofstream s(script);
     Header(s, image, 1200, 40 + 300 * rows);
+    // Failed runs without a value (e.g. refused input) are ticks on the bottom axis.
+    std::set<double> failed_at;
+    for (const SweepRow& row : r.rows) {
+      if (!row.success && failed_at.size() < kMaxFailedTicks) failed_at.insert(row.values[v]);
+    }
+    for (double x : failed_at) {
+      s << std::setprecision(17) << "set arrow from " << x << ", graph 0 to " << x
+        << ", graph 0.08 nohead lw 2 lc rgb '#D62728'\n";
+    }
     s << "set multiplot layout " << rows << "," << columns << " title "
       << Quote(r.scene + ": " + std::to_string(r.rows.size()) + " runs against " +
                r.varied_names[v] + " (" + r.integrator + ")")
@@ -138,15 +149,14 @@ std::vector<std::string> SweepFigures(const SweepResult& r, const SweepSpec& spe
     for (std::size_t q = 0; q < quantities.size(); ++q) {
       const Span span = SpanOf(quantities[q].values);
       const int column = static_cast<int>(3 + q);
-      s << "set title " << Quote(quantities[q].name + (span.constant ? " (constant: " +
-                                                           Format(span.lo) + ")"
-                                                                       : ""))
+      s << "set title "
+        << Quote(quantities[q].name + (span.constant ? " (constant: " + Format(span.lo) + ")" : ""))
         << "\nset yrange " << (span.constant ? ConstantRange(span.lo) : "[*:*]") << "\n"
         << "plot " << Quote(data) << " using 1:($2 == 1 ? $" << column << " : 1/0) " << kOkStyle
         << " title 'runs'";
       if (failed > 0) {
-        s << ", " << Quote(data) << " using 1:($2 == 0 ? $" << column << " : 1/0) "
-          << kFailedStyle << " title " << Quote(failed_title);
+        s << ", " << Quote(data) << " using 1:($2 == 0 ? $" << column << " : 1/0) " << kFailedStyle
+          << " title " << Quote(failed_title);
       }
       s << "\n";
     }
@@ -166,7 +176,7 @@ std::vector<std::string> SweepFigures(const SweepResult& r, const SweepSpec& spe
     s << "set multiplot layout " << rows << "," << columns << " title "
       << Quote(r.scene + ": distribution over " + std::to_string(r.rows.size()) +
                " runs (successful runs)")
-      << "\nset style fill solid 0.7 noborder\nunset key\nset ylabel 'runs'\n";
+      << "\nset style fill solid 0.7 noborder\nunset key\nset ylabel 'runs'\nset yrange [0:*]\n";
     const int bins = std::clamp(static_cast<int>(std::sqrt(static_cast<double>(r.rows.size()))),
                                 kMinBins, kMaxBins);
     for (std::size_t q = 0; q < quantities.size(); ++q) {
@@ -198,9 +208,8 @@ std::vector<std::string> SweepFigures(const SweepResult& r, const SweepSpec& spe
         }
       }
       out.close();
-      s << "set title " << Quote(quantities[q].name + (span.constant ? " (constant: " +
-                                                           Format(span.lo) + ")"
-                                                                       : ""))
+      s << "set title "
+        << Quote(quantities[q].name + (span.constant ? " (constant: " + Format(span.lo) + ")" : ""))
         << "\nset xlabel " << Quote(quantities[q].name) << "\nset xrange "
         << (span.constant ? ConstantRange(span.lo) : "[*:*]") << "\nplot " << Quote(data)
         << " using 1:2:3 with boxes lc rgb '#4C78A8'\n";
@@ -228,8 +237,8 @@ std::vector<std::string> SweepFigures(const SweepResult& r, const SweepSpec& spe
           for (std::size_t j = 0; j < b.values.size(); ++j) {
             const SweepRow& row = r.rows[i * b.values.size() + j];
             const double value = q.values[i * b.values.size() + j];
-            out << a.values[i] << " " << b.values[j] << " "
-                << (std::isfinite(value) ? value : NAN) << "\n";
+            out << a.values[i] << " " << b.values[j] << " " << (std::isfinite(value) ? value : NAN)
+                << "\n";
             if (!row.success) bad << a.values[i] << " " << b.values[j] << "\n";
           }
           out << "\n";
@@ -244,7 +253,8 @@ std::vector<std::string> SweepFigures(const SweepResult& r, const SweepSpec& spe
                  std::to_string(a.values.size()) + " x " + std::to_string(b.values.size()) +
                  " grid (" + r.integrator + ")")
         << "\nset xlabel " << Quote(a.name) << "\nset ylabel " << Quote(b.name)
-        << "\nset palette defined (0 '#440154', 1 '#3B528B', 2 '#21908C', 3 '#5DC863', 4 '#FDE725')\nunset grid\nset key outside bottom center\n";
+        << "\nset palette defined (0 '#440154', 1 '#3B528B', 2 '#21908C', 3 '#5DC863', 4 "
+           "'#FDE725')\nunset grid\nset key outside bottom center\n";
       if (span.constant) {
         // One colour: no colour bar pretending to resolve round-off.
         s << "set cbrange " << ConstantRange(span.lo) << "\nunset colorbox\n";

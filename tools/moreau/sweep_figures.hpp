@@ -2,7 +2,8 @@
 // The figures of `moreau sweep` (gnuplot), one point per run and never the run index as an
 // axis: for each varied value, vs_<name>.png with every final state, the event count and the
 // first event time against it; for sampled sweeps, histograms.png; for two grids (nothing
-// sampled), heatmap_<quantity>.png drawn on the grid itself. Failed runs are red crosses;
+// sampled), heatmap_<quantity>.png drawn on the grid itself. Failed runs are red crosses
+// (and red ticks on the bottom axis);
 // a quantity that is the same in every run is titled "(constant: v)" with a range that does
 // not magnify round-off.
 
