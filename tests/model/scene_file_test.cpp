@@ -513,12 +513,12 @@ TEST(SceneViewTest, ValidateSceneChecksBuiltViews) {
   scene.view.bodies[0].radius = -1.0;
   EXPECT_THROW(ValidateScene(scene), std::invalid_argument);
   scene = MakeScene("S3");
-  scene.view.bodies[0].y = "x3";
+  scene.view.bodies[0].y = "xx2";
   try {
     ValidateScene(scene);
     ADD_FAILURE() << "no error for an unknown state";
   } catch (const std::invalid_argument& error) {
-    EXPECT_NE(std::string(error.what()).find("'x3' is not a state; did you mean 'x2'?"),
+    EXPECT_NE(std::string(error.what()).find("'xx2' is not a state; did you mean 'x2'?"),
               std::string::npos)
         << error.what();
   }

@@ -42,7 +42,8 @@ constexpr double kPhaseRight = 0.97;
 constexpr std::size_t kMaxNamedRows = 10;
 // Most events drawn as lines through the time panels (beyond: marks in the event panel only).
 constexpr std::size_t kMaxEventLines = 20;
-// Most constraints whose multipliers are drawn one by one (beyond: active counts).
+// Most multipliers drawn one by one (effects with more than kMaxNamedRows constraints get active
+// counts instead).
 constexpr std::size_t kMaxMultiplierLines = 8;
 // Most boundary curves C(t_event) in the phase portrait (event times spread evenly).
 constexpr std::size_t kMaxBoundaryTimes = 8;
@@ -236,7 +237,6 @@ std::string WritePlot(const Scene& scene, const SimulationResult& report,
     }
     if (band_rows.size() > kMaxNamedRows) band_rows.resize(kMaxNamedRows);
   }
-  const bool many_multipliers = multiplier_columns.size() > kMaxMultiplierLines;
   const bool effects_panel = !multiplier_columns.empty() || !counts.empty();
   const std::vector<Event> events = numerical_time_axis ? std::vector<Event>() : report.events;
 
@@ -415,11 +415,18 @@ std::string WritePlot(const Scene& scene, const SimulationResult& report,
   if (effects_panel) {
     open_panel(panel + 1 == time_panels);
     event_lines();
-    if (!many_multipliers && !multiplier_columns.empty()) {
+    if (counts.empty()) {
+      // The first kMaxMultiplierLines multipliers, named (more would not be readable).
+      const std::size_t drawn = std::min(multiplier_columns.size(), kMaxMultiplierLines);
       s << "set ylabel 'multiplier'\nplot ";
-      for (std::size_t i = 0; i < multiplier_columns.size(); ++i) {
+      for (std::size_t i = 0; i < drawn; ++i) {
+        std::string title = multiplier_columns[i].first;
+        if (i + 1 == drawn && drawn < multiplier_columns.size()) {
+          title += " (first " + std::to_string(drawn) + " of " +
+                   std::to_string(multiplier_columns.size()) + ")";
+        }
         s << (i ? ", " : "") << Quote(dense_csv) << " using 1:" << multiplier_columns[i].second
-          << " with fsteps lw 1.6 title " << Quote(multiplier_columns[i].first);
+          << " with fsteps lw 1.6 title " << Quote(title);
       }
       s << "\n";
     } else {
@@ -427,9 +434,6 @@ std::string WritePlot(const Scene& scene, const SimulationResult& report,
       for (std::size_t i = 0; i < counts.size(); ++i) {
         s << (i ? ", " : "") << Quote(directory + "/active_counts.dat") << " using 1:" << i + 2
           << " with steps lw 1.6 title " << Quote(counts[i].first + " (count)");
-      }
-      if (counts.empty()) {
-        s << "0 notitle";  // multipliers too many to draw, no count either
       }
       s << "\nset datafile separator ','\n";
     }
