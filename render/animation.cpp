@@ -159,11 +159,11 @@ AnimationStats Animate(const CompiledView& view, TrajectorySource* source,
     std::snprintf(filters, sizeof filters, "fps=%.6g,scale=%d:-2:flags=lanczos",
                   std::min(options.fps, options.gif_fps), options.gif_width);
     RunOrThrow("ffmpeg -y -loglevel error -i " + Quote(mp4) + " -vf '" + filters +
-                   ",palettegen=max_colors=64:stats_mode=diff' " + Quote(palette),
+                   ",palettegen=max_colors=32:stats_mode=diff' " + Quote(palette),
                "making the GIF palette");
     RunOrThrow("ffmpeg -y -loglevel error -i " + Quote(mp4) + " -i " + Quote(palette) +
                    " -lavfi '" + filters +
-                   " [v]; [v][1:v] paletteuse=dither=bayer:bayer_scale=4:diff_mode=rectangle' " +
+                   " [v]; [v][1:v] paletteuse=dither=none:diff_mode=rectangle' " +
                    Quote(options.gif_path),
                "writing the GIF");
     fs::remove(palette);
