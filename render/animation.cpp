@@ -174,4 +174,19 @@ AnimationStats Animate(const CompiledView& view, TrajectorySource* source,
   return stats;
 }
 
+AnimationStats AnimateTrajectory(const Scene& scene, const Trajectory& trajectory,
+                                 double final_time, const std::vector<Event>& events,
+                                 const AnimationOptions& options) {
+  Scene drawn = scene;
+  drawn.final_time = final_time;
+  const CompiledView view(drawn);
+  std::vector<double> window;
+  {
+    MemorySource first_pass(trajectory);
+    window = FitWindow(view, &first_pass);
+  }
+  MemorySource source(trajectory);
+  return Animate(view, &source, window, events, options);
+}
+
 }  // namespace moreau::render

@@ -51,6 +51,13 @@ AnimationStats Animate(const CompiledView& view, TrajectorySource* source,
                        const std::vector<double>& window, const std::vector<Event>& events,
                        const AnimationOptions& options);
 
+// Animates a simulation in memory: the scene's view over [t0, final_time] (where the run got),
+// drawn from `trajectory` (the stage points where recorded: the densest record) in the window
+// FitWindow chooses.
+AnimationStats AnimateTrajectory(const Scene& scene, const Trajectory& trajectory,
+                                 double final_time, const std::vector<Event>& events,
+                                 const AnimationOptions& options);
+
 // True if an `ffmpeg` executable runs.
 bool FfmpegAvailable();
 

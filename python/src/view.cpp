@@ -80,20 +80,11 @@ void BindView(py::module_& m) {
         options.width = width;
         options.gif_width = gif_width;
         options.max_snapshots = max_snapshots;
-        Scene drawn = scene;
-        drawn.final_time = result.final_time;
-        const render::CompiledView view(drawn);
-        py::gil_scoped_release release;
+        py::gil_scoped_release release;  // re-acquired when an error unwinds (ValueError)
         const Trajectory& trajectory =
             result.stage_trajectory.size() > 0 ? result.stage_trajectory : result.trajectory;
-        std::vector<double> window;
-        {
-          render::MemorySource first_pass(trajectory);
-          window = render::FitWindow(view, &first_pass);
-        }
-        render::MemorySource source(trajectory);
         const render::AnimationStats stats =
-            render::Animate(view, &source, window, result.events, options);
+            render::AnimateTrajectory(scene, trajectory, result.final_time, result.events, options);
         return stats.files;
       },
       py::arg("scene"), py::arg("result"), py::arg("mp4"), py::arg("gif"), py::arg("snapshots"),

@@ -114,19 +114,12 @@ int RunAnimateCommand(const std::string& run_directory, AnimateSettings settings
 
 void AnimateResult(const Scene& scene, const SimulationResult& result, const std::string& directory,
                    AnimateSettings settings) {
-  Scene drawn = scene;
-  drawn.final_time = result.final_time;  // up to where the run got
-  const render::CompiledView view(drawn);
+  SetPaths(directory, &settings);
   const Trajectory& trajectory =
       result.stage_trajectory.size() > 0 ? result.stage_trajectory : result.trajectory;
-  std::vector<double> window;
-  {
-    render::MemorySource first_pass(trajectory);
-    window = render::FitWindow(view, &first_pass);
-  }
-  render::MemorySource source(trajectory);
-  SetPaths(directory, &settings);
-  Report(render::Animate(view, &source, window, result.events, settings.options), settings.quiet);
+  Report(render::AnimateTrajectory(scene, trajectory, result.final_time, result.events,
+                                   settings.options),
+         settings.quiet);
 }
 
 }  // namespace moreau::tool
