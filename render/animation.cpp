@@ -15,6 +15,10 @@ namespace fs = std::filesystem;
 
 namespace {
 
+// The encoder runs without LD_PRELOAD: a host that preloads sanitizer runtimes (the Python
+// tests under the dev preset) must not impose them on ffmpeg.
+constexpr const char* kFfmpeg = "env -u LD_PRELOAD ffmpeg";
+
 std::string Quote(const std::string& text) {
   std::string quoted = "'";
   for (char c : text) quoted += c == '\'' ? std::string("'\\''") : std::string(1, c);
@@ -64,7 +68,9 @@ void AnimationOptions::Validate() const {
   RequireArgument(max_snapshots >= 0, "snapshots must be >= 0, got ", max_snapshots);
 }
 
-bool FfmpegAvailable() { return std::system("ffmpeg -version > /dev/null 2>&1") == 0; }
+bool FfmpegAvailable() {
+  return std::system((std::string(kFfmpeg) + " -version > /dev/null 2>&1").c_str()) == 0;
+}
 
 AnimationStats Animate(const CompiledView& view, TrajectorySource* source,
                        const std::vector<double>& window, const std::vector<Event>& events,
@@ -93,7 +99,7 @@ AnimationStats Animate(const CompiledView& view, TrajectorySource* source,
     char rate[32];
     std::snprintf(rate, sizeof rate, "%.6g", options.fps);
     const std::string command =
-        "ffmpeg -y -loglevel error -f rawvideo -pixel_format bgra -video_size " +
+        std::string(kFfmpeg) + " -y -loglevel error -f rawvideo -pixel_format bgra -video_size " +
         std::to_string(renderer.width()) + "x" + std::to_string(renderer.height()) +
         " -framerate " + rate +
         " -i - -c:v libx264 -pix_fmt yuv420p -crf 23 -movflags +faststart " + Quote(mp4);
@@ -158,11 +164,11 @@ AnimationStats Animate(const CompiledView& view, TrajectorySource* source,
     char filters[160];
     std::snprintf(filters, sizeof filters, "fps=%.6g,scale=%d:-2:flags=lanczos",
                   std::min(options.fps, options.gif_fps), options.gif_width);
-    RunOrThrow("ffmpeg -y -loglevel error -i " + Quote(mp4) + " -vf '" + filters +
+    RunOrThrow(std::string(kFfmpeg) + " -y -loglevel error -i " + Quote(mp4) + " -vf '" + filters +
                    ",palettegen=max_colors=32:stats_mode=diff' " + Quote(palette),
                "making the GIF palette");
-    RunOrThrow("ffmpeg -y -loglevel error -i " + Quote(mp4) + " -i " + Quote(palette) +
-                   " -lavfi '" + filters +
+    RunOrThrow(std::string(kFfmpeg) + " -y -loglevel error -i " + Quote(mp4) + " -i " +
+                   Quote(palette) + " -lavfi '" + filters +
                    " [v]; [v][1:v] paletteuse=dither=none:diff_mode=rectangle' " +
                    Quote(options.gif_path),
                "writing the GIF");
