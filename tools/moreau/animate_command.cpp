@@ -81,14 +81,15 @@ int RunAnimateCommand(const std::string& run_directory, AnimateSettings settings
   if (fs::is_regular_file(summary_path)) {
     try {
       summary = nlohmann::json::parse(std::ifstream(summary_path));
-      for (const auto& e : summary.at("events")) {
+      // Runs have events; optimal control solutions (moreau ocp) may not.
+      for (const auto& e : summary.value("events", nlohmann::json::array())) {
         Event event;
         event.t = e.at("t").get<double>();
         event.what = e.at("what").get<std::string>();
         events.push_back(event);
       }
       // A run that stopped early is drawn up to where it stopped.
-      const double t_final = summary.at("t_final").get<double>();
+      const double t_final = summary.value("t_final", scene.final_time);
       if (t_final < scene.final_time && t_final > scene.initial_time) {
         scene.final_time = t_final;
       }

@@ -1,6 +1,6 @@
 #pragma once
 // `moreau animate RUN_DIR` and `moreau run ... --animate`: frames of a planar scene (its view)
-// from the run's trajectory, written as DIR/animation.mp4, DIR/animation.gif and
+// from the trajectory of a run (or of an optimal control solution of `moreau ocp`), written as DIR/animation.mp4, DIR/animation.gif and
 // DIR/snapshots/snapshot_<k>_t<time>.png at event times (render/animation.hpp).
 
 #include <CLI/CLI.hpp>
