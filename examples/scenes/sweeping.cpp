@@ -196,12 +196,16 @@ Scene MakeS5() {
         out[4] = square(x[2] - (centre - offset)) + square(x[3]) - square(p[radius]);
       });
   scene.effects.push_back(set);
-  // Slider and pusher (discs of radius contact/2 touch at centre distance `contact`) between
-  // the two moving discs of the doorway.
+  // Slider and pusher as discs of radius contact/2 = 1 (they touch at centre distance
+  // `contact`). The doorway keeps their *centres* outside its discs of radius `radius`, so it
+  // is drawn with radius - contact/2: the drawn discs touch exactly when a constraint is active.
   scene.view.bodies = {{"slider", "x1", "x2", 1.0, false}, {"pusher", "x3", "x4", 1.0, false}};
-  scene.view.obstacles = {
-      {"right", ViewObstacle::Shape::kCircle, {"cos(t) + radius + gap/2", "0", "radius"}},
-      {"left", ViewObstacle::Shape::kCircle, {"cos(t) - radius - gap/2", "0", "radius"}}};
+  scene.view.obstacles = {{"right",
+                           ViewObstacle::Shape::kCircle,
+                           {"cos(t) + radius + gap/2", "0", "radius - contact/2"}},
+                          {"left",
+                           ViewObstacle::Shape::kCircle,
+                           {"cos(t) - radius - gap/2", "0", "radius - contact/2"}}};
   scene.view.window = {-12.0, 12.0, -9.0, 9.0};
   return scene;
 }
