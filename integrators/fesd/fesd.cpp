@@ -77,6 +77,9 @@ void FesdOptions::Validate() const {
                   "sample_times need sensitivities: directions, adjoint weights or keep_adjoint");
   RequireArgument(adjoint_sample_weights.size() == 0 || !sample_times.empty(),
                   "adjoint sample weights need sample_times");
+  RequireArgument(std::isfinite(adjoint_memory_limit_mb) && adjoint_memory_limit_mb >= 0.0,
+                  "adjoint memory limit must be >= 0 megabytes (0: none), got ",
+                  adjoint_memory_limit_mb);
   newton.Validate();
 }
 
@@ -116,6 +119,7 @@ FesdStats& FesdStats::operator+=(const FesdStats& other) {
   max_working_pairs = std::max(max_working_pairs, other.max_working_pairs);
   num_reduced_elements += other.num_reduced_elements;
   adjoint_memory_bytes = std::max(adjoint_memory_bytes, other.adjoint_memory_bytes);
+  adjoint_file_bytes = std::max(adjoint_file_bytes, other.adjoint_file_bytes);
   adjoint_cpu_seconds += other.adjoint_cpu_seconds;
   cpu_seconds += other.cpu_seconds;
   return *this;

@@ -10,6 +10,7 @@
 #include <type_traits>
 #include <variant>
 
+#include "../common/sensitivity_arguments.hpp"
 #include "fesd_run.hpp"
 #include "moreau/complementarity/ncp_function.hpp"
 #include "moreau/core/error.hpp"
@@ -21,28 +22,6 @@ namespace {
 // distance of it: clocks at grid points carry the round-off of summed increments (far below),
 // and distinct grid points are separated by whole elements (far above).
 constexpr double kSampleTolerance = 1e-9;
-
-// A Matrix argument in one of its accepted shapes (FesdOptions): exactly `rows` or
-// `lowered_rows` rows, or a single column of `rows` * k entries read column by column.
-// `blocks` > 1: the columns come in that many equal blocks. Sets *lowered.
-Matrix Shaped(const Matrix& given, int rows, int lowered_rows, int blocks, const char* what,
-              bool* lowered) {
-  *lowered = false;
-  if (given.rows() == rows && given.cols() % blocks == 0) return given;
-  if (given.rows() == lowered_rows && given.cols() % blocks == 0) {
-    *lowered = true;
-    return given;
-  }
-  if (given.cols() == 1 && rows > 0 &&
-      given.size() % (static_cast<Eigen::Index>(rows) * blocks) == 0) {
-    return given.reshaped(rows, given.size() / rows);
-  }
-  std::ostringstream s;
-  s << what << ": expected " << rows << " rows (or " << lowered_rows
-    << " over the lowered state), or a single column of " << rows << " * " << blocks
-    << " * k entries; got " << given.rows() << " x " << given.cols();
-  throw std::invalid_argument(s.str());
-}
 
 }  // namespace
 
@@ -67,8 +46,9 @@ void FesdRun::InitializeTape() {
   }
   if (options_.sensitivity_directions.size() > 0) {
     bool lowered = false;
-    const Matrix directions = Shaped(options_.sensitivity_directions, nx_ + n_theta, ny_ + n_theta,
-                                     1, "sensitivity directions", &lowered);
+    const Matrix directions =
+        ShapedSensitivityArgument(options_.sensitivity_directions, nx_ + n_theta, ny_ + n_theta, 1,
+                                  "sensitivity directions", &lowered);
     const int state_rows = lowered ? ny_ : nx_;
     tape_.directional = true;
     tape_.d.setZero(ny_ + 2, directions.cols());
@@ -82,6 +62,8 @@ void FesdRun::InitializeTape() {
       tape_.segment_inputs.push_back(scene.InputValues(segment_ends_[static_cast<std::size_t>(k)]));
     }
     tape_.parameters = system_.parameters();
+    tape_.memory_limit =
+        static_cast<std::size_t>(options_.adjoint_memory_limit_mb * 1024.0 * 1024.0);
   }
 }
 
@@ -123,13 +105,23 @@ void FesdRun::CommitTracks(SolveRecord& record) {
   if (full_) ApplyTransfer(record.transfer);
   if (tape_.directional) tape_.d = record.directions_end;
   if (tape_.adjoint) {
-    const GroupStep& step = record.step;
-    tape_.bytes +=
+    GroupStep& step = record.step;
+    const std::size_t small =
         sizeof(GroupStep) +
-        sizeof(double) * static_cast<std::size_t>(step.w.size() + step.setup.y_start.size() +
-                                                  step.setup.indicator_weights.size()) +
+        sizeof(double) * static_cast<std::size_t>(step.setup.indicator_weights.size()) +
         step.setup.a_zero.size() / 8 + sizeof(int) * step.setup.indicator_power.size();
-    tape_.steps.emplace_back(std::move(record.step));
+    const std::size_t large =
+        sizeof(double) * static_cast<std::size_t>(step.w.size() + step.setup.y_start.size());
+    if (tape_.memory_limit > 0 && tape_.bytes + small + large > tape_.memory_limit) {
+      // Beyond the bound: the large parts to the checkpoint file.
+      if (!tape_.file) tape_.file = std::make_unique<CheckpointFile>();
+      tape_.file_bytes = tape_.file->Write(tape_.file_bytes, &step);
+      tape_.bytes += small;
+    } else {
+      step.file_offset = -1;
+      tape_.bytes += small + large;
+    }
+    tape_.steps.emplace_back(std::move(step));
   }
   if (tape_.next_sample >= tape_.sample_times.size() || record.frozen) return;
   const double clock = y_[system_.clock_index()];
@@ -243,8 +235,15 @@ void FesdRun::GroupForward(const Vector& w, int group_elements, int remaining, c
 // The transpose of GroupForward: with mu = sum_e E_e^T lambda_y (+ m lambda_tau at h) and
 // R_w^T nu = mu, lambda_y -= B_y^T nu, the parameter gradient -= B_p^T nu, B_u^T nu, and the
 // tau row takes the length terms.
-bool FesdRun::GroupTransposed(const GroupStep& step, Matrix* lambda, Matrix* gradient,
+bool FesdRun::GroupTransposed(const GroupStep& kept, Matrix* lambda, Matrix* gradient,
                               std::string* message) {
+  // A checkpoint beyond the memory bound is read back from the file.
+  GroupStep loaded;
+  if (kept.file_offset >= 0) {
+    loaded = kept;
+    tape_.file->Read(&loaded);
+  }
+  const GroupStep& step = kept.file_offset >= 0 ? loaded : kept;
   if (WorkingFlags(system_) != tape_.layouts[static_cast<std::size_t>(step.layout)]) {
     system_.SetWorkingPairs(tape_.layouts[static_cast<std::size_t>(step.layout)]);
     group_.Resize();
@@ -317,12 +316,13 @@ FesdGradient FesdRun::ReverseSweep(const Matrix& final_weights, const Matrix& sa
   bool final_lowered = false, sample_lowered = false;
   Matrix final_shaped, sample_shaped;
   if (final_weights.size() > 0) {
-    final_shaped = Shaped(final_weights, nx_, ny_, 1, "adjoint weights", &final_lowered);
+    final_shaped =
+        ShapedSensitivityArgument(final_weights, nx_, ny_, 1, "adjoint weights", &final_lowered);
   }
   if (sample_weights.size() > 0) {
     RequireArgument(samples > 0, "adjoint sample weights need sample_times");
-    sample_shaped =
-        Shaped(sample_weights, nx_, ny_, samples, "adjoint sample weights", &sample_lowered);
+    sample_shaped = ShapedSensitivityArgument(sample_weights, nx_, ny_, samples,
+                                              "adjoint sample weights", &sample_lowered);
   }
   RequireArgument(final_shaped.size() > 0 || sample_shaped.size() > 0,
                   "adjoint: no weights (final or sample) given");
@@ -393,6 +393,7 @@ void FesdRun::FinishSensitivities() {
   }
   if (!tape_.adjoint) return;
   result_.stats.adjoint_memory_bytes = static_cast<double>(tape_.bytes);
+  result_.stats.adjoint_file_bytes = static_cast<double>(tape_.file_bytes);
   const bool weighted =
       options_.adjoint_weights.size() > 0 || options_.adjoint_sample_weights.size() > 0;
   if (!weighted || !success) return;

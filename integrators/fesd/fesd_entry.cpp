@@ -85,6 +85,9 @@ IntegratorEntry FesdEntry() {
       BindMatrixList("adjoint_sample_weights", &O::adjoint_sample_weights,
                      "adjoint weights of the sample states: n_x x q per sample time, column by "
                      "column"),
+      BindReal("adjoint_memory_limit_mb", &O::adjoint_memory_limit_mb,
+               "memory bound of the adjoint's checkpoints in MB (0: none); beyond it they go to "
+               "a temporary file"),
       BindBool("keep_adjoint", &O::keep_adjoint,
                "keep the reverse sweep in the result: gradients for weights chosen after the "
                "run"),
@@ -126,6 +129,8 @@ IntegratorEntry FesdEntry() {
                "most complementarity pairs in an element system (near-active filter)"),
       BindStat("adjoint_memory_bytes", &S::adjoint_memory_bytes,
                "bytes kept for the adjoint sweep (converged unknowns of every group)"),
+      BindStat("adjoint_file_bytes", &S::adjoint_file_bytes,
+               "bytes of adjoint checkpoints written to a file (beyond the memory limit)"),
       BindStat("adjoint_cpu_seconds", &S::adjoint_cpu_seconds, "time of the adjoint sweep"),
       BindStat("cpu_seconds", &S::cpu_seconds, "thread CPU time"),
   };

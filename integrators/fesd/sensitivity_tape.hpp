@@ -17,6 +17,8 @@
 // goes; the adjoint records them (the tape) and applies their transposes in reverse order.
 
 #include <cstddef>
+#include <cstdio>
+#include <memory>
 #include <variant>
 #include <vector>
 
@@ -28,10 +30,32 @@ namespace moreau::internal {
 // refactorize its Jacobian in the reverse sweep.
 struct GroupStep {
   GroupSetup setup;
-  Vector w;           // the converged unknowns
+  Vector w;           // the converged unknowns (empty when in the checkpoint file)
   int segment = 0;    // control segment (inputs u_segment)
   int remaining = 1;  // element count that fixed the lengths (h = rest / remaining)
   int layout = 0;     // index of the working set (near-active filter) in SensitivityTape
+  // In the checkpoint file (beyond the memory limit): w and setup.y_start at this offset.
+  long file_offset = -1;
+  Eigen::Index w_size = 0, y_size = 0;
+};
+
+// Checkpoints beyond the memory limit: an anonymous temporary file (std::tmpfile, removed
+// when closed), written forward and read back by the sweep.
+class CheckpointFile {
+ public:
+  CheckpointFile() = default;
+  ~CheckpointFile();
+  CheckpointFile(const CheckpointFile&) = delete;
+  CheckpointFile& operator=(const CheckpointFile&) = delete;
+  // Writes w and step->setup.y_start at `offset` (the end of the kept checkpoints), empties
+  // them in *step and returns the next offset. Throws std::runtime_error if the file cannot
+  // be written.
+  long Write(long offset, GroupStep* step);
+  // Reads a written step's w and y_start back into *step.
+  void Read(GroupStep* step);
+
+ private:
+  std::FILE* file_ = nullptr;
 };
 
 // s_y -= jump (g_y s_y + g_p dp + g_u du_segment) / rate, jump = F_- - F_+.
@@ -86,7 +110,10 @@ struct SensitivityTape {
   std::vector<std::vector<bool>> layouts;
   std::vector<Vector> segment_inputs;  // u of every control segment
   Vector parameters;
-  std::size_t bytes = 0;  // memory the steps hold
+  std::size_t bytes = 0;         // memory the steps hold
+  std::size_t memory_limit = 0;  // bytes (0: none); checkpoints beyond go to the file
+  long file_bytes = 0;           // the file's used length
+  std::unique_ptr<CheckpointFile> file;
 
   // Sample times (physical) and the lowered states reached there (the first next_sample).
   std::vector<double> sample_times;
@@ -97,12 +124,14 @@ struct SensitivityTape {
   struct Mark {
     Matrix d;
     std::size_t steps = 0, bytes = 0, next_sample = 0;
+    long file_bytes = 0;
   };
-  Mark Save() const { return {d, steps.size(), bytes, next_sample}; }
+  Mark Save() const { return {d, steps.size(), bytes, next_sample, file_bytes}; }
   void Restore(const Mark& mark) {
     d = mark.d;
     steps.resize(mark.steps, TapeStep(SampleStep{}));
     bytes = mark.bytes;
+    file_bytes = mark.file_bytes;  // later checkpoints are written over
     next_sample = mark.next_sample;
     sample_states.resize(next_sample);
     if (directional) sample_d.resize(next_sample);

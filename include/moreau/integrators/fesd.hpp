@@ -146,6 +146,11 @@ struct FesdOptions {
   /// chosen after the run (the gradient of a function of x(T) and of sample_states) cost one
   /// reverse sweep each.
   bool keep_adjoint = false;
+  /// Memory bound of the adjoint's checkpoints, in megabytes (0: none). Checkpoints beyond it
+  /// (every further group's converged unknowns and start state) are written to a temporary
+  /// file and read back by the sweep, so that the resident memory of the tape stays below the
+  /// bound at the cost of file I/O (docs/sensitivities.md). >= 0.
+  double adjoint_memory_limit_mb = 0.0;
   /// Smooth elements: in an element whose statuses leave a smooth vector field (Stewart's form
   /// of one SwitchingSurfaces effect with exactly one active mode, no other effects or
   /// dynamics; moving sets only, with no active constraint; or hysteresis relays only, each in
@@ -289,6 +294,7 @@ struct FesdStats {
   /// Adjoint sensitivities: bytes the run kept for the reverse sweep (converged unknowns and
   /// group data) and the thread CPU time of the sweep(s) in this result.
   double adjoint_memory_bytes = 0.0;
+  double adjoint_file_bytes = 0.0;  ///< checkpoints beyond adjoint_memory_limit_mb (file)
   double adjoint_cpu_seconds = 0.0;
   double cpu_seconds = 0.0;
 
