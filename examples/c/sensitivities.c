@@ -182,10 +182,12 @@ static void bad_input(void) {
   ok(moreau_run_set_real(run, "h", -1.0), "set h");
   check(moreau_run_simulate(run) == MOREAU_INVALID_ARGUMENT, "negative step");
   ok(moreau_run_set_real(run, "h", 0.05), "set h");
-  const double wrong[3] = {1.0, 2.0, 3.0};
+  /* n_x = 2 (or n_y = 3 over the lowered state x1, x2, clock): 5 weights fit neither. */
+  const double wrong[5] = {1.0, 2.0, 3.0, 4.0, 5.0};
   check(moreau_run_set_initial_state(run, wrong, 3) == MOREAU_INVALID_ARGUMENT,
         "initial state of the wrong size");
-  ok(moreau_run_set_reals(run, "adjoint_weights", wrong, 3), "set weights (checked at simulate)");
+  printf("bad input: %s\n", moreau_last_error());
+  ok(moreau_run_set_reals(run, "adjoint_weights", wrong, 5), "set weights (checked at simulate)");
   check(moreau_run_simulate(run) == MOREAU_INVALID_ARGUMENT, "weights of the wrong size");
   printf("bad input: %s\n", moreau_last_error());
   ok(moreau_run_set_reals(run, "adjoint_weights", wrong, 2), "weights");

@@ -130,3 +130,33 @@ def test_bad_input_gives_a_status_and_a_message(lib):
     lib.moreau_run_free(run)
     lib.moreau_scene_free(scene)
     assert lib.moreau_version().decode().count(".") == 2
+
+
+def test_the_documented_example_compiles_and_runs(tmp_path):
+    """The C program of docs/c-api.md, compiled with the system's C compiler against the
+    library and run: the documentation's example stays correct."""
+    import re
+    import shutil
+    import subprocess
+
+    docs = os.environ.get("MOREAU_DOCS")
+    include = os.environ.get("MOREAU_INCLUDE")
+    library = os.environ.get("MOREAU_C_LIBRARY")
+    if not (docs and include and library):
+        pytest.fail("MOREAU_DOCS, MOREAU_INCLUDE and MOREAU_C_LIBRARY are set by the build")
+    compiler = shutil.which("cc") or shutil.which("gcc")
+    assert compiler, "a C compiler (cc) is needed"
+    with open(os.path.join(docs, "c-api.md"), encoding="utf-8") as f:
+        blocks = re.findall(r"```c\n(.*?)```", f.read(), flags=re.S)
+    assert len(blocks) == 1, "docs/c-api.md has one C program"
+    source = tmp_path / "app.c"
+    source.write_text(blocks[0])
+    program = tmp_path / "app"
+    flags = os.environ.get("MOREAU_C_FLAGS", "").split()
+    library_dir = os.path.dirname(library)
+    subprocess.run([compiler, "-std=c11", "-Wall", "-Werror", *flags, str(source), "-I", include,
+                    library, f"-Wl,-rpath,{library_dir}", "-o", str(program)], check=True,
+                   capture_output=True, text=True)
+    completed = subprocess.run([str(program)], capture_output=True, text=True, timeout=120)
+    assert completed.returncode == 0, completed.stderr
+    assert "dx1(T)/dtheta" in completed.stdout

@@ -279,7 +279,8 @@ TEST(FesdAdjointTest, BadInputIsRefusedWithAClearMessage) {
   const Scene scene = MakeScene("F1");
   FesdOptions options;
   options.step_size = 0.05;
-  options.sensitivity_directions = Matrix::Ones(4, 1);  // n_theta = 3 (x0, omega)
+  // n_theta = 3 (x0, omega): 3 rows, or 4 over the lowered (x1, x2, clock, omega); 5 fits none.
+  options.sensitivity_directions = Matrix::Ones(5, 1);
   EXPECT_THROW(
       {
         try {
@@ -302,7 +303,7 @@ TEST(FesdAdjointTest, BadInputIsRefusedWithAClearMessage) {
   options.sample_times = {0.5};
   const FesdResult kept = SimulateFesd(scene, options);
   ASSERT_EQ(kept.status, FesdStatus::kSuccess) << kept.message;
-  EXPECT_THROW(kept.adjoint->Sweep(Matrix::Ones(3, 1)), std::invalid_argument);
+  EXPECT_THROW(kept.adjoint->Sweep(Matrix::Ones(4, 1)), std::invalid_argument);  // n_x 2, n_y 3
   EXPECT_THROW(kept.adjoint->Sweep(Matrix::Ones(2, 1), Matrix::Ones(2, 3)), std::invalid_argument);
   EXPECT_THROW(kept.adjoint->Sweep(Matrix()), std::invalid_argument);
 }
