@@ -52,10 +52,11 @@ def main():
         residual = result.final_state - data
         gradient = result.adjoint(residual)[0, columns]  # dJ/d(s, eps)
         evaluations.append(result.cpu_seconds)
+        print(f"    s = {z[0]:.6f}, eps = {z[1]:.6f}: J = {0.5 * residual @ residual:.6e}", flush=True)
         return 0.5 * residual @ residual, gradient
 
     solution = minimize(objective, [START["speed"], START["smoothing"]], jac=True,
-                        method="L-BFGS-B", bounds=[(0.1, 5.0), (0.1, 20.0)],
+                        method="L-BFGS-B", bounds=[(0.5, 2.0), (1.0, 10.0)],
                         options={"gtol": 1e-10, "ftol": 1e-14, "maxiter": 100})
     seconds = time.process_time() - start
     s, eps = solution.x

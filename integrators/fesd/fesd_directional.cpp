@@ -25,6 +25,13 @@ constexpr double kSampleTolerance = 1e-9;
 
 }  // namespace
 
+// The working set of the near-active filter as flags over the declared pairs.
+static std::vector<bool> WorkingFlags(const LoweredSystem& system) {
+  std::vector<bool> keep(static_cast<std::size_t>(system.num_declared_pairs()), false);
+  for (int k : system.working_pairs()) keep[static_cast<std::size_t>(k)] = true;
+  return keep;
+}
+
 FesdOptions FesdRun::Tracking(const FesdOptions& options) {
   FesdOptions tracking = options;
   tracking.sensitivities = options.sensitivities || options.sensitivity_directions.size() > 0 ||
@@ -62,17 +69,12 @@ void FesdRun::InitializeTape() {
       tape_.segment_inputs.push_back(scene.InputValues(segment_ends_[static_cast<std::size_t>(k)]));
     }
     tape_.parameters = system_.parameters();
+    tape_.layouts.push_back(WorkingFlags(system_));
     tape_.memory_limit =
         static_cast<std::size_t>(options_.adjoint_memory_limit_mb * 1024.0 * 1024.0);
   }
 }
 
-// The working set of the near-active filter as flags over the declared pairs.
-static std::vector<bool> WorkingFlags(const LoweredSystem& system) {
-  std::vector<bool> keep(static_cast<std::size_t>(system.num_declared_pairs()), false);
-  for (int k : system.working_pairs()) keep[static_cast<std::size_t>(k)] = true;
-  return keep;
-}
 
 void FesdRun::TrackGroup(const Vector& w, int group_elements, int remaining, const Vector& a0,
                          SolveRecord* record) {
@@ -93,9 +95,10 @@ void FesdRun::TrackGroup(const Vector& w, int group_elements, int remaining, con
     step.w = w;
     step.segment = segment_;
     step.remaining = remaining;
-    std::vector<bool> keep = WorkingFlags(system_);
-    if (tape_.layouts.empty() || tape_.layouts.back() != keep) {
-      tape_.layouts.push_back(std::move(keep));
+    // The working set only changes with the near-active filter.
+    if (filter_.enabled()) {
+      std::vector<bool> keep = WorkingFlags(system_);
+      if (tape_.layouts.back() != keep) tape_.layouts.push_back(std::move(keep));
     }
     step.layout = static_cast<int>(tape_.layouts.size()) - 1;
   }
@@ -244,7 +247,8 @@ bool FesdRun::GroupTransposed(const GroupStep& kept, Matrix* lambda, Matrix* gra
     tape_.file->Read(&loaded);
   }
   const GroupStep& step = kept.file_offset >= 0 ? loaded : kept;
-  if (WorkingFlags(system_) != tape_.layouts[static_cast<std::size_t>(step.layout)]) {
+  if (tape_.layouts.size() > 1 &&
+      WorkingFlags(system_) != tape_.layouts[static_cast<std::size_t>(step.layout)]) {
     system_.SetWorkingPairs(tape_.layouts[static_cast<std::size_t>(step.layout)]);
     group_.Resize();
   }
@@ -252,8 +256,12 @@ bool FesdRun::GroupTransposed(const GroupStep& kept, Matrix* lambda, Matrix* gra
   group_.Configure(step.setup);
   // The Jacobian at the solution exactly as Newton factorizes it there
   // (SemismoothNewtonOptions::factorize_at_solution): NCP derivatives of its options.
+  // One evaluation with every derivative serves the Jacobian and the blocks (it is
+  // EvaluateForSensitivities's, with the element-length pair's data of Evaluate).
   Vector r, a, b;
+  group_.set_parameter_derivatives(true);
   group_.Evaluate(step.w, true, &r, &a, &b);
+  group_.set_parameter_derivatives(false);
   const SemismoothNewtonOptions& newton = options_.newton;
   Vector da(a.size()), db(a.size());
   for (Eigen::Index k = 0; k < a.size(); ++k) {
@@ -264,16 +272,17 @@ bool FesdRun::GroupTransposed(const GroupStep& kept, Matrix* lambda, Matrix* gra
     da[k] = v.da;
     db[k] = v.db;
   }
-  group_.EvaluateForSensitivities(step.w);
   const int n = group_.num_unknowns();
-  if (reverse_solver_ == nullptr || reverse_jacobian_.size() != n) {
-    reverse_solver_ =
-        MakeLinearSolver(options_.newton.linear_solver, n, group_.EstimatedJacobianNonzeros());
+  // A solver per system size (trial elements and switch groups alternate), each keeping its
+  // sparse symbolic analysis while the pattern holds.
+  std::unique_ptr<LinearSolver>& solver = reverse_solvers_[n];
+  if (solver == nullptr) {
+    solver = MakeLinearSolver(options_.newton.linear_solver, n, group_.EstimatedJacobianNonzeros());
   }
-  reverse_jacobian_.Reset(n, reverse_solver_->wants_sparse());
+  reverse_jacobian_.Reset(n, solver->wants_sparse());
   group_.AssembleJacobian(da, db, &reverse_jacobian_);
   reverse_jacobian_.Finalize();
-  const FactorizationStatus status = reverse_solver_->Factorize(reverse_jacobian_);
+  const FactorizationStatus status = solver->Factorize(reverse_jacobian_);
   if (status != FactorizationStatus::kSuccess) {
     std::ostringstream s;
     s << "the Jacobian of the group starting at clock " << step.setup.y_start[system_.clock_index()]
@@ -291,7 +300,7 @@ bool FesdRun::GroupTransposed(const GroupStep& kept, Matrix* lambda, Matrix* gra
     weights.middleRows(group_.element_offset(e) + last, ny_) += lambda->topRows(ny_);
   }
   if (setup.with_event) weights.row(group_.h_index()) += m * lambda->row(ny_);
-  for (int c = 0; c < q; ++c) reverse_solver_->SolveTransposed(weights.col(c));
+  for (int c = 0; c < q; ++c) solver->SolveTransposed(weights.col(c));
   weights = -weights;  // -nu: the rhs enters dw with a minus sign
   double event_da = 0.0, event_db = 0.0;
   EventWeights(step.w, &event_da, &event_db);
@@ -335,6 +344,12 @@ FesdGradient FesdRun::ReverseSweep(const Matrix& final_weights, const Matrix& sa
   if (final_shaped.size() > 0) lambda.topRows(final_shaped.rows()) = final_shaped;
   Matrix gradient = Matrix::Zero(n_params, q);
   FesdGradient out;
+  // The sweep sets the system up as each group had it; what it had before is restored after
+  // (a shared system: FesdIntegrator's next run starts from it, the filter's working set too).
+  const std::vector<bool> layout_before =
+      tape_.layouts.size() > 1 ? WorkingFlags(system_) : std::vector<bool>();
+  const Vector parameters_before = system_.parameters();
+  const Vector inputs_before = system_.inputs();
   if (np > 0) system_.SetParameters(tape_.parameters);
   for (auto it = tape_.steps.rbegin(); it != tape_.steps.rend() && out.success; ++it) {
     std::visit(
@@ -354,6 +369,12 @@ FesdGradient FesdRun::ReverseSweep(const Matrix& final_weights, const Matrix& sa
         },
         *it);
   }
+  if (!layout_before.empty() && WorkingFlags(system_) != layout_before) {
+    system_.SetWorkingPairs(layout_before);
+    group_.Resize();
+  }
+  if (np > 0) system_.SetParameters(parameters_before);
+  if (nu > 0) system_.SetInputs(inputs_before);
   if (out.success) {
     out.lowered.resize(q, ny_ + n_params);
     out.lowered << lambda.topRows(ny_).transpose(), gradient.transpose();

@@ -13,6 +13,7 @@
 
 #include <array>
 #include <chrono>
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -600,11 +601,11 @@ class FesdRun {
     Matrix node_values, dense;
   };
   mutable ResolutionBuffers resolution_;
-  Eigen::RowVectorXd d_step_end_;                 // d(step end)/d(x0, p, u) of the last step
-  SensitivityTape tape_;                          // directional and adjoint sensitivities
-  const Vector* pending_a_last_ = nullptr;        // TrackGroup's last record (its a_last) ...
-  const Matrix* pending_directions_ = nullptr;    // ... and its directions at its end
-  std::unique_ptr<LinearSolver> reverse_solver_;  // the reverse sweep's factorizations
+  Eigen::RowVectorXd d_step_end_;               // d(step end)/d(x0, p, u) of the last step
+  SensitivityTape tape_;                        // directional and adjoint sensitivities
+  const Vector* pending_a_last_ = nullptr;      // TrackGroup's last record (its a_last) ...
+  const Matrix* pending_directions_ = nullptr;  // ... and its directions at its end
+  std::map<int, std::unique_ptr<LinearSolver>> reverse_solvers_;  // the sweep's, by size
   SystemMatrix reverse_jacobian_;
   bool dense_output_ = false;         // output times replace element ends
   std::vector<double> output_times_;  // sorted, in (t0, tf]

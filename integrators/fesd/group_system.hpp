@@ -78,6 +78,9 @@ class GroupSystem final : public MixedComplementaritySystem {
     Vector h_fixed, h_max, h_reference;
   };
   void EvaluateForSensitivities(const Vector& w);
+  // With-Jacobian evaluations also compute the derivatives with respect to p and u, so that
+  // one evaluation serves the Jacobian and the parameter blocks (the adjoint sweep).
+  void set_parameter_derivatives(bool on) { parameter_derivatives_ = on; }
   void SensitivityBlocks(const Vector& w, double event_da, double event_db,
                          ParameterBlocks* out) const;
   // The same blocks as products, without forming them (group_sensitivity.cpp; directional
@@ -126,6 +129,7 @@ class GroupSystem final : public MixedComplementaritySystem {
   double event_b_ = 0.0;
   int event_pair_ = -1;
   double tau_ = 1.0;
+  bool parameter_derivatives_ = false;
 };
 
 }  // namespace moreau::internal

@@ -69,4 +69,4 @@ def test_bad_input_raises_value_error():
         result.adjoint([1.0, 0.0])
     kept = moreau.simulate(scene, "fesd", h=0.05, keep_adjoint=True)
     with pytest.raises(ValueError, match="adjoint weights"):
-        kept.adjoint(np.ones(3))
+        kept.adjoint(np.ones(5))  # n_x = 2, n_y = 3: 5 weights fit neither

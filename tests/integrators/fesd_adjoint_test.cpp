@@ -303,7 +303,7 @@ TEST(FesdAdjointTest, BadInputIsRefusedWithAClearMessage) {
   options.sample_times = {0.5};
   const FesdResult kept = SimulateFesd(scene, options);
   ASSERT_EQ(kept.status, FesdStatus::kSuccess) << kept.message;
-  EXPECT_THROW(kept.adjoint->Sweep(Matrix::Ones(4, 1)), std::invalid_argument);  // n_x 2, n_y 3
+  EXPECT_THROW(kept.adjoint->Sweep(Matrix::Ones(5, 1)), std::invalid_argument);  // n_x 2, n_y 3
   EXPECT_THROW(kept.adjoint->Sweep(Matrix::Ones(2, 1), Matrix::Ones(2, 3)), std::invalid_argument);
   EXPECT_THROW(kept.adjoint->Sweep(Matrix()), std::invalid_argument);
 }
