@@ -23,6 +23,11 @@ namespace {
 // and distinct grid points are separated by whole elements (far above).
 constexpr double kSampleTolerance = 1e-9;
 
+// The sweep keeps a factorization per system size up to this many sizes (trial elements and
+// switch groups of a few element counts alternate; more sizes, with the near-active filter,
+// would keep every one's factors in memory).
+constexpr std::size_t kReverseSolvers = 4;
+
 }  // namespace
 
 // The working set of the near-active filter as flags over the declared pairs.
@@ -74,7 +79,6 @@ void FesdRun::InitializeTape() {
         static_cast<std::size_t>(options_.adjoint_memory_limit_mb * 1024.0 * 1024.0);
   }
 }
-
 
 void FesdRun::TrackGroup(const Vector& w, int group_elements, int remaining, const Vector& a0,
                          SolveRecord* record) {
@@ -254,54 +258,103 @@ bool FesdRun::GroupTransposed(const GroupStep& kept, Matrix* lambda, Matrix* gra
   }
   system_.SetInputs(tape_.segment_inputs[static_cast<std::size_t>(step.segment)]);
   group_.Configure(step.setup);
-  // The Jacobian at the solution exactly as Newton factorizes it there
-  // (SemismoothNewtonOptions::factorize_at_solution): NCP derivatives of its options.
-  // One evaluation with every derivative serves the Jacobian and the blocks (it is
-  // EvaluateForSensitivities's, with the element-length pair's data of Evaluate).
-  Vector r, a, b;
-  group_.set_parameter_derivatives(true);
-  group_.Evaluate(step.w, true, &r, &a, &b);
-  group_.set_parameter_derivatives(false);
-  const SemismoothNewtonOptions& newton = options_.newton;
-  Vector da(a.size()), db(a.size());
-  for (Eigen::Index k = 0; k < a.size(); ++k) {
-    const NcpValue v =
-        newton.ncp_function == NcpFunctionKind::kFischerBurmeister && newton.smoothing > 0.0
-            ? SmoothedFischerBurmeister(a[k], b[k], newton.smoothing)
-            : EvaluateNcp(newton.ncp_function, a[k], b[k]);
-    da[k] = v.da;
-    db[k] = v.db;
-  }
-  const int n = group_.num_unknowns();
-  // A solver per system size (trial elements and switch groups alternate), each keeping its
-  // sparse symbolic analysis while the pattern holds.
-  std::unique_ptr<LinearSolver>& solver = reverse_solvers_[n];
-  if (solver == nullptr) {
-    solver = MakeLinearSolver(options_.newton.linear_solver, n, group_.EstimatedJacobianNonzeros());
-  }
-  reverse_jacobian_.Reset(n, solver->wants_sparse());
-  group_.AssembleJacobian(da, db, &reverse_jacobian_);
-  reverse_jacobian_.Finalize();
-  const FactorizationStatus status = solver->Factorize(reverse_jacobian_);
-  if (status != FactorizationStatus::kSuccess) {
-    std::ostringstream s;
-    s << "the Jacobian of the group starting at clock " << step.setup.y_start[system_.clock_index()]
-      << " is " << ToString(status) << " at its solution";
-    *message = s.str();
-    return false;
-  }
   const GroupSetup& setup = step.setup;
   const int m = setup.elements;
   const int q = static_cast<int>(lambda->cols());
   const int np = system_.num_parameters(), nu = system_.num_inputs();
+  const int n = group_.num_unknowns();
   const int last = group_.element_size() / s_ * (s_ - 1);
-  Matrix weights = Matrix::Zero(n, q);
-  for (int e = 0; e < m; ++e) {
-    weights.middleRows(group_.element_offset(e) + last, ny_) += lambda->topRows(ny_);
+  Matrix weights = Matrix::Zero(n, q);  // -nu, the rows' multipliers
+  // An element whose statuses leave a smooth field (trial elements of Stewart modes, free
+  // moving sets, relays: InitializeSmoothFields) is a Radau IIA step of that field: the field
+  // depends on the algebraic unknowns only through values the statuses fix (theta = e_k or
+  // 1/2, lambda = 0), so the element's map y_start -> Z equals the collocation equations'
+  // alone, R_C(Z; y_start) = Z_i - h sum_j a_ij F(Y_j) = 0 with Jacobian I - h (A x I)
+  // diag(F_y(Y_j)). Their transposed solve (n_y s unknowns instead of (n_y + n_z) s) gives
+  // the collocation rows' multipliers, the other rows' being zero: the same products.
+  // Not for a relay sliding on a memory boundary (two active regions, theta = 1/2): there
+  // the statuses make the algebraic rows a constraint on the stage states (g_A(Y) = g_B(Y)
+  // keeps w on the boundary), which the smooth field w' = 0 does not differentiate.
+  bool one_region = true;
+  for (std::size_t i = 0; reduction_ == Reduction::kRelayModes && i < relay_theta_.size(); ++i) {
+    int active = 0;
+    for (std::size_t k = 0; k < 4; ++k) active += setup.a_zero[4 * i + k] ? 0 : 1;
+    one_region = one_region && active == 1;
   }
-  if (setup.with_event) weights.row(group_.h_index()) += m * lambda->row(ny_);
-  for (int c = 0; c < q; ++c) solver->SolveTransposed(weights.col(c));
-  weights = -weights;  // -nu: the rhs enters dw with a minus sign
+  const bool smooth_element = !setup.with_event && m == 1 && reduction_ != Reduction::kNone &&
+                              one_region && s_ * ny_ <= kDenseSizeLimit &&
+                              SmoothField(setup.a_zero) >= 0;
+  if (smooth_element) {
+    group_.EvaluateForSensitivities(step.w);
+    const CollocationStages& stages = group_.element(0);
+    const Matrix& a = stages.tableau().a;
+    const double h = group_.H(step.w);
+    const int rows = s_ * ny_;
+    Matrix jacobian = Matrix::Identity(rows, rows);
+    for (int j = 0; j < s_; ++j) {
+      const Matrix f_y = stages.stage(j).F_y.ToDense();
+      for (int i = 0; i < s_; ++i) jacobian.block(i * ny_, j * ny_, ny_, ny_) -= h * a(i, j) * f_y;
+    }
+    Matrix mu = Matrix::Zero(rows, q);
+    mu.bottomRows(ny_) = lambda->topRows(ny_);  // y_end = y_start + Z_s
+    const Eigen::PartialPivLU<Matrix> lu(jacobian.transpose());
+    const Matrix nu_c = lu.solve(mu);
+    if (!nu_c.allFinite()) {
+      *message = "the collocation Jacobian of a smooth element is singular at its solution";
+      return false;
+    }
+    const int collocation_rows = ny_ + system_.num_equations();  // per stage: F rows, then G
+    for (int i = 0; i < s_; ++i) {
+      weights.middleRows(i * collocation_rows, ny_) = -nu_c.middleRows(i * ny_, ny_);
+    }
+  } else {
+    // The Jacobian at the solution exactly as Newton factorizes it there
+    // (SemismoothNewtonOptions::factorize_at_solution): NCP derivatives of its options. One
+    // evaluation with every derivative serves the Jacobian and the blocks (it is
+    // EvaluateForSensitivities's, with the element-length pair's data of Evaluate).
+    Vector r, a, b;
+    group_.set_parameter_derivatives(true);
+    group_.Evaluate(step.w, true, &r, &a, &b);
+    group_.set_parameter_derivatives(false);
+    const SemismoothNewtonOptions& newton = options_.newton;
+    Vector da(a.size()), db(a.size());
+    for (Eigen::Index k = 0; k < a.size(); ++k) {
+      const NcpValue v =
+          newton.ncp_function == NcpFunctionKind::kFischerBurmeister && newton.smoothing > 0.0
+              ? SmoothedFischerBurmeister(a[k], b[k], newton.smoothing)
+              : EvaluateNcp(newton.ncp_function, a[k], b[k]);
+      da[k] = v.da;
+      db[k] = v.db;
+    }
+    // A solver per system size (trial elements and switch groups alternate), each keeping its
+    // sparse symbolic analysis while the pattern holds.
+    if (reverse_solvers_.size() >= kReverseSolvers && reverse_solvers_.count(n) == 0) {
+      reverse_solvers_.clear();  // (near-active filter: many sizes; each keeps its factors)
+    }
+    std::unique_ptr<LinearSolver>& solver = reverse_solvers_[n];
+    if (solver == nullptr) {
+      solver =
+          MakeLinearSolver(options_.newton.linear_solver, n, group_.EstimatedJacobianNonzeros());
+    }
+    reverse_jacobian_.Reset(n, solver->wants_sparse());
+    group_.AssembleJacobian(da, db, &reverse_jacobian_);
+    reverse_jacobian_.Finalize();
+    const FactorizationStatus status = solver->Factorize(reverse_jacobian_);
+    if (status != FactorizationStatus::kSuccess) {
+      std::ostringstream s;
+      s << "the Jacobian of the group starting at clock "
+        << step.setup.y_start[system_.clock_index()] << " is " << ToString(status)
+        << " at its solution";
+      *message = s.str();
+      return false;
+    }
+    for (int e = 0; e < m; ++e) {
+      weights.middleRows(group_.element_offset(e) + last, ny_) += lambda->topRows(ny_);
+    }
+    if (setup.with_event) weights.row(group_.h_index()) += m * lambda->row(ny_);
+    for (int c = 0; c < q; ++c) solver->SolveTransposed(weights.col(c));
+    weights = -weights;  // -nu: the rhs enters dw with a minus sign
+  }
   double event_da = 0.0, event_db = 0.0;
   EventWeights(step.w, &event_da, &event_db);
   for (int c = 0; c < q; ++c) {
