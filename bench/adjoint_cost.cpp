@@ -9,8 +9,6 @@
 // `directional` (one direction), `full` (the full matrices). Prints one JSON object with the
 // median CPU seconds over the repeats (process user + system time around Simulate), the sweep's
 // share, the bytes the tape kept and the process's peak resident set.
-#include <sys/resource.h>
-
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <iostream>
@@ -20,21 +18,12 @@
 
 #include "moreau/integrators/simulate.hpp"
 #include "moreau/scenes/catalog.hpp"
+#include "process_usage.hpp"
 
 namespace {
 
-double ProcessCpuSeconds() {
-  rusage usage{};
-  getrusage(RUSAGE_SELF, &usage);
-  return static_cast<double>(usage.ru_utime.tv_sec + usage.ru_stime.tv_sec) +
-         1e-6 * static_cast<double>(usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
-}
-
-double PeakResidentMegabytes() {
-  rusage usage{};
-  getrusage(RUSAGE_SELF, &usage);
-  return static_cast<double>(usage.ru_maxrss) / 1024.0;  // kB on Linux
-}
+using moreau::bench::PeakResidentMegabytes;
+using moreau::bench::ProcessCpuSeconds;
 
 double Median(std::vector<double> values) {
   std::sort(values.begin(), values.end());
