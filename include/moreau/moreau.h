@@ -96,7 +96,7 @@ moreau_status moreau_run_set_integer(moreau_run* run, const char* name, long val
 /// Sets a boolean option by name (value 0 or 1), e.g. "sensitivities".
 moreau_status moreau_run_set_bool(moreau_run* run, const char* name, int value);
 /// Sets an option from text: a named choice ("switching" = "heaviside") or any value as the
-/// command line spells it ("0.05", "true", "[0.1, 0.2]").
+/// command line spells it ("0.05", "true", a list "0.1,0.2").
 moreau_status moreau_run_set_string(moreau_run* run, const char* name, const char* value);
 /// Sets a list option from `count` numbers, e.g. "output_times", or a matrix column-major
 /// ("directions", "adjoint_weights").

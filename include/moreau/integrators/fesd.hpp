@@ -35,6 +35,10 @@
 /// dx(T)/dx(0), dx(T)/dp and dx(T)/du for the piecewise-constant inputs of every control
 /// segment. These are the derivatives of the discrete solution map; they converge to those of
 /// the exact flow, whereas the time-stepping baseline misses the dependence of switch times.
+/// The same derivative applied to a block of directions (FesdOptions::sensitivity_directions)
+/// and transposed onto adjoint weights by a reverse sweep over checkpoints of the run's groups
+/// (adjoint_weights, sample_times, keep_adjoint; FesdAdjoint) serves systems too large for
+/// the full matrices (docs/sensitivities.md).
 ///
 /// Effects: moving sets, switching surfaces and hysteresis relays; path constraints belong
 /// to the alpha-method stepper.
