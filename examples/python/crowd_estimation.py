@@ -51,7 +51,7 @@ def main():
             raise RuntimeError(result.message)
         residual = result.final_state - data
         gradient = result.adjoint(residual)[0, columns]  # dJ/d(s, eps)
-        evaluations.append(result.cpu_seconds)
+        evaluations.append(z.copy())
         print(f"    s = {z[0]:.6f}, eps = {z[1]:.6f}: J = {0.5 * residual @ residual:.6e}", flush=True)
         return 0.5 * residual @ residual, gradient
 
@@ -62,7 +62,7 @@ def main():
     s, eps = solution.x
     print(f"crowd of {args.agents} agents, tf = {args.tf}: {solution.nit} L-BFGS iterations, "
           f"{len(evaluations)} runs with gradients, {seconds:.1f} s CPU "
-          f"({np.median(evaluations):.2f} s per run and sweep)")
+          f"({seconds / len(evaluations):.2f} s per run and sweep)")
     print(f"  estimate s = {s:.6f} (true {TRUE['speed']}), eps = {eps:.6f} "
           f"(true {TRUE['smoothing']}); J = {solution.fun:.6e}; {solution.message}")
     # The noise moves the least-squares estimate by about its standard deviation over the

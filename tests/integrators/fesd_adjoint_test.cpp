@@ -207,6 +207,27 @@ TEST(FesdAdjointTest, SampleTimesAndKeptSweeps) {
   EXPECT_LE(RelativeError(swept.theta, other.transpose() * f), kProductTolerance);
 }
 
+// The memory bound: checkpoints beyond adjoint_memory_limit_mb go to a file and come back
+// bit for bit, so the gradient is the in-memory one exactly.
+TEST(FesdAdjointTest, CheckpointsBeyondTheMemoryBoundGoToAFile) {
+  Scene scene = MakeScene("crowd:N=16");
+  scene.final_time = 1.0;
+  FesdOptions options;
+  options.step_size = 0.1;
+  options.adjoint_weights = Random(scene.num_states(), 2, 51);
+  const FesdResult in_memory = SimulateFesd(scene, options);
+  ASSERT_EQ(in_memory.status, FesdStatus::kSuccess) << in_memory.message;
+  EXPECT_EQ(in_memory.stats.adjoint_file_bytes, 0.0);
+  options.adjoint_memory_limit_mb = 0.25 * in_memory.stats.adjoint_memory_bytes / (1024 * 1024);
+  const FesdResult bounded = SimulateFesd(scene, options);
+  ASSERT_EQ(bounded.status, FesdStatus::kSuccess) << bounded.message;
+  EXPECT_GT(bounded.stats.adjoint_file_bytes, 0.0);
+  // What stays in memory: the checkpoints up to the bound and every group's bookkeeping
+  // (statuses, lengths: a few hundred bytes a group).
+  EXPECT_LT(bounded.stats.adjoint_memory_bytes, 0.5 * in_memory.stats.adjoint_memory_bytes);
+  EXPECT_EQ(bounded.sensitivities.adjoint, in_memory.sensitivities.adjoint);
+}
+
 // Kept sweeps through FesdIntegrator (a shared lowered system): a later run with other values
 // does not change an earlier run's sweep.
 TEST(FesdAdjointTest, KeptSweepsOfAnIntegratorStayValid) {
