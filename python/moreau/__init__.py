@@ -32,6 +32,7 @@ __all__ = [
     "scene_from_dict",
     "scene_from_data",
     "sweep",
+    "plot_sweep",
     "Integrator",
     "Relay",
     "Result",
@@ -64,12 +65,23 @@ class Relay(NamedTuple):
 
 
 class Sensitivities(NamedTuple):
-    """Derivatives of the final scene state (rows) for shooting codes."""
+    """Derivatives of the final scene state (rows) for shooting codes, with respect to
+    theta = (x0, p, u_1, ..., u_S) (initial state, parameters, inputs of every control segment).
+
+    ``dx_dx0``, ``dx_dp``, ``dx_du``: the full matrices (option ``sensitivities=True``; empty
+    otherwise). ``directional``: dx(T)/dtheta V for ``directions=V`` (an (n_theta, k) array),
+    ``sample_directional`` the same at every ``sample_times`` entry. ``adjoint``: the
+    (q, n_theta) gradients W^T dx(T)/dtheta (+ sample terms) for ``adjoint_weights=W`` (an
+    (n_x, q) array) and ``adjoint_sample_weights``. See docs/sensitivities.md.
+    """
 
     dx_dx0: np.ndarray  #: (n_x, n_x)
     dx_dp: np.ndarray  #: (n_x, n_p)
     dx_du: np.ndarray  #: (n_x, n_u * segments), segment k's inputs in columns k*n_u...
     segment_starts: List[float]
+    directional: Optional[np.ndarray] = None  #: (n_x, k)
+    sample_directional: Optional[List[np.ndarray]] = None  #: per sample time, (n_x, k)
+    adjoint: Optional[np.ndarray] = None  #: (q, n_theta)
 
 
 def _check_finite(name: str, value: Any) -> float:
@@ -347,7 +359,43 @@ class Result:
         if native is None:
             return None
         return Sensitivities(native["dx_dx0"], native["dx_dp"], native["dx_du"],
-                             list(native["segment_starts"]))
+                             list(native["segment_starts"]), native["directional"],
+                             list(native["sample_directional"]), native["adjoint"])
+
+    @functools.cached_property
+    def sample_states(self) -> np.ndarray:
+        """The scene state at every ``sample_times`` entry, shape (K, n_x)."""
+        states = self._native.sample_states()
+        return np.array(states).reshape(len(states), len(self.final_state))
+
+    def adjoint(self, final_weights: Optional[Any] = None,
+                sample_weights: Optional[Any] = None) -> np.ndarray:
+        """A reverse sweep of this run (needs ``keep_adjoint=True``): the (q, n_theta) gradients
+        W^T dx(T)/dtheta + sum_j W_j^T dx(t_j)/dtheta for final weights W of shape (n_x,) or
+        (n_x, q) and sample weights of shape (K, n_x) (q = 1) or (K, n_x, q), K the number of
+        ``sample_times``. For a scalar f(x(T), x(t_1), ..., x(t_K)) pass its partial derivatives:
+        the result's row is df/dtheta, theta = (x0, p, u_1, ..., u_S). Raises ValueError for
+        shapes that do not fit and RuntimeError if the sweep fails (a singular Jacobian)."""
+        if not self._native.has_adjoint():
+            raise ValueError("this result keeps no adjoint sweep: simulate with keep_adjoint=True")
+        n_x = len(self.final_state)
+        final = np.zeros((0, 0)) if final_weights is None else np.asarray(final_weights, float)
+        if final.ndim == 1:
+            final = final.reshape(n_x if final.size == n_x else final.size, 1)
+        samples = np.zeros((0, 0))
+        if sample_weights is not None:
+            given = np.asarray(sample_weights, float)
+            if given.ndim == 2:
+                given = given[:, :, None]
+            if given.ndim != 3:
+                raise ValueError(f"sample_weights must have shape (K, n_x) or (K, n_x, q), got "
+                                 f"{given.shape}")
+            # (n_x, q K): sample j in columns j q ... (j + 1) q - 1.
+            samples = np.concatenate(list(given), axis=1) if len(given) else samples
+        success, message, theta, _ = self._native.adjoint_gradient(final, samples)
+        if not success:
+            raise RuntimeError(message)
+        return theta
 
     @property
     def num_steps(self) -> int:
@@ -362,11 +410,38 @@ class Result:
         return self._native.cpu_seconds
 
     def plot(self, states: Optional[Sequence[str]] = None, multipliers: bool = True,
-             events: bool = True, ax=None):
-        """Plots states (and multipliers in a second panel) over time with matplotlib, switch
-        events as dashed vertical lines, relay memories as steps. Returns the figure."""
+             events: bool = True, ax=None, internal: bool = False,
+             phase: Optional[bool] = None):
+        """The figure of the run (matplotlib), built from what the scene contains: states with
+        labels and units; the effects' multipliers as steps (jumps stay jumps); active
+        constraints and relay memories as bands; events in rows by constraint and kind; and for
+        two-state scenes (or ``phase=True``) the phase portrait with the set boundaries at the
+        event times or the switching surfaces. ``internal=True`` adds the lowering's own
+        variables (Filippov theta/lambda/mu, time-freezing variables). Returns the figure."""
         from ._plot import plot_result
-        return plot_result(self, states=states, multipliers=multipliers, events=events, ax=ax)
+        return plot_result(self, states=states, multipliers=multipliers, events=events, ax=ax,
+                           internal=internal, phase=phase)
+
+    def animate(self, path: str, fps: float = 25.0, duration: float = 10.0, speed: float = 0.0,
+                width: int = 720, gif_width: int = 360, snapshots: Optional[str] = None,
+                max_snapshots: int = 12, frames: Optional[str] = None) -> List[str]:
+        """Animates a planar scene (one with a view: bodies, obstacles) into ``path`` (.mp4 or
+        .gif; needs ffmpeg): frames at ``fps`` per second of video, the horizon lasting
+        ``duration`` seconds (or ``speed`` simulation time per second). ``snapshots``: a
+        directory for PNG snapshots at event times (at most ``max_snapshots``); ``frames``: a
+        directory for every frame as PNG. Returns the files written. Raises ValueError for a
+        scene without bodies or bad options, RuntimeError if ffmpeg is missing or fails."""
+        scene = getattr(self, "_scene", None)
+        if scene is None:
+            raise ValueError("this result does not know its scene (made by moreau.simulate or "
+                             "moreau.Integrator, it would)")
+        if not isinstance(path, str) or not path.endswith((".mp4", ".gif")):
+            raise ValueError(f"path must end in .mp4 or .gif, got {path!r}")
+        mp4 = path if path.endswith(".mp4") else ""
+        gif = path if path.endswith(".gif") else ""
+        return _moreau._animate(scene._native, self._native, mp4, gif, snapshots or "",
+                                frames or "", float(fps), float(duration), float(speed),
+                                int(width), int(gif_width), int(max_snapshots))
 
     def __repr__(self) -> str:
         return (f"<moreau.Result {self.scene} ({self.integrator}): {self.status}, "
@@ -390,7 +465,9 @@ def simulate(scene: Scene, integrator: str = "auto",
         raise ValueError(f"scene must be a moreau.Scene, got {type(scene).__name__}")
     if not isinstance(integrator, str):
         raise ValueError(f"integrator must be a string, got {type(integrator).__name__}")
-    return Result(_moreau._simulate(scene._native, integrator, options, _progress_arg(progress)))
+    result = Result(_moreau._simulate(scene._native, integrator, options, _progress_arg(progress)))
+    result._scene = scene.copy()  # as simulated: figures and animations read its view
+    return result
 
 
 class Integrator:
@@ -429,7 +506,12 @@ class Integrator:
                 raise ValueError(f"parameters must be a dict name -> value, got "
                                  f"{type(parameters).__name__}")
             values += [(name, _check_finite(name, value)) for name, value in parameters.items()]
-        return Result(self._native.run(values, _progress_arg(progress)))
+        result = Result(self._native.run(values, _progress_arg(progress)))
+        result._scene = self.scene.copy()
+        for name, value in values:
+            result._scene._native.set_value(name, value)
+        return result
 
 
 from ._ensemble import sweep  # noqa: E402  (needs Scene and simulate above)
+from ._plot import plot_sweep  # noqa: E402
