@@ -85,8 +85,6 @@ Violation FesdRun::InsideViolation(const CollocationStages& stages, const Vector
       Vector values;
       if (functions.values(theta, &values) && values[k] < -b.thresholds[k]) {
         // A crossing: its first zero before theta, as the bounded search would locate it.
-        std::vector<char> only(static_cast<std::size_t>(np_), 0);
-        only[static_cast<std::size_t>(k)] = 1;
         double lo = 0.0, hi = theta;
         for (int i = 0; i < CrossingSearchLimits{}.bisections; ++i) {
           const double mid = 0.5 * (lo + hi);

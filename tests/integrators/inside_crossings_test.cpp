@@ -167,20 +167,21 @@ TEST(InsideCrossingsTest, StopTimesAreDeclaredForEveryIntegratorThatSteps) {
     const SimulationResult plain = Simulate(PulseScene(0.05), {integrator, {}});
     EXPECT_FALSE(HasPoint(plain, kStop)) << integrator;
   }
-  const Scene smooth = ParseScene(
-      "name = \"decay\"\nstates = [\"x\"]\nx0 = [1.0]\ntf = 1.0\ndynamics = [\"-x\"]\n");
+  const Scene smooth =
+      ParseScene("name = \"decay\"\nstates = [\"x\"]\nx0 = [1.0]\ntf = 1.0\ndynamics = [\"-x\"]\n");
   EXPECT_TRUE(HasPoint(Simulate(smooth, {"radau", {{"tstops", 0.3}, {"h", 0.25}}}), 0.3));
   EXPECT_THROW(Simulate(smooth, {"radau", {{"tstops", std::vector<double>{NAN}}}}),
                std::invalid_argument);
 }
 
 TEST(InsideCrossingsTest, BoundsThatCannotDecideGiveAWarning) {
-  // A switching function whose interval evaluation overestimates (1000 (sin t - sin t) is
-  // zero, but its enclosure over an interval of width d is about 840 d wide) and whose true
-  // minimum, 1e-11 at t = 2, is a graze above the event tolerance: the bounds admit a crossing
-  // down to 2^-30 of a step that the samples never confirm. Fixed steps warn; adaptive steps
-  // halve six times, then warn. Neither reports a switch, and neither is silent.
-  const Scene scene = ParseScene(R"(
+  // A switching function whose interval evaluation overestimates (1e8 (sin t - sin t) is
+  // zero, but its enclosure over an interval of width d is about 1e8 d wide) and whose true
+  // minimum, 1e-6 at t = 2.3 (on no step's node), is a graze far above the event tolerance
+  // (1e-9): the bounds admit a crossing down to 2^-30 of a step (1e8 2^-30 > 1e-6 for steps
+  // above 1e-5) that the samples never confirm. Fixed steps warn; adaptive steps halve six
+  // times, then go on and warn. Neither reports a switch, and neither is silent.
+  const Scene scene = ParseScene(R"toml(
 name = "graze"
 states = ["x"]
 x0 = [0.0]
@@ -190,10 +191,10 @@ dynamics = ["0"]
 [[effects]]
 kind = "switching"
 name = "graze"
-surfaces = ["(t - 2)^2 + 1e-11 + 1000*(sin(t) - sin(t))"]
+surfaces = ["(t - 2.3)^2 + 1e-6 + 1e8*(sin(t) - sin(t))"]
 below = [["1"]]
 above = [["0"]]
-)");
+)toml");
   for (const SimulationSettings& settings :
        {SimulationSettings{"fesd", {{"h", 1.0}}}, SimulationSettings{"fesd", {{"rtol", 1e-6}}}}) {
     const SimulationResult r = Simulate(scene, settings);
