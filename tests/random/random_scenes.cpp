@@ -253,8 +253,8 @@ RandomScene GenerateRandomScene(std::uint64_t seed) {
 }
 
 SimulationSettings DefaultSettings() {
-  // Until error control is the default of `auto` (issue 32, item 1): adaptive FESD with
-  // Simulate's default tolerances. When it is, this becomes `return {};`.
+  // Until error control is the default of `auto`: adaptive FESD with Simulate's default
+  // tolerances. When it is, this becomes `return {};`.
   return {"fesd", {{"adaptive", true}}};
 }
 
