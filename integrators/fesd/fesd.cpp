@@ -337,9 +337,10 @@ FesdResult FesdRun::Finish(std::chrono::steady_clock::time_point start) {
     warning << result_.stats.num_unresolved_crossings
             << (result_.stats.num_unresolved_crossings == 1 ? " element" : " elements")
             << " (the first at t = " << first_unresolved_time_
-            << ") where the bounds of an event indicator admit a zero between the element's nodes "
-               "that the search could not resolve: a switch may have been stepped over; bound the "
-               "step (h_max, or a smaller h) or give its time as a breakpoint (tstops)";
+            << ") where an event indicator may cross zero between the element's nodes (its bounds "
+               "admit it, or a crossing found there could not be located) and the search could "
+               "not resolve it: a switch may have been stepped over; bound the step (h_max, or a "
+               "smaller h) or give its time as a breakpoint (tstops)";
     result_.warnings.push_back(warning.str());
   }
   if (result_.elements.empty()) result_.stats.min_element_length = 0.0;

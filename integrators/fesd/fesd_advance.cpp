@@ -18,15 +18,35 @@ namespace moreau::internal {
 // fixed-length elements; if a free side turns negative, a group solve of equal elements that
 // ends on the switch. Returns true if a switch ended the advance.
 bool FesdRun::Advance(double step_end, int* remaining) {
+  // A crossing found between an element's nodes (InsideViolation) that the group solves then
+  // cannot locate (a graze at the event tolerance, a dip of a sliding mode's indicator) would
+  // end a run that succeeds without the search: the step is taken again without it, and the
+  // crossing counts as unresolved (a warning, FesdResult::warnings).
+  const bool fallback = np_ > 0 && !inside_search_off_;
+  const long found = result_.stats.num_inside_crossings;
+  const int remaining_before = *remaining;
+  if (fallback) Save(&advance_before_);
+  bool switched = false;
   for (;;) {
     UpdateWorkingSet(step_end - tau_);
     bool retry = false;
-    const bool switched = AdvanceOnce(step_end, remaining, &retry);
+    switched = AdvanceOnce(step_end, remaining, &retry);
     if (!retry) {
       filter_.StepAccepted();
-      return switched;
+      break;
     }
   }
+  if (fallback && failed() && result_.stats.num_inside_crossings > found) {
+    const double t = advance_before_.y[system_.clock_index()];
+    Restore(advance_before_);
+    *remaining = remaining_before;
+    ++result_.stats.num_unresolved_crossings;
+    if (!std::isfinite(first_unresolved_time_)) first_unresolved_time_ = t;
+    inside_search_off_ = true;
+    switched = Advance(step_end, remaining);
+    inside_search_off_ = false;
+  }
+  return switched;
 }
 
 bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {

@@ -20,7 +20,7 @@ constexpr int kHermiteSamples = 64;
 Violation FesdRun::InsideViolation(const CollocationStages& stages, const Vector& y0,
                                    const ConstVectorRef& w_e, const Vector& scales, int element) {
   Violation violation;
-  if (np_ == 0) return violation;
+  if (np_ == 0 || inside_search_off_) return violation;
   InsideBuffers& b = inside_;
   b.watched.assign(static_cast<std::size_t>(np_), 0);
   bool any = false;

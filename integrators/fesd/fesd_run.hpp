@@ -614,6 +614,10 @@ class FesdRun {
     std::vector<double> values, slopes;
   };
   InsideBuffers inside_;
+  // Advance's fallback: the state before the step, and the search switched off while the step
+  // is taken again without it.
+  Snapshot advance_before_;
+  bool inside_search_off_ = false;
   double first_unresolved_time_ = std::numeric_limits<double>::infinity();
   // Adaptive steps and dense output.
   bool keep_polynomials_ = false;         // record ElementPolynomial of committed elements
