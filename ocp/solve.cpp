@@ -375,6 +375,7 @@ void Verify(const OcpProblem& problem, OcpResult* result) {
     fesd.step_size = (result->grid.back() - result->grid.front()) /
                      (static_cast<double>(result->grid.size() - 1) * kFesdVerificationRefinement);
     fesd.keep_elements_after_early_switch = true;
+    fesd.estimate_error = false;  // compared with IDA's reference instead
     const FesdResult run = SimulateFesd(scene, fesd);
     if (run.status == FesdStatus::kSuccess) {
       result->fesd_verified = true;

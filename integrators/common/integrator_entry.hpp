@@ -18,6 +18,11 @@
 
 namespace moreau::internal {
 
+// Throws std::invalid_argument for an option `name` that `spec` does not declare: "option
+// 'h' does not apply to integrator 'ida' (an option of fesd, radau, timestepping)" if another
+// integrator declares it, else "unknown option 'stage'; did you mean 'stages'?".
+[[noreturn]] void ThrowUnknownOption(const IntegratorSpec& spec, const std::string& name);
+
 // Converts a front end's value to the option's type; throws std::invalid_argument naming the
 // option, what it expects and what it got.
 bool SettingToBool(const OptionSpec& spec, const SettingValue& value);
@@ -204,8 +209,7 @@ IntegratorEntry MakeEntry(
       for (const auto& binding : options) {
         if (binding.spec.name == name) found = &binding;
       }
-      RequireArgument(found != nullptr, "option '", name, "' does not apply to integrator '",
-                      spec.name, "'");
+      if (found == nullptr) ThrowUnknownOption(spec, name);
       found->set(&built, value);
     }
     if (adjust) adjust(given, &built);
@@ -230,6 +234,10 @@ IntegratorEntry MakeEntry(
     out.final_state = result.final_state;
     out.trajectory = result.trajectory;
     if constexpr (requires { result.events; }) out.events = result.events;
+    if constexpr (requires { result.warnings; }) out.warnings = result.warnings;
+    if constexpr (requires { result.stats.error_estimate; }) {
+      if (result.stats.error_estimate >= 0.0) out.error_estimate = result.stats.error_estimate;
+    }
     for (const auto& stat : stats) out.stats.emplace_back(stat.spec.name, stat.get(result.stats));
     out.stats_summary = result.stats.Summary();
     out.cpu_seconds = result.stats.cpu_seconds;

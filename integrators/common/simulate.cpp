@@ -1,12 +1,14 @@
 // Simulate(): the one entry point every front end uses (include/moreau/integrators/simulate.hpp).
 #include "moreau/integrators/simulate.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <sstream>
 
 #include "integrator_entry.hpp"
 #include "moreau/core/error.hpp"
+#include "moreau/model/expression.hpp"
 
 namespace moreau {
 namespace internal {
@@ -54,6 +56,28 @@ bool ParseReal(const std::string& text, double* value) {
 }
 
 }  // namespace
+
+void ThrowUnknownOption(const IntegratorSpec& spec, const std::string& name) {
+  std::string declaring;
+  std::vector<std::string> all;
+  for (const IntegratorSpec& other : Integrators()) {
+    for (const OptionSpec& option : other.options) {
+      if (std::find(all.begin(), all.end(), option.name) == all.end()) all.push_back(option.name);
+      if (option.name == name) declaring += (declaring.empty() ? "" : ", ") + other.name;
+    }
+  }
+  if (!declaring.empty()) {
+    ThrowInvalidArgument("option '", name, "' does not apply to integrator '", spec.name,
+                         "' (an option of ", declaring, ")");
+  }
+  std::vector<std::string> own;
+  for (const OptionSpec& option : spec.options) own.push_back(option.name);
+  // The closest of the integrator's own options, else of any integrator's.
+  std::string closest = ClosestName(name, own);
+  if (closest.empty()) closest = ClosestName(name, all);
+  ThrowInvalidArgument("unknown option '", name, "' for integrator '", spec.name, "'",
+                       closest.empty() ? std::string() : "; did you mean '" + closest + "'?");
+}
 
 bool SettingToBool(const OptionSpec& spec, const SettingValue& value) {
   if (const bool* b = std::get_if<bool>(&value)) return *b;

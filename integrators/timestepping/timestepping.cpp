@@ -28,6 +28,7 @@ void TimeSteppingOptions::Validate() const {
                   "step size h must be positive and finite, got ", step_size);
   RequireArgument(std::isfinite(filter_safety) && filter_safety >= 1.0,
                   "filter safety must be >= 1, got ", filter_safety);
+  RequireArgument(max_steps >= 1, "max_steps must be >= 1, got ", max_steps);
   newton.Validate();
 }
 
@@ -193,6 +194,10 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
                                         const ProgressCallback& progress) {
   options.Validate();
   RequireSupportedEffects(scene, "timestepping");
+  // A grid longer than max_steps is refused before any work.
+  RequireFixedStepsWithin(
+      SegmentEnds(scene.initial_time, scene.final_time, scene.ControlBreakpoints()),
+      options.step_size, options.max_steps);
   const auto start = std::chrono::steady_clock::now();
   LoweringOptions lowering;
   lowering.switching_form = options.switching_form;

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import functools
 import math
+import warnings
 from typing import Any, Callable, Dict, List, NamedTuple, Optional, Sequence
 
 import numpy as np
@@ -37,6 +38,7 @@ __all__ = [
     "Result",
     "Scene",
     "Sensitivities",
+    "SimulationWarning",
     "integrators",
     "scene",
     "scenes",
@@ -250,7 +252,8 @@ def integrators() -> List[Dict[str, Any]]:
 class Result:
     """The result of a simulation (the same for every integrator).
 
-    Attributes: ``status``, ``success``, ``message``, ``integrator``, ``final_time``,
+    Attributes: ``status``, ``success``, ``message``, ``warnings``, ``error_estimate``,
+    ``integrator``, ``final_time``,
     ``final_state``; arrays ``t`` (N,), ``x`` (N, n_x), ``algebraic`` (N, n_a; NaN where an
     integrator has no value, e.g. at t0) and ``step`` (N,); ``events``, ``relays``, ``stats``
     (dict), ``options`` (the options used, with defaults), ``records`` (per-element or per-step
@@ -265,6 +268,12 @@ class Result:
         self.status: str = native.status
         self.message: str = native.message
         self.final_time: float = native.final_time
+        #: What to know although the run may have succeeded (an estimated error far above the
+        #: tolerance, ...); simulate() also issues each with warnings.warn.
+        self.warnings: List[str] = list(native.warnings)
+        #: The run's estimated error relative to the solution's scale (FESD, Radau; None
+        #: where the integrator has none; docs/accuracy.md).
+        self.error_estimate: Optional[float] = native.error_estimate
 
     @functools.cached_property
     def final_state(self) -> np.ndarray:
@@ -390,7 +399,20 @@ def simulate(scene: Scene, integrator: str = "auto",
         raise ValueError(f"scene must be a moreau.Scene, got {type(scene).__name__}")
     if not isinstance(integrator, str):
         raise ValueError(f"integrator must be a string, got {type(integrator).__name__}")
-    return Result(_moreau._simulate(scene._native, integrator, options, _progress_arg(progress)))
+    return _warned(Result(_moreau._simulate(scene._native, integrator, options,
+                                            _progress_arg(progress))))
+
+
+class SimulationWarning(UserWarning):
+    """A run's warning (``Result.warnings``): an estimated error far above the tolerance, a
+    suspected unresolved crossing, ..."""
+
+
+def _warned(result: Result) -> Result:
+    for message in result.warnings:
+        warnings.warn(f"{result.scene} ({result.integrator}): {message}", SimulationWarning,
+                      stacklevel=3)
+    return result
 
 
 class Integrator:
@@ -429,7 +451,7 @@ class Integrator:
                 raise ValueError(f"parameters must be a dict name -> value, got "
                                  f"{type(parameters).__name__}")
             values += [(name, _check_finite(name, value)) for name, value in parameters.items()]
-        return Result(self._native.run(values, _progress_arg(progress)))
+        return _warned(Result(self._native.run(values, _progress_arg(progress))))
 
 
 from ._ensemble import sweep  # noqa: E402  (needs Scene and simulate above)

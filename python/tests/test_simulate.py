@@ -156,8 +156,11 @@ def test_listing_functions():
 
 
 def test_bad_input_unknown_keyword_is_named():
-    with pytest.raises(ValueError, match="option 'stage' does not apply to integrator 'fesd'"):
+    with pytest.raises(ValueError, match="unknown option 'stage' for integrator 'fesd'; "
+                                         "did you mean 'stages'"):
         moreau.simulate(moreau.scene("S3"), integrator="fesd", stage=3)
+    with pytest.raises(ValueError, match="option 'h' does not apply to integrator 'ida'"):
+        moreau.simulate(moreau.scene("S3"), integrator="ida", h=0.1)
     with pytest.raises(ValueError, match="unknown integrator 'fsed'"):
         moreau.simulate(moreau.scene("S3"), integrator="fsed")
     with pytest.raises(ValueError, match="unknown scene 'S33'"):
@@ -168,8 +171,13 @@ def test_bad_input_unknown_keyword_is_named():
 
 def test_bad_input_wrong_types():
     s3 = moreau.scene("S3")
-    with pytest.raises(ValueError, match="expected an integer"):
+    with pytest.raises(ValueError, match="option 'stages' expects an integer"):
         moreau.simulate(s3, integrator="fesd", stages="three")
+    # Strings are never parsed as numbers or bools (the command line's text is).
+    with pytest.raises(ValueError, match="option 'h' expects a number, got the string '0.1'"):
+        moreau.simulate(s3, integrator="fesd", h="0.1")
+    with pytest.raises(ValueError, match="option 'sensitivities' expects True or False"):
+        moreau.simulate(s3, integrator="fesd", sensitivities="no")
     with pytest.raises(ValueError, match="expected a number"):
         moreau.simulate(s3, integrator="fesd", h=[0.1])
     with pytest.raises(ValueError, match="expected one of stewart, heaviside"):

@@ -178,6 +178,9 @@ int Run(Scene scene, const moreau::SimulationSettings& settings, bool numerical_
   const moreau::SimulationResult report =
       moreau::Simulate(scene, settings, [&progress](double t) { progress.Update(t); });
   progress.Finish();
+  for (const std::string& warning : report.warnings) {
+    std::fprintf(stderr, "moreau: warning: %s\n", warning.c_str());
+  }
   const moreau::Trajectory& trajectory =
       numerical_time ? report.numerical_trajectory : report.trajectory;
 
@@ -238,6 +241,10 @@ int Run(Scene scene, const moreau::SimulationSettings& settings, bool numerical_
   std::printf("iterations  %ld (%s)\n", report.num_iterations, spec.iteration_unit.c_str());
   std::printf("cpu time    %.3g s\n", report.cpu_seconds);
   std::printf("stats       %s\n", report.stats_summary.c_str());
+  if (report.error_estimate) {
+    std::printf("error       %.3g estimated, relative to the solution's scale\n",
+                *report.error_estimate);
+  }
   std::printf("output      %s/trajectory.csv, %s/summary.json%s%s%s\n", out_directory.c_str(),
               out_directory.c_str(), extra_files.c_str(), image.empty() ? "" : ", ", image.c_str());
   if (plot && image.empty()) {

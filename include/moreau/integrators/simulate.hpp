@@ -136,6 +136,13 @@ struct SimulationResult {
   std::optional<SimulationSensitivities> sensitivities;
   /// Adaptive FESD: the accepted steps, in the form its option `step_sequence` replays them.
   std::vector<double> step_sequence;
+  /// The run's estimated error relative to the solution's scale (docs/accuracy.md): local
+  /// error estimates accumulated over the steps (FESD, smooth Radau IIA), else empty.
+  std::optional<double> error_estimate;
+  /// What the user should know although the run may have succeeded (an estimated error far
+  /// above the tolerance, a suspected unresolved crossing, ...), one sentence each. Front ends
+  /// show them: the command line on stderr and in summary.json, Python by warnings.warn.
+  std::vector<std::string> warnings;
 
   /// The statistic with this name (std::invalid_argument if the integrator has none).
   double Stat(const std::string& name) const;

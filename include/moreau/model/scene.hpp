@@ -223,6 +223,14 @@ inline constexpr int kMaxEnumeratedPMatrixSize = 16;
 /// std::invalid_argument for a non-square D or an m too large to enumerate.
 std::string PMatrixViolation(const Matrix& d);
 
+/// Empty if every model function of the scene (dynamics and every effect's functions) is
+/// finite at the state x, inputs u, time t and parameters p; otherwise names the first that is
+/// not: which function, which output, its value, and the point, e.g. "the dynamics f, output
+/// 'y' (the rate of state y), is nan at t = 0.1276, x = (x = -1e-17, y = 0.03)". Integrators put
+/// it into their non-finite statuses (a runaway named, never an unexplained solver failure).
+std::string NonFiniteModelValue(const Scene& scene, const Vector& x, const Vector& u, double t,
+                                const Vector& p);
+
 /// Names accepted by SetSceneValue: "tf", "x0.<state>" and every parameter name.
 std::vector<std::string> OverridableNames(const Scene& scene);
 
