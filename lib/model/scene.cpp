@@ -362,6 +362,23 @@ void ValidateScene(const Scene& scene, bool check_initial_feasibility) {
                     scene.time_scale_input);
   }
 
+  const SceneDefaults& defaults = scene.defaults;
+  for (const auto& [value, key] : {std::pair{defaults.relative_tolerance, "rtol"},
+                                   {defaults.absolute_tolerance, "atol"},
+                                   {defaults.initial_step, "h0"},
+                                   {defaults.max_step, "h_max"},
+                                   {defaults.output_step, "output_dt"}}) {
+    RequireArgument(std::isfinite(value) && value >= 0.0, s, ": default ", key,
+                    " must be finite and >= 0 (0: the integrator's own), got ", value);
+  }
+  RequireArgument(defaults.relative_tolerance < 1.0, s, ": default rtol must be below 1, got ",
+                  defaults.relative_tolerance);
+  for (double t : defaults.output_times) {
+    RequireArgument(std::isfinite(t) && t >= scene.initial_time, s,
+                    ": default output times must be finite and >= t0 = ", scene.initial_time,
+                    ", got ", t);
+  }
+
   if (!scene.dynamics.empty()) {
     EvaluateAtStart(scene, scene.dynamics, "dynamics f", scene.num_states());
   }

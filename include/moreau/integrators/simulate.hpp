@@ -148,6 +148,15 @@ struct SimulationResult {
   double Stat(const std::string& name) const;
 };
 
+/// The options `given` for `integrator` with the scene's defaults (Scene::defaults) added
+/// where the user gave none: rtol, atol, h0 and h_max (IDA: max_step) only where the steps are
+/// error-controlled (no h given, or h with adaptive, rtol, atol or h0), output times (those
+/// inside [t0, tf]) and output_dt unless either is given; each only where the integrator
+/// declares the option. Simulate, Simulator and ValidateSimulationSettings apply it.
+std::map<std::string, SettingValue> WithSceneDefaults(const Scene& scene,
+                                                      const std::string& integrator,
+                                                      const std::map<std::string, SettingValue>& given);
+
 /// Checks the settings for `scene` without simulating: the integrator exists ("auto" is
 /// resolved for the scene) and supports the scene's effects, every option is declared, of the
 /// right type and in range. Throws std::invalid_argument as Simulate would.

@@ -152,6 +152,25 @@ std::string EffectKind(const Effect& effect);
 /// The effect's name.
 const std::string& EffectName(const Effect& effect);
 
+/// What a scene's author knows of its scales (scene files: the [defaults] table,
+/// docs/scene-files.md): integrator settings that moreau::Simulate uses where the user gives
+/// none (docs/accuracy.md). Zero or empty: the integrator's own default.
+struct SceneDefaults {
+  double relative_tolerance = 0.0;  ///< rtol of error-controlled runs, >= 0
+  double absolute_tolerance = 0.0;  ///< atol of error-controlled runs (one for every state), >= 0
+  double initial_step = 0.0;        ///< initial step of error-controlled runs (h0), >= 0
+  double max_step = 0.0;            ///< largest step of error-controlled runs (h_max), >= 0
+  /// Output times: the trajectory at these times (dense output), in [t0, tf]; times beyond a
+  /// horizon the user shortened are left out.
+  std::vector<double> output_times;
+  double output_step = 0.0;  ///< output every output_step from t0 (output_dt), >= 0
+
+  bool empty() const {
+    return relative_tolerance == 0.0 && absolute_tolerance == 0.0 && initial_step == 0.0 &&
+           max_step == 0.0 && output_times.empty() && output_step == 0.0;
+  }
+};
+
 /// A complete problem description (see file comment).
 struct Scene {
   std::string name;
@@ -171,6 +190,8 @@ struct Scene {
   /// (smooth dynamics, switching modes, relay fields; moving-set multipliers adapt). Supported
   /// by the FESD integrator.
   int time_scale_input = -1;
+  /// Integrator settings the scene's author chose for its scales (see SceneDefaults).
+  SceneDefaults defaults;
 
   int num_states() const { return static_cast<int>(state_names.size()); }
   int num_inputs() const { return static_cast<int>(inputs.size()); }
