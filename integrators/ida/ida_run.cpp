@@ -319,6 +319,11 @@ void IdaRun::ReInit(double t) {
 }
 
 // Integrates from t_ to t_end (a breakpoint or tf), handling roots on the way.
+// Where IDA's step collapsed without a non-finite evaluation, the model is probed this far
+// (relative to max(1, |t|)) beyond t to name a singularity there: 1e-12 is far beyond the
+// collapsed steps (below 10 eps |t|) and close enough to be the same singular point.
+constexpr double kSingularityProbe = 1e-12;
+
 void IdaRun::Integrate(double t_end) {
   Check(IDASetStopTime(memory_, t_end), "IDASetStopTime");
   int stalled_steps = 0;
@@ -355,7 +360,16 @@ void IdaRun::Integrate(double t_end) {
         kMinIdaStepUlps * std::numeric_limits<double>::epsilon() * std::fabs(t_return);
     collapsed_steps = collapsed ? collapsed_steps + 1 : 0;
     if (collapsed_steps >= kMaxCollapsedIdaSteps) {
-      const std::string named = NonFiniteWitness();
+      std::string named = NonFiniteWitness();
+      if (named.empty()) {
+        // IDA may never have evaluated beyond t (a square root's slope grows without bound
+        // towards its zero): the model just beyond t names the singularity if it is one.
+        Vector probe = View(Y_->vector).head(ny_);
+        const double t_probe = t_return + kSingularityProbe * std::max(1.0, std::fabs(t_return));
+        probe[system_.clock_index()] = t_probe;
+        const std::string beyond = system_.DescribeNonFinite(probe);
+        if (!beyond.empty()) named = beyond + " (just beyond t)";
+      }
       std::ostringstream reason;
       reason.precision(3);
       reason << "IDA's step collapsed to " << last_step << " (" << kMaxCollapsedIdaSteps

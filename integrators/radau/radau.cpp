@@ -303,9 +303,9 @@ class RadauRun {
   // Full Newton on the collocation equations (shared kernel, see smooth_collocation.hpp).
   SolveOutcome SolveStages(double h, const Vector& y0, Matrix* z, int* iterations) {
     internal::SmoothCollocationSolver::Stopping stopping;
-    stopping.weighted_rms = options_.adaptive;
+    stopping.weighted_rms = options_.ErrorControlled();
     // Adaptive: a small fraction of the error tolerance; fixed step: newton_tolerance.
-    stopping.tolerance = options_.adaptive ? 1e-2 : options_.newton_tolerance;
+    stopping.tolerance = options_.ErrorControlled() ? 1e-2 : options_.newton_tolerance;
     stopping.relative_tolerance = options_.relative_tolerance;
     const int nx = system_.num_scene_states();
     newton_atol_.resize(nx);
