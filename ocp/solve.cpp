@@ -692,10 +692,10 @@ OcpResult SolveOcp(const OcpProblem& problem, const OcpOptions& options) {
     result.verification_gap =
         std::min(result.verified ? result.resimulated_state_difference : infinity,
                  result.fesd_verified ? result.fesd_resimulated_state_difference : infinity);
-    const double allowed = kOcpVerificationTolerance *
-                           std::max(1.0, result.final_state.lpNorm<Eigen::Infinity>());
-    const bool solved = result.status == OcpStatus::kSolved ||
-                        result.status == OcpStatus::kSolvedToAcceptable;
+    const double allowed =
+        kOcpVerificationTolerance * std::max(1.0, result.final_state.lpNorm<Eigen::Infinity>());
+    const bool solved =
+        result.status == OcpStatus::kSolved || result.status == OcpStatus::kSolvedToAcceptable;
     if (solved && !(result.verification_gap <= allowed)) {
       std::ostringstream message;
       message.precision(3);

@@ -282,9 +282,9 @@ double SimulationResult::Stat(const std::string& name) const {
   ThrowInvalidArgument("integrator '", integrator, "' has no statistic '", name, "'");
 }
 
-std::map<std::string, SettingValue> WithSceneDefaults(const Scene& scene,
-                                                      const std::string& integrator,
-                                                      const std::map<std::string, SettingValue>& given) {
+std::map<std::string, SettingValue> WithSceneDefaults(
+    const Scene& scene, const std::string& integrator,
+    const std::map<std::string, SettingValue>& given) {
   std::map<std::string, SettingValue> options = given;
   const SceneDefaults& defaults = scene.defaults;
   if (defaults.empty()) return options;

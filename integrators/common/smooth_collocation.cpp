@@ -127,9 +127,8 @@ double SmoothCollocationSolver::ScaledIncrement(const Eigen::Ref<const Vector>& 
   const int nx = system_->num_scene_states();
   double sum = 0.0;
   for (int i = 0; i < nx; ++i) {
-    const double atol = stopping.absolute_tolerances != nullptr
-                            ? (*stopping.absolute_tolerances)[i]
-                            : stopping.absolute_tolerance;
+    const double atol = stopping.absolute_tolerances != nullptr ? (*stopping.absolute_tolerances)[i]
+                                                                : stopping.absolute_tolerance;
     // A state with no scale yet (the automatic atol at zero): what floating point resolves.
     const double w =
         std::max(atol + stopping.relative_tolerance * std::fabs(y0[i]),

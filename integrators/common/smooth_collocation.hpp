@@ -24,9 +24,9 @@ class SmoothCollocationSolver {
   // Newton stops when the scaled increment is <= tolerance: max_i |dZ_i| / (1 + |y0_i|)
   // (relative), or the weighted RMS over the scene states with weights
   // atol_i + rtol |y0_i| (weighted_rms; atol_i from absolute_tolerances if given, else
-  // absolute_tolerance), never below 10 eps (1 + |y0_i|). Contraction failure (an increment not smaller than the
-  // previous one from the third iteration on) ends the solve: converged if the increment is
-  // within 1e3 tolerances (round-off stall), not converged otherwise.
+  // absolute_tolerance), never below 10 eps (1 + |y0_i|). Contraction failure (an increment not
+  // smaller than the previous one from the third iteration on) ends the solve: converged if the
+  // increment is within 1e3 tolerances (round-off stall), not converged otherwise.
   struct Stopping {
     bool weighted_rms = false;
     double tolerance = 1e-12;

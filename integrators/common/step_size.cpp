@@ -5,8 +5,8 @@
 
 namespace moreau::internal {
 
-double StartingStep(const Vector& y0, const Vector& f0, const Vector& weights, int count,
-                    int order, double span, double quiet,
+double StartingStep(const Vector& y0, const Vector& f0, const Vector& weights, int count, int order,
+                    double span, double quiet,
                     const std::function<void(const Vector&, Vector*)>& field) {
   // Weighted RMS over the states with a scale (see the header).
   auto norm = [&](const Vector& value) {

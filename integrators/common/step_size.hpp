@@ -37,8 +37,8 @@ class StateScale {
 // Every quantity is a ratio of the model's own rates and scales, so the step scales with the
 // model's time scale (a model with time in milliseconds gets a starting step 1000 times
 // shorter). `field(y, f)` evaluates the field at y into *f.
-double StartingStep(const Vector& y0, const Vector& f0, const Vector& weights, int count,
-                    int order, double span, double quiet,
+double StartingStep(const Vector& y0, const Vector& f0, const Vector& weights, int count, int order,
+                    double span, double quiet,
                     const std::function<void(const Vector&, Vector*)>& field);
 
 }  // namespace moreau::internal

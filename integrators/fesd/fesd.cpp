@@ -108,7 +108,8 @@ FesdStats& FesdStats::operator+=(const FesdStats& other) {
   num_filter_rechecks += other.num_filter_rechecks;
   max_working_pairs = std::max(max_working_pairs, other.max_working_pairs);
   num_reduced_elements += other.num_reduced_elements;
-  if (other.error_estimate >= 0.0) error_estimate = std::max(error_estimate, 0.0) + other.error_estimate;
+  if (other.error_estimate >= 0.0)
+    error_estimate = std::max(error_estimate, 0.0) + other.error_estimate;
   num_unestimated_steps += other.num_unestimated_steps;
   cpu_seconds += other.cpu_seconds;
   return *this;

@@ -227,8 +227,7 @@ void FesdRun::IntegrateAdaptive(bool clock_targets) {
       bool lands = false;
       if (result_.stats.num_steps >= options_.max_steps) {
         Fail(FesdStatus::kMaxStepsReached, position,
-             "max_steps = " + std::to_string(options_.max_steps) +
-                 " steps before the final time");
+             "max_steps = " + std::to_string(options_.max_steps) + " steps before the final time");
         return;
       }
       system_.ClearNonFinite();
@@ -371,8 +370,8 @@ double FesdRun::StartingStep(double span) {
   const double rtol = options_.relative_tolerance;
   Vector weights(nx_);
   for (int i = 0; i < nx_; ++i) {
-    weights[i] = scale_.AbsoluteTolerance(i, options_.absolute_tolerance, rtol) +
-                 rtol * std::fabs(y_[i]);
+    weights[i] =
+        scale_.AbsoluteTolerance(i, options_.absolute_tolerance, rtol) + rtol * std::fabs(y_[i]);
   }
   PointEvaluation point;
   system_.Evaluate(y_, ConsistentGuess(y_, v()), Derivatives::kNone, &point);

@@ -30,10 +30,8 @@ IntegratorEntry FesdEntry() {
                "state's largest magnitude so far (with h: sets adaptive)"),
       BindReal("h0", &O::initial_step_size,
                "initial step of the error-controlled steps, > 0 (0: automatic)"),
-      BindReal("h_min", &O::min_step_size,
-               "smallest error-controlled step and failure retry, > 0"),
-      BindReal("h_max", &O::max_step_size,
-               "largest error-controlled step, >= 0 (0: no bound)"),
+      BindReal("h_min", &O::min_step_size, "smallest error-controlled step and failure retry, > 0"),
+      BindReal("h_max", &O::max_step_size, "largest error-controlled step, >= 0 (0: no bound)"),
       BindInteger("max_steps", &O::max_steps,
                   "most steps: a longer fixed grid is refused, an error-controlled run stops "
                   "with max_steps_reached, >= 1"),

@@ -1,5 +1,4 @@
 #include "moreau/integrators/radau.hpp"
-#include "moreau/integrators/simulate.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -10,6 +9,7 @@
 #include "../common/step_size.hpp"
 #include "moreau/core/error.hpp"
 #include "moreau/integrators/radau_tableau.hpp"
+#include "moreau/integrators/simulate.hpp"
 #include "moreau/model/lowered_system.hpp"
 
 namespace moreau {
@@ -61,7 +61,8 @@ RadauStats& RadauStats::operator+=(const RadauStats& other) {
   num_factorizations += other.num_factorizations;
   num_function_evaluations += other.num_function_evaluations;
   num_jacobian_evaluations += other.num_jacobian_evaluations;
-  if (other.error_estimate >= 0.0) error_estimate = std::max(error_estimate, 0.0) + other.error_estimate;
+  if (other.error_estimate >= 0.0)
+    error_estimate = std::max(error_estimate, 0.0) + other.error_estimate;
   cpu_seconds += other.cpu_seconds;
   return *this;
 }
@@ -119,8 +120,8 @@ class RadauRun {
     scale_.Reset(y);
     result.trajectory.Append(scene.initial_time, y.head(nx), Vector(), 0.0);
 
-    double h_next = options_.initial_step_size > 0.0 ? options_.initial_step_size
-                                                     : options_.step_size;
+    double h_next =
+        options_.initial_step_size > 0.0 ? options_.initial_step_size : options_.step_size;
     for (std::size_t segment = 0; segment + 1 < ends.size(); ++segment) {
       const double t_begin = ends[segment];
       const double t_end = ends[segment + 1];
@@ -215,8 +216,8 @@ class RadauRun {
           std::ostringstream text;
           text.precision(3);
           text << reason << "; retried with the step halved below its minimum " << minimum(t);
-          return FailSolve(result, t, text.str(),
-                           outcome == SolveOutcome::kNonFinite, RadauStatus::kStepSizeTooSmall);
+          return FailSolve(result, t, text.str(), outcome == SolveOutcome::kNonFinite,
+                           RadauStatus::kStepSizeTooSmall);
         }
         continue;
       }
@@ -263,16 +264,17 @@ class RadauRun {
     const double rtol = options_.relative_tolerance;
     Vector weights(nx);
     for (int i = 0; i < nx; ++i) {
-      weights[i] = scale_.AbsoluteTolerance(i, options_.absolute_tolerance, rtol) +
-                   rtol * std::fabs(y[i]);
+      weights[i] =
+          scale_.AbsoluteTolerance(i, options_.absolute_tolerance, rtol) + rtol * std::fabs(y[i]);
     }
     Evaluate(y, Derivatives::kNone);
     const Vector f0 = eval_.F;
-    const double h = internal::StartingStep(y, f0, weights, nx, 2 * s_ - 1, span,
-                                            kQuietStart * span, [this](const Vector& y1, Vector* f1) {
-                                              Evaluate(y1, Derivatives::kNone);
-                                              *f1 = eval_.F;
-                                            });
+    const double h =
+        internal::StartingStep(y, f0, weights, nx, 2 * s_ - 1, span, kQuietStart * span,
+                               [this](const Vector& y1, Vector* f1) {
+                                 Evaluate(y1, Derivatives::kNone);
+                                 *f1 = eval_.F;
+                               });
     system_.ClearNonFinite();  // trial evaluations beyond t0 are not the run's
     return h;
   }
@@ -310,8 +312,8 @@ class RadauRun {
     const int nx = system_.num_scene_states();
     newton_atol_.resize(nx);
     for (int i = 0; i < nx; ++i) {
-      newton_atol_[i] = scale_.AbsoluteTolerance(i, options_.absolute_tolerance,
-                                                 options_.relative_tolerance);
+      newton_atol_[i] =
+          scale_.AbsoluteTolerance(i, options_.absolute_tolerance, options_.relative_tolerance);
     }
     stopping.absolute_tolerances = &newton_atol_;
     stopping.max_iterations = options_.max_newton_iterations;
@@ -340,11 +342,10 @@ class RadauRun {
         const double size = std::max(std::fabs(y0[i]), std::fabs(y1[i]));
         // A state that has been exactly zero so far has no scale: its weight is never below
         // what floating point resolves there.
-        const double w =
-            std::max(scale_.AbsoluteTolerance(i, options_.absolute_tolerance,
-                                              options_.relative_tolerance) +
-                         options_.relative_tolerance * size,
-                     kNoise * std::numeric_limits<double>::epsilon() * (1.0 + size));
+        const double w = std::max(
+            scale_.AbsoluteTolerance(i, options_.absolute_tolerance, options_.relative_tolerance) +
+                options_.relative_tolerance * size,
+            kNoise * std::numeric_limits<double>::epsilon() * (1.0 + size));
         sum += (e[i] / w) * (e[i] / w);
       }
       return std::sqrt(sum / nx);
@@ -386,10 +387,10 @@ class RadauRun {
     if (!non_finite && !system_.non_finite_seen()) return Fail(result, otherwise, t, reason);
     const std::string named =
         system_.non_finite_seen() ? system_.DescribeNonFinite(system_.non_finite_state()) : "";
-    return Fail(result, RadauStatus::kNonFinite, t,
-                (named.empty() ? std::string("a non-finite value in the state or the dynamics")
-                               : named) +
-                    " (" + reason + ")");
+    return Fail(
+        result, RadauStatus::kNonFinite, t,
+        (named.empty() ? std::string("a non-finite value in the state or the dynamics") : named) +
+            " (" + reason + ")");
   }
 
   bool Fail(RadauResult* result, RadauStatus status, double t, const std::string& reason) {

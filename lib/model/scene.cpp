@@ -422,8 +422,7 @@ std::string NonFiniteModelValue(const Scene& scene, const Vector& x, const Vecto
       text << what << " ('" << f.name() << "'), output " << output_name(k) << ", is " << out[k]
            << " at t = " << t << ", x = (";
       for (int i = 0; i < scene.num_states(); ++i) {
-        text << (i ? ", " : "") << scene.state_names[static_cast<std::size_t>(i)] << " = "
-             << x[i];
+        text << (i ? ", " : "") << scene.state_names[static_cast<std::size_t>(i)] << " = " << x[i];
       }
       text << ")";
       found = text.str();

@@ -611,8 +611,8 @@ void SceneReader::ReadDefaults(const toml::node& node, Scene* scene) {
       const std::string path = Index("defaults.output_times", i);
       const double t = Value(*list.get(i), path);
       if (t < scene->initial_time || t > scene->final_time) {
-        Fail(*list.get(i), path, "output time ", t, " is outside [t0, tf] = [",
-             scene->initial_time, ", ", scene->final_time, "]");
+        Fail(*list.get(i), path, "output time ", t, " is outside [t0, tf] = [", scene->initial_time,
+             ", ", scene->final_time, "]");
       }
       defaults.output_times.push_back(t);
     }

@@ -79,7 +79,7 @@ SimulationSettings Settings(const Scene& scene, const std::string& integrator,
     const OptionSpec* option = spec.FindOption(name);
     if (option != nullptr && option->type != OptionSpec::Type::kChoice &&
         std::holds_alternative<std::string>(setting)) {
-      const char* expected = option->type == OptionSpec::Type::kBool      ? "True or False"
+      const char* expected = option->type == OptionSpec::Type::kBool       ? "True or False"
                              : option->type == OptionSpec::Type::kInteger  ? "an integer"
                              : option->type == OptionSpec::Type::kRealList ? "a list of numbers"
                                                                            : "a number";

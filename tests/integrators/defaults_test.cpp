@@ -24,7 +24,7 @@ namespace {
 constexpr double kProportionality = 10.0;
 
 SimulationResult RunWith(const Scene& scene, const std::string& integrator,
-                     std::map<std::string, SettingValue> options = {}) {
+                         std::map<std::string, SettingValue> options = {}) {
   return Simulate(scene, SimulationSettings{integrator, std::move(options)});
 }
 
@@ -183,8 +183,9 @@ TEST(RightByDefault, UnknownOptionsSuggestTheClosest) {
     }
     return std::string("no error");
   };
-  EXPECT_NE(message("fesd", "stage").find("unknown option 'stage' for integrator 'fesd'; did "
-                                          "you mean 'stages'?"),
+  EXPECT_NE(message("fesd", "stage")
+                .find("unknown option 'stage' for integrator 'fesd'; did "
+                      "you mean 'stages'?"),
             std::string::npos);
   EXPECT_NE(message("ida", "h").find("option 'h' does not apply to integrator 'ida'"),
             std::string::npos);

@@ -153,9 +153,9 @@ struct SimulationResult {
 /// error-controlled (no h given, or h with adaptive, rtol, atol or h0), output times (those
 /// inside [t0, tf]) and output_dt unless either is given; each only where the integrator
 /// declares the option. Simulate, Simulator and ValidateSimulationSettings apply it.
-std::map<std::string, SettingValue> WithSceneDefaults(const Scene& scene,
-                                                      const std::string& integrator,
-                                                      const std::map<std::string, SettingValue>& given);
+std::map<std::string, SettingValue> WithSceneDefaults(
+    const Scene& scene, const std::string& integrator,
+    const std::map<std::string, SettingValue>& given);
 
 /// Checks the settings for `scene` without simulating: the integrator exists ("auto" is
 /// resolved for the scene) and supports the scene's effects, every option is declared, of the

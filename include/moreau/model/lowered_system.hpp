@@ -420,9 +420,9 @@ class LoweredSystem {
   void FinalizeEvaluation(Derivatives derivatives, PointEvaluation* out) const;
   // Records y as the non-finite witness if none is kept and the evaluation is not finite.
   void NoteNonFinite(const ConstVectorRef& y, const PointEvaluation& out, bool field_only) const {
-    if (non_finite_seen_ || (out.F.allFinite() &&
-                             (field_only || (out.G.allFinite() && out.A.allFinite() &&
-                                             out.B.allFinite())))) {
+    if (non_finite_seen_ ||
+        (out.F.allFinite() &&
+         (field_only || (out.G.allFinite() && out.A.allFinite() && out.B.allFinite())))) {
       return;
     }
     non_finite_seen_ = true;
