@@ -11,6 +11,7 @@
 
 #include "moreau/core/error.hpp"
 #include "moreau/model/expression.hpp"
+#include "toml_screen.hpp"
 
 // toml++ (Debian libtomlplusplus-dev), header-only, private to this file. Its internal
 // assertions are compiled as in release builds in every build type: toml++ 3.3 asserts (and so
@@ -591,6 +592,7 @@ void SceneReader::ReadEffect(const toml::table& table, const std::string& path, 
 Scene SceneReader::Read(const std::string& text) {
   RequireArgument(text.size() <= kMaxFileBytes, source_, ": file larger than ", kMaxFileBytes,
                   " bytes");
+  detail::ScreenTomlText(text, source_);  // keeps toml++ 3.3 off its undefined behaviour
   toml::table root;
   try {
     root = toml::parse(text, source_);
