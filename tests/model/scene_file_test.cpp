@@ -421,11 +421,15 @@ std::string RandomExpression(std::mt19937* random, int depth) {
 // a located error where toml++ 3.3 would classify it as whitespace (undefined behaviour there:
 // lib/model/toml_screen.hpp) and for bytes that are not UTF-8.
 TEST(SceneFileTextTest, NonAsciiTextInStringsAndCommentsOnly) {
-  const std::string greek = "# \xce\xb8 is the angle\n[view]\nunits = { x = \"\xc2\xb0" "C\" }\n"
-                            "labels = { y = '\xce\xb8' }\n";
-  const Scene scene = ParseScene(std::string(kHeader) + "dynamics = [\"1\", \"0\"]\n" + greek,
-                                 "text.toml");
-  EXPECT_EQ(scene.view.units.at("x"), "\xc2\xb0" "C");
+  const std::string greek =
+      "# \xce\xb8 is the angle\n[view]\nunits = { x = \"\xc2\xb0"
+      "C\" }\n"
+      "labels = { y = '\xce\xb8' }\n";
+  const Scene scene =
+      ParseScene(std::string(kHeader) + "dynamics = [\"1\", \"0\"]\n" + greek, "text.toml");
+  EXPECT_EQ(scene.view.units.at("x"),
+            "\xc2\xb0"
+            "C");
   EXPECT_EQ(scene.view.labels.at("y"), "\xce\xb8");
   // Multi-line strings, their closing quotes and escapes around non-ASCII content.
   const Scene described = ParseScene(
