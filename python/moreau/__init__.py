@@ -25,6 +25,10 @@ import numpy as np
 
 from . import _moreau
 
+#: The version of moreau (the file VERSION of the source tree; ``moreau --version`` and the C++
+#: macro ``MOREAU_VERSION`` show the same).
+__version__: str = _moreau.__version__
+
 __all__ = [
     "Event",
     "load_scene",

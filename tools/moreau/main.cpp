@@ -24,6 +24,7 @@
 #include "moreau/integrators/simulate.hpp"
 #include "moreau/scenes/catalog.hpp"
 #include "moreau/scenes/crowd.hpp"
+#include "moreau/version.hpp"
 #include "ocp_command.hpp"
 #include "output.hpp"
 #include "sweep_command.hpp"
@@ -252,6 +253,8 @@ int main(int argc, char** argv) {
   CLI::App app{"moreau: simulate nonsmooth dynamical systems with measured accuracy"};
   app.require_subcommand(1);
   app.set_help_all_flag("--help-all", "help for all subcommands");
+  app.set_version_flag("--version", std::string("moreau ") + MOREAU_VERSION,
+                       "print the version (moreau/version.hpp) and exit");
 
   app.add_subcommand("list", "list the scenes and integrators");
 
