@@ -11,9 +11,11 @@
 
 namespace moreau {
 
+/// A built-in scene: its name, a one-line summary and its factory.
 struct SceneDefinition {
   std::string name;     ///< command-line name, e.g. "F1"
   std::string summary;  ///< one line for `moreau list`
+  /// Makes the scene.
   std::function<Scene()> make;
 };
 
