@@ -11,6 +11,14 @@ With ``sphinx-build -W`` every warning below fails the build (docs/_tools/build_
 It also registers the ``output`` code-block language: expected output shown after a command
 or a Python block in the tutorials, rendered as plain text and checked by
 docs/_tools/run_tutorials.py.
+
+And it makes breathe's ``doxygenfile`` render a header's namespace members without a
+declaration of the namespace itself. Breathe renders the members of namespace ``moreau``
+defined in a file inside a declaration of that namespace, with the same id on every page: with
+one page per group of headers that is a duplicate declaration per page (an error under -W).
+The members keep their fully qualified names (``moreau::SimulateFesd``), so cross-references
+are unchanged. (breathe 4.34, Debian 12; the build fails loudly if a later breathe changes
+what this relies on.)
 """
 
 from __future__ import annotations
@@ -18,7 +26,11 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+from breathe.renderer.sphinxrenderer import SphinxRenderer, WithContext
 from pygments.lexers.special import TextLexer
+from sphinx.domains.cpp import CPPDomain
+from docutils import nodes
+from sphinx import addnodes
 from sphinx.application import Sphinx
 from sphinx.util import logging
 
@@ -64,7 +76,40 @@ def _check_docstring(app: Sphinx, what: str, name: str, obj, options, lines: lis
                        type="moreau", subtype="python_coverage")
 
 
+def _run_cpp_directive(self, name: str, argument: str) -> None:
+    """Runs the C++ domain's directive `name` (namespace-push or namespace-pop) in the context of
+    the doxygenfile directive being rendered."""
+    args = self.context.directive_args
+    directive = CPPDomain.directives[name](
+        f"cpp:{name}", [argument] if argument else [], {}, [], *args[4:])
+    directive.run()
+
+
+def _visit_namespace_members_only(self, node):
+    """SphinxRenderer.visit_namespace without the namespace's own declaration (see above): the
+    members are rendered as breathe renders them inside that declaration (one nesting level
+    down, names relative to the namespace), with the namespace pushed as the C++ scope, as
+    `cpp:namespace-push` does, instead of declared."""
+    file_data = self.compound_parser.parse(node.refid)
+    parent_context = self.context.create_child_context(file_data)
+    new_context = parent_context.create_child_context(file_data.compounddef)
+    _run_cpp_directive(self, "namespace-push", file_data.compounddef.compoundname)
+    self.nesting_level += 1
+    try:
+        with WithContext(self, new_context):
+            rendered = self.render(file_data, parent_context)
+        # A member group (`@name ... @{`) of the namespace in another header renders as its
+        # title and description with no members here: leave such empty sections out.
+        return [n for n in rendered
+                if not (isinstance(n, nodes.container) and "breathe-sectiondef" in n["classes"]
+                        and not any(True for _ in n.findall(addnodes.desc)))]
+    finally:
+        self.nesting_level -= 1
+        _run_cpp_directive(self, "namespace-pop", "")
+
+
 def setup(app: Sphinx) -> dict:
+    SphinxRenderer.visit_namespace = _visit_namespace_members_only
     app.add_lexer("output", TextLexer)
     app.connect("builder-inited", _check_cpp_coverage)
     app.connect("autodoc-process-docstring", _check_docstring)
