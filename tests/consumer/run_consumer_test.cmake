@@ -16,9 +16,9 @@ run(${WORK_DIR}/prefix/bin/moreau --version)
 if(NOT run_output STREQUAL "moreau ${version}\n")
   message(FATAL_ERROR "`moreau --version` printed '${run_output}', VERSION says ${version}")
 endif()
-if(PYTHON)
+if(PYTHON)  # (no ';' in the code: CMake would split the argument there)
   run(${CMAKE_COMMAND} -E env PYTHONPATH=${PYTHON_PATH} ${PYTHON} -c
-      "import importlib.metadata, moreau; print(moreau.__version__, importlib.metadata.version('moreau'))")
+      "import importlib.metadata, moreau\nprint(moreau.__version__, importlib.metadata.version('moreau'))")
   if(NOT run_output STREQUAL "${version} ${version}\n")
     message(FATAL_ERROR "Python: moreau.__version__ and the package metadata say '${run_output}', "
       "VERSION says ${version}")
