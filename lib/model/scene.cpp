@@ -383,6 +383,7 @@ void ValidateScene(const Scene& scene, bool check_initial_feasibility) {
         effect);
   }
   RequireUniqueNames(names, s + ": effects");
+  ValidateView(scene);
 }
 
 std::vector<std::string> OverridableNames(const Scene& scene) {

@@ -36,6 +36,7 @@ __all__ = [
     "scene_from_dict",
     "scene_from_data",
     "sweep",
+    "plot_sweep",
     "Integrator",
     "Relay",
     "Result",
@@ -385,11 +386,38 @@ class Result:
         return self._native.cpu_seconds
 
     def plot(self, states: Optional[Sequence[str]] = None, multipliers: bool = True,
-             events: bool = True, ax=None):
-        """Plots states (and multipliers in a second panel) over time with matplotlib, switch
-        events as dashed vertical lines, relay memories as steps. Returns the figure."""
+             events: bool = True, ax=None, internal: bool = False,
+             phase: Optional[bool] = None):
+        """The figure of the run (matplotlib), built from what the scene contains: states with
+        labels and units; the effects' multipliers as steps (jumps stay jumps); active
+        constraints and relay memories as bands; events in rows by constraint and kind; and for
+        two-state scenes (or ``phase=True``) the phase portrait with the set boundaries at the
+        event times or the switching surfaces. ``internal=True`` adds the lowering's own
+        variables (Filippov theta/lambda/mu, time-freezing variables). Returns the figure."""
         from ._plot import plot_result
-        return plot_result(self, states=states, multipliers=multipliers, events=events, ax=ax)
+        return plot_result(self, states=states, multipliers=multipliers, events=events, ax=ax,
+                           internal=internal, phase=phase)
+
+    def animate(self, path: str, fps: float = 25.0, duration: float = 10.0, speed: float = 0.0,
+                width: int = 720, gif_width: int = 360, snapshots: Optional[str] = None,
+                max_snapshots: int = 12, frames: Optional[str] = None) -> List[str]:
+        """Animates a planar scene (one with a view: bodies, obstacles) into ``path`` (.mp4 or
+        .gif; needs ffmpeg): frames at ``fps`` per second of video, the horizon lasting
+        ``duration`` seconds (or ``speed`` simulation time per second). ``snapshots``: a
+        directory for PNG snapshots at event times (at most ``max_snapshots``); ``frames``: a
+        directory for every frame as PNG. Returns the files written. Raises ValueError for a
+        scene without bodies or bad options, RuntimeError if ffmpeg is missing or fails."""
+        scene = getattr(self, "_scene", None)
+        if scene is None:
+            raise ValueError("this result does not know its scene (made by moreau.simulate or "
+                             "moreau.Integrator, it would)")
+        if not isinstance(path, str) or not path.endswith((".mp4", ".gif")):
+            raise ValueError(f"path must end in .mp4 or .gif, got {path!r}")
+        mp4 = path if path.endswith(".mp4") else ""
+        gif = path if path.endswith(".gif") else ""
+        return _moreau._animate(scene._native, self._native, mp4, gif, snapshots or "",
+                                frames or "", float(fps), float(duration), float(speed),
+                                int(width), int(gif_width), int(max_snapshots))
 
     def __repr__(self) -> str:
         return (f"<moreau.Result {self.scene} ({self.integrator}): {self.status}, "
@@ -413,7 +441,9 @@ def simulate(scene: Scene, integrator: str = "auto",
         raise ValueError(f"scene must be a moreau.Scene, got {type(scene).__name__}")
     if not isinstance(integrator, str):
         raise ValueError(f"integrator must be a string, got {type(integrator).__name__}")
-    return Result(_moreau._simulate(scene._native, integrator, options, _progress_arg(progress)))
+    result = Result(_moreau._simulate(scene._native, integrator, options, _progress_arg(progress)))
+    result._scene = scene.copy()  # as simulated: figures and animations read its view
+    return result
 
 
 class Integrator:
@@ -452,7 +482,12 @@ class Integrator:
                 raise ValueError(f"parameters must be a dict name -> value, got "
                                  f"{type(parameters).__name__}")
             values += [(name, _check_finite(name, value)) for name, value in parameters.items()]
-        return Result(self._native.run(values, _progress_arg(progress)))
+        result = Result(self._native.run(values, _progress_arg(progress)))
+        result._scene = self.scene.copy()
+        for name, value in values:
+            result._scene._native.set_value(name, value)
+        return result
 
 
 from ._ensemble import sweep  # noqa: E402  (needs Scene and simulate above)
+from ._plot import plot_sweep  # noqa: E402

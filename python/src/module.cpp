@@ -29,6 +29,7 @@
 namespace py = pybind11;
 
 namespace moreau::python {
+void BindView(py::module_& m);  // view.cpp
 namespace {
 
 // A front end's keyword value as a SettingValue (bool before int: Python's bool is an int).
@@ -460,4 +461,5 @@ PYBIND11_MODULE(_moreau, m) {
 
   m.def("_simulate", &RunSimulation, py::arg("scene"), py::arg("integrator"), py::arg("options"),
         py::arg("progress"));
+  BindView(m);
 }

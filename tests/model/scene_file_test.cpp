@@ -439,5 +439,94 @@ TEST(SceneFileRobustnessTest, MutatedFilesAndGeneratedExpressionsAreRejectedClea
   EXPECT_GT(rejected, kFiles / 2);
 }
 
+// ---- [view]: names, units and planar geometry --------------------------------------------
+
+TEST(SceneFileViewTest, ReadsUnitsLabelsBodiesAndObstacles) {
+  const Scene scene = ParseScene(std::string(kHeader) +
+                                     "[[parameters]]\nname = \"h\"\nvalue = 0.5\n"
+                                     "[view]\nunits = { x = \"m\", y = \"m\" }\n"
+                                     "labels = { x = \"position\" }\nwindow = [-2, 2, \"-h\", 3]\n"
+                                     "[[view.bodies]]\nname = \"ball\"\nx = \"x\"\ny = \"y\"\n"
+                                     "radius = \"h/5\"\ntrail = true\n"
+                                     "[[view.obstacles]]\nname = \"floor\"\nshape = \"segment\"\n"
+                                     "from = [-2, \"h*t\"]\nto = [2, \"h*t\"]\n"
+                                     "[[view.obstacles]]\nname = \"post\"\nshape = \"circle\"\n"
+                                     "center = [0, 1]\nradius = \"h\"\n",
+                                 "view.toml");
+  const SceneView& view = scene.view;
+  EXPECT_EQ(view.units.at("x"), "m");
+  EXPECT_EQ(view.labels.at("x"), "position");
+  EXPECT_EQ(StateAxisLabel(view, "x"), "position (x) [m]");
+  EXPECT_EQ(StateAxisLabel(view, "y"), "y [m]");
+  EXPECT_EQ(view.window, (std::vector<double>{-2.0, 2.0, -0.5, 3.0}));
+  ASSERT_EQ(view.bodies.size(), 1u);
+  EXPECT_EQ(view.bodies[0].x, "x");
+  EXPECT_EQ(view.bodies[0].radius, 0.1);
+  EXPECT_TRUE(view.bodies[0].trail);
+  ASSERT_EQ(view.obstacles.size(), 2u);
+  // The obstacles move with t and the parameters: the floor at h t.
+  const SmoothFunction geometry = ViewObstacleFunction(scene);
+  Vector out;
+  geometry.Evaluate(Vector(), Vector(), 2.0, scene.ParameterValues(), &out);
+  ASSERT_EQ(out.size(), 7);
+  EXPECT_EQ(out[1], 1.0);  // floor's y at t = 2: h t
+  EXPECT_EQ(out[6], 0.5);  // post's radius
+}
+
+// A view error names file:line:column and what is wrong.
+void ExpectLocated(const std::string& text, const std::string& where,
+                   const std::string& what = "") {
+  ExpectError(text, where);
+  if (!what.empty()) ExpectError(text, what);
+}
+
+TEST(SceneFileViewTest, BadViewsAreLocatedErrors) {
+  const std::string body = "[[view.bodies]]\nname = \"b\"\n";
+  // Unknown state, with the closest name, at its line and column.
+  ExpectLocated(std::string(kHeader) + body + "x = \"x\"\ny = \"z\"\n", "bad.toml:8:5",
+                "unknown state 'z'");
+  ExpectLocated(std::string(kHeader) + body + "x = \"xx\"\n", "did you mean 'x'?");
+  // Negative radius.
+  ExpectLocated(std::string(kHeader) + body + "x = \"x\"\nradius = -0.5\n", "bad.toml:8:10",
+                "radius must be >= 0, got -0.5");
+  ExpectLocated(std::string(kHeader) + "[view]\nunits = { q = \"m\" }\n", "bad.toml:6:11",
+                "unknown state 'q'");
+  ExpectLocated(std::string(kHeader) + body + "x = \"x\"\nsize = 1\n", "unknown key 'size'");
+  // Obstacles: expressions of t and parameters only, the right shape, a radius >= 0.
+  const std::string obstacle = "[[view.obstacles]]\nname = \"o\"\n";
+  ExpectLocated(
+      std::string(kHeader) + obstacle + "shape = \"segment\"\nfrom = [\"x\", 0]\nto = [1, 1]\n",
+      "bad.toml:8:10", "unknown name 'x'");
+  ExpectLocated(std::string(kHeader) + obstacle + "shape = \"square\"\n",
+                "expected \"circle\" or \"segment\"");
+  ExpectLocated(
+      std::string(kHeader) + obstacle + "shape = \"circle\"\ncenter = [0, 0]\nradius = -1\n",
+      "bad.toml:9:10", "radius must be >= 0, got -1 at t0");
+  ExpectLocated(std::string(kHeader) + obstacle + "shape = \"segment\"\nfrom = [0]\nto = [1, 1]\n",
+                "expected 2 entries");
+  ExpectLocated(std::string(kHeader) + "[view]\nwindow = [1, 0, 0, 1]\n", "bad.toml:6:10",
+                "expected xmin < xmax");
+}
+
+TEST(SceneViewTest, ValidateSceneChecksBuiltViews) {
+  Scene scene = MakeScene("S3");
+  scene.view.bodies[0].radius = -1.0;
+  EXPECT_THROW(ValidateScene(scene), std::invalid_argument);
+  scene = MakeScene("S3");
+  scene.view.bodies[0].y = "xx2";
+  try {
+    ValidateScene(scene);
+    ADD_FAILURE() << "no error for an unknown state";
+  } catch (const std::invalid_argument& error) {
+    EXPECT_NE(std::string(error.what()).find("'xx2' is not a state; did you mean 'x2'?"),
+              std::string::npos)
+        << error.what();
+  }
+  // Every built-in view is valid (ValidateScene runs in MakeScene's callers; here directly).
+  for (const char* name : {"S1", "S2", "S3", "S4", "S5", "crowd", "rectifier", "H1"}) {
+    EXPECT_NO_THROW(ValidateScene(MakeScene(name))) << name;
+  }
+}
+
 }  // namespace
 }  // namespace moreau

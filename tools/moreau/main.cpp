@@ -16,6 +16,7 @@
 #include <map>
 #include <sstream>
 
+#include "animate_command.hpp"
 #include "check_command.hpp"
 #include "integrator_flags.hpp"
 #include "moreau/core/error.hpp"
@@ -141,7 +142,8 @@ void Show(const Scene& scene) {
 // `implicit`: options the command line sets itself (shown only where they differ from that).
 int Run(Scene scene, const moreau::SimulationSettings& settings,
         const std::map<std::string, moreau::SettingValue>& implicit, bool numerical_time,
-        const std::string& out_directory, bool plot, bool quiet) {
+        const std::string& out_directory, bool plot, bool plot_internal, bool quiet,
+        const tool::AnimateSettings* animate) {
   tool::ProgressBar progress("run", !quiet);
   const double t0 = scene.initial_time, tf = scene.final_time;
   auto time_text = [tf](double t) {
@@ -175,9 +177,16 @@ int Run(Scene scene, const moreau::SimulationSettings& settings,
     extra_files += ", " + out_directory + "/numerical.csv";
   }
   tool::WriteSummaryJson(report, out_directory + "/summary.json");
-  const std::string image =
-      plot ? tool::WritePlot(report, trajectory, out_directory, numerical_time) : "";
+  tool::WriteViewJson(scene, out_directory + "/view.json");
+  const std::string image = plot ? tool::WritePlot(scene, report, trajectory, out_directory,
+                                                   numerical_time, plot_internal)
+                                 : "";
   if (quiet) {  // errors only: a run that did not succeed says why, on stderr
+    if (animate != nullptr) {
+      tool::AnimateSettings silent = *animate;
+      silent.quiet = true;
+      tool::AnimateResult(scene, report, out_directory, silent);
+    }
     if (!report.success) {
       std::fprintf(stderr, "moreau: %s: %s: %s\n", report.scene.c_str(), report.status.c_str(),
                    report.message.c_str());
@@ -223,6 +232,7 @@ int Run(Scene scene, const moreau::SimulationSettings& settings,
   if (plot && image.empty()) {
     std::fprintf(stderr, "moreau: warning: no plot written (is gnuplot installed?)\n");
   }
+  if (animate != nullptr) tool::AnimateResult(scene, report, out_directory, *animate);
   return report.success ? 0 : 1;
 }
 
@@ -270,10 +280,30 @@ int main(int argc, char** argv) {
                 "memories and the clock (default: physical time)");
   run->add_flag("--no-plot", no_plot, "do not write trajectory.png");
   run->add_flag("--quiet", quiet, "print nothing but errors (the files are written as usual)");
+  bool plot_internal = false;
+  run->add_flag("--plot-internal", plot_internal,
+                "trajectory.png also shows the lowering's internal variables (Filippov theta, "
+                "lambda, mu; time-freezing variables)");
+  bool run_animate = false;
+  tool::AnimateSettings run_animate_settings;
+  run->add_flag("--animate", run_animate,
+                "also animate the run (scenes with a view: animation.mp4, animation.gif, "
+                "snapshots/; see `moreau animate --help` for the animation options)");
+  tool::AddAnimateOptions(run, &run_animate_settings);
   // Every integrator option, declared once in the library (moreau::Integrators()), becomes a
   // flag --name (dashes for underscores); its value goes to moreau::Simulate() as text, which
   // parses and validates it for the chosen integrator.
   tool::IntegratorFlags integrator_flags(run);
+  auto* animate = app.add_subcommand(
+      "animate",
+      "animate a run of a planar scene: RUN_DIR/animation.mp4, animation.gif and snapshots at "
+      "event times (needs ffmpeg)");
+  std::string animate_directory;
+  tool::AnimateSettings animate_settings;
+  animate->add_option("run_dir", animate_directory, "a directory written by `moreau run`")
+      ->required();
+  animate->add_flag("--quiet", animate_settings.quiet, "print nothing");
+  tool::AddAnimateOptions(animate, &animate_settings);
   auto* sweep = app.add_subcommand(
       "sweep", "run a scene over grids and samples of its named values on all cores");
   std::string sweep_scene;
@@ -408,6 +438,9 @@ int main(int argc, char** argv) {
       tool::CheckScene(scene, check_stages);
       return 0;
     }
+    if (app.got_subcommand("animate")) {
+      return tool::RunAnimateCommand(animate_directory, animate_settings);
+    }
     if (app.got_subcommand("sweep")) {
       Scene scene = tool::ResolveScene(sweep_scene);
       ApplySettings(&scene, sweep_assignments, sweep_tf, sweep_tf_option->count() > 0);
@@ -496,8 +529,13 @@ int main(int argc, char** argv) {
         !numerical_time || (settings.integrator == "fesd" && scene.Has<moreau::HysteresisRelay>()),
         "--numerical-time applies to scenes with hysteresis relays simulated by the fesd "
         "integrator (elsewhere numerical and physical time coincide)");
+    if (run_animate) {
+      // Checked before simulating: a scene without bodies, or bad animation options.
+      const moreau::render::CompiledView view(scene);
+      run_animate_settings.options.Validate();
+    }
     return Run(std::move(scene), settings, implicit, numerical_time, out_directory, !no_plot,
-               quiet);
+               plot_internal, quiet, run_animate ? &run_animate_settings : nullptr);
   } catch (const std::invalid_argument& error) {
     std::fprintf(stderr, "moreau: error: %s\n", error.what());
     return 2;

@@ -364,6 +364,7 @@ int RunOcpCommand(const OcpCommandSettings& settings) {
     RequireArgument(out.good(), "cannot write '", directory, "/summary.json'");
     out << std::setw(2) << SummaryJson(problem, options, result) << "\n";
   }
+  WriteViewJson(problem.scene, directory + "/view.json");  // `moreau animate DIR`
   const std::string image = settings.plot ? WriteSolutionPlot(problem, result, directory) : "";
   if (settings.quiet) {  // errors only
     if (result.status != OcpStatus::kSolved && result.status != OcpStatus::kSolvedToAcceptable) {

@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include "moreau/core/error.hpp"
+#include "render/view_geometry.hpp"
 
 namespace moreau::tool {
 
@@ -194,49 +195,10 @@ void WriteSummaryJson(const SimulationResult& report, const std::string& path) {
   out << std::setw(2) << SummaryJson(report) << "\n";
 }
 
-std::string WritePlot(const SimulationResult& report, const Trajectory& trajectory,
-                      const std::string& directory, bool numerical_time_axis) {
-  const std::string csv = directory + "/trajectory.csv";
-  const std::string image = directory + "/trajectory.png";
-  const std::string script_path = directory + "/plot.gp";
-  std::ofstream script(script_path);
-  RequireArgument(script.good(), "cannot write '", script_path, "'");
-  const auto& names = trajectory.state_names;
-  const std::size_t shown = std::min<std::size_t>(names.size(), kMaxPlottedStates);
-  script << "set terminal pngcairo size 1000,600 noenhanced\n"
-         << "set output '" << image << "'\n"
-         << "set datafile separator ','\n"
-         << "set key outside right top\n"
-         << "set grid\n"
-         << "set xlabel '" << (numerical_time_axis ? "numerical time tau" : "t") << "'\n"
-         << "set title '" << report.scene << " (" << report.integrator << ", " << report.status
-         << (shown < names.size() ? ", first " + std::to_string(shown) + " states" : "") << ")'\n";
-  for (const Event& event : numerical_time_axis ? std::vector<Event>() : report.events) {
-    script << "set arrow from " << std::setprecision(17) << event.t << ", graph 0 to " << event.t
-           << ", graph 1 nohead dashtype 2 lc rgb '#999999'\n";
-  }
-  // Relay memories (physical time) in a lower panel.
-  const bool relays =
-      !report.relays.empty() && !numerical_time_axis && fs::exists(directory + "/relays.csv");
-  if (relays) {
-    script << "set multiplot layout 2,1\nset lmargin at screen 0.08\nset rmargin at screen 0.8\n";
-  }
-  script << "plot ";
-  for (std::size_t i = 0; i < shown; ++i) {
-    script << (i ? ", " : "") << "'" << csv << "' using 1:" << i + 2 << " with lines lw 2 title '"
-           << names[i] << "'";
-  }
-  script << "\n";
-  if (relays) {
-    script << "unset title\nset ylabel 'w'\nset yrange [-0.1:1.1]\nplot ";
-    for (std::size_t i = 0; i < report.relays.size(); ++i) {
-      script << (i ? ", " : "") << "'" << directory << "/relays.csv' using 1:" << i + 2
-             << " with steps lw 2 title '" << report.relays[i].relay << ".w'";
-    }
-    script << "\nunset multiplot\n";
-  }
-  script.close();
-  return RunGnuplot(script_path, image) ? image : "";
+void WriteViewJson(const Scene& scene, const std::string& path) {
+  std::ofstream out(path);
+  RequireArgument(out.good(), "cannot write '", path, "'");
+  out << render::ViewJson(scene) << "\n";
 }
 
 bool RunGnuplot(const std::string& script_path, const std::string& image) {

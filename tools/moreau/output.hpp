@@ -39,12 +39,21 @@ std::string IntegratorLine(const SimulationResult& result,
 // hysteresis relays "relays" (name, initial, jumps [{t, w}], final).
 nlohmann::json SummaryJson(const SimulationResult& report);
 void WriteSummaryJson(const SimulationResult& report, const std::string& path);
-// Draws trajectory.png with gnuplot from DIR/trajectory.csv (events as dashed lines), with
-// the relay memories from DIR/relays.csv in a second panel when the scene has relays.
-// Returns the image path, or "" if gnuplot is unavailable or failed.
-// With numerical_time_axis the trajectory is the numerical-time one (no event lines).
-std::string WritePlot(const SimulationResult& report, const Trajectory& trajectory,
-                      const std::string& directory, bool numerical_time_axis);
+// view.json: what `moreau animate` needs to draw the run (render/view_geometry.hpp).
+void WriteViewJson(const Scene& scene, const std::string& path);
+// The algebraic columns a figure shows: multipliers of moving sets and complementarity pairs
+// ("<effect>.lambda_<name>"), and with `internal` also the lowering's own variables (Filippov
+// theta, lambda, mu; time-freezing variables).
+std::vector<std::string> ShownAlgebraicNames(const Scene& scene, const Trajectory& trajectory,
+                                             bool internal);
+// Draws DIR/trajectory.png with gnuplot from what the scene contains (run_figure.cpp): states
+// with labels and units, multipliers, active sets/modes/relay memories as bands, events in
+// rows by constraint and kind, and the phase portrait of two-state scenes; figure.json holds
+// the phase panel's pixel geometry. Returns the image path, or "" if gnuplot is unavailable or
+// failed. With numerical_time_axis the trajectory is the numerical-time one (no events).
+std::string WritePlot(const Scene& scene, const SimulationResult& report,
+                      const Trajectory& trajectory, const std::string& directory,
+                      bool numerical_time_axis, bool internal = false);
 // Runs gnuplot on a script that writes `image`; true if the image exists afterwards.
 bool RunGnuplot(const std::string& script_path, const std::string& image);
 

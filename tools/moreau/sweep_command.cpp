@@ -13,89 +13,9 @@
 #include "moreau/core/error.hpp"
 #include "output.hpp"
 #include "progress.hpp"
+#include "sweep_figures.hpp"
 
 namespace moreau::tool {
-namespace {
-
-std::string Quote(const std::string& text) { return "'" + text + "'"; }
-
-// Column numbers (1-based, gnuplot) of the CSV written by WriteSweepCsv.
-struct Columns {
-  int varied = 2;  // first varied value
-  int state = 0;   // first final state
-  int events = 0;  // num_events
-  int first_event = 0;
-};
-Columns CsvColumns(const SweepResult& r) {
-  Columns c;
-  const int varied = static_cast<int>(r.varied_names.size());
-  c.state = 2 + varied + 4;  // index, varied..., status, success, message, final_time
-  c.events = c.state + static_cast<int>(r.state_names.size());
-  c.first_event = c.events + 1;
-  return c;
-}
-
-std::vector<std::string> Plots(const SweepResult& r, const std::string& dir) {
-  std::vector<std::string> images;
-  const std::string csv = dir + "/sweep.csv";
-  const Columns c = CsvColumns(r);
-  const std::size_t shown = std::min<std::size_t>(r.state_names.size(), kMaxPlottedStates);
-  auto header = [&](std::ofstream& s, const std::string& image, const std::string& title) {
-    s << "set terminal pngcairo size 1000,600 noenhanced\nset output " << Quote(image)
-      << "\nset datafile separator ','\nset key autotitle columnhead outside right top\n"
-      << "set grid\nset title " << Quote(title) << "\n";
-  };
-  if (r.varied_names.size() == 1) {
-    const std::string name = r.varied_names[0];
-    {
-      const std::string image = dir + "/final_states.png", script = dir + "/final_states.gp";
-      std::ofstream s(script);
-      header(s, image, r.scene + ": final states against " + name + " (" + r.integrator + ")");
-      s << "set xlabel " << Quote(name) << "\nplot ";
-      for (std::size_t i = 0; i < shown; ++i) {
-        s << (i ? ", " : "") << Quote(csv) << " using " << c.varied << ":"
-          << c.state + static_cast<int>(i) << " with linespoints lw 2 pt 7 ps 0.5";
-      }
-      s << "\n";
-      s.close();
-      if (RunGnuplot(script, image)) images.push_back(image);
-    }
-    if (r.num_event_times > 0) {
-      const std::string image = dir + "/event_times.png", script = dir + "/event_times.gp";
-      std::ofstream s(script);
-      header(s, image, r.scene + ": event times against " + name + " (" + r.integrator + ")");
-      s << "set xlabel " << Quote(name) << "\nset ylabel 't'\nplot ";
-      for (int e = 0; e < r.num_event_times; ++e) {
-        s << (e ? ", " : "") << Quote(csv) << " using " << c.varied << ":" << c.first_event + e
-          << " with points pt 7 ps 0.6";
-      }
-      s << "\n";
-      s.close();
-      if (RunGnuplot(script, image)) images.push_back(image);
-    }
-  } else if (r.varied_names.size() == 2) {
-    // Heat maps on the scattered (a, b) points (exact grids and samples alike).
-    std::vector<std::pair<std::string, int>> quantities;
-    for (std::size_t i = 0; i < std::min<std::size_t>(shown, 4); ++i) {
-      quantities.push_back({"x." + r.state_names[i], c.state + static_cast<int>(i)});
-    }
-    quantities.push_back({"num_events", c.events});
-    for (const auto& [quantity, column] : quantities) {
-      const std::string base = dir + "/heatmap_" + quantity;
-      const std::string image = base + ".png", script = base + ".gp";
-      std::ofstream s(script);
-      header(s, image, r.scene + ": " + quantity + " (" + r.integrator + ")");
-      s << "set xlabel " << Quote(r.varied_names[0]) << "\nset ylabel " << Quote(r.varied_names[1])
-        << "\nset palette rgbformulae 33,13,10\nunset key\nplot " << Quote(csv) << " using "
-        << c.varied << ":" << c.varied + 1 << ":" << column << " with points pt 5 ps 1.5 palette\n";
-      s.close();
-      if (RunGnuplot(script, image)) images.push_back(image);
-    }
-  }
-  return images;
-}
-
-}  // namespace
 
 int RunSweepCommand(const Scene& scene, const SweepCommandSettings& settings) {
   SweepSpec spec;
@@ -153,7 +73,7 @@ int RunSweepCommand(const Scene& scene, const SweepCommandSettings& settings) {
   summary["cpu_seconds"] = cpu;
   std::ofstream(dir + "/summary.json") << std::setw(2) << summary << "\n";
   const std::vector<std::string> images =
-      settings.plot ? Plots(result, dir) : std::vector<std::string>{};
+      settings.plot ? SweepFigures(result, spec, dir) : std::vector<std::string>{};
 
   const bool all = by_status.size() == 1 && by_status.count("success") == 1;
   if (settings.quiet) {  // errors only

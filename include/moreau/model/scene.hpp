@@ -32,6 +32,7 @@
 
 #include "moreau/core/smooth_function.hpp"
 #include "moreau/core/types.hpp"
+#include "moreau/model/view.hpp"
 
 namespace moreau {
 
@@ -197,6 +198,9 @@ struct Scene {
   /// (smooth dynamics, switching modes, relay fields; moving-set multipliers adapt). Supported
   /// by the FESD integrator.
   int time_scale_input = -1;
+  /// How figures and animations show the scene (names, units, planar geometry); never
+  /// changes the dynamics (moreau/model/view.hpp).
+  SceneView view;
 
   /// Number of states n_x.
   int num_states() const { return static_cast<int>(state_names.size()); }
