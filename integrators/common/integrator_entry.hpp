@@ -83,6 +83,24 @@ OptionBinding<Options> BindRealList(std::string name, std::vector<double> Option
   return binding;
 }
 
+// A Matrix field given as a list of numbers: a single column, which the integrator reads
+// column by column into its documented shape (FesdOptions::sensitivity_directions).
+template <class Options>
+OptionBinding<Options> BindMatrixList(std::string name, Matrix Options::*member,
+                                      std::string meaning) {
+  OptionBinding<Options> binding;
+  binding.spec = {std::move(name), std::move(meaning), OptionSpec::Type::kRealList, {}, {}};
+  binding.set = [member, spec = binding.spec](Options* o, const SettingValue& v) {
+    const std::vector<double> list = SettingToRealList(spec, v);
+    o->*member = Eigen::Map<const Vector>(list.data(), static_cast<Eigen::Index>(list.size()));
+  };
+  binding.get = [member](const Options& o) {
+    const Matrix& m = o.*member;
+    return SettingValue(std::vector<double>(m.data(), m.data() + m.size()));
+  };
+  return binding;
+}
+
 // An enum field with named values: `parse` maps a name to the enum (throwing for others),
 // `format` the enum to its name.
 template <class Options, class Enum>

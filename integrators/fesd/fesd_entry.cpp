@@ -4,6 +4,28 @@
 #include "moreau/linalg/linear_solver.hpp"
 
 namespace moreau::internal {
+namespace {
+
+// A kept FESD reverse sweep as Simulate's results offer it.
+class FesdAdjointSweep final : public AdjointSweep {
+ public:
+  explicit FesdAdjointSweep(std::shared_ptr<FesdAdjoint> adjoint) : adjoint_(std::move(adjoint)) {}
+  AdjointGradient Gradient(const Matrix& final_weights,
+                           const Matrix& sample_weights) const override {
+    const FesdGradient gradient = adjoint_->Sweep(final_weights, sample_weights);
+    AdjointGradient out;
+    out.success = gradient.success;
+    out.message = gradient.message;
+    out.theta = gradient.theta;
+    out.cpu_seconds = gradient.cpu_seconds;
+    return out;
+  }
+
+ private:
+  std::shared_ptr<FesdAdjoint> adjoint_;
+};
+
+}  // namespace
 
 IntegratorEntry FesdEntry() {
   using O = FesdOptions;
@@ -44,10 +66,31 @@ IntegratorEntry FesdEntry() {
                "remainders shorter than this fraction of H / N_fe merge into the next step, "
                "in (0, 0.5]"),
       BindInteger("max_event_retries", &O::max_event_retries, "re-solves per switch, >= 1"),
+      BindBool("project_initial_state", &O::project_initial_state,
+               "an initial state outside the moving sets is projected onto them (shooting "
+               "nodes), not refused"),
       BindBool("keep_elements_after_early_switch", &O::keep_elements_after_early_switch,
                "a switch right after a step's start does not use up an element (shooting)"),
       BindBool("sensitivities", &O::sensitivities,
                "dx(T)/dx(0), dx(T)/dp, dx(T)/du through switches (IFT on every group)"),
+      BindMatrixList("directions", &O::sensitivity_directions,
+                     "directional sensitivities dx(T)/dtheta V: V column by column, n_theta = "
+                     "n_x + n_p + n_u S entries per direction (theta = x0, p, u per segment)"),
+      BindMatrixList("adjoint_weights", &O::adjoint_weights,
+                     "adjoint sensitivities W^T dx(T)/dtheta by a reverse sweep: W (n_x x q) "
+                     "column by column"),
+      BindRealList("sample_times", &O::sample_times,
+                   "times in (t0, tf] whose states the sensitivities also cover (element ends "
+                   "of the run: multiples of h from a control breakpoint)"),
+      BindMatrixList("adjoint_sample_weights", &O::adjoint_sample_weights,
+                     "adjoint weights of the sample states: n_x x q per sample time, column by "
+                     "column"),
+      BindReal("adjoint_memory_limit_mb", &O::adjoint_memory_limit_mb,
+               "memory bound of the adjoint's checkpoints in MB (0: none); beyond it they go to "
+               "a temporary file"),
+      BindBool("keep_adjoint", &O::keep_adjoint,
+               "keep the reverse sweep in the result: gradients for weights chosen after the "
+               "run"),
       BindBool("reduce_smooth_elements", &O::reduce_smooth_elements,
                "elements whose statuses leave a smooth field (one Stewart mode, no active "
                "constraint) solved as Radau IIA steps of it, then checked on the full system"),
@@ -84,11 +127,16 @@ IntegratorEntry FesdEntry() {
                "elements solved as a Radau IIA step of a smooth field"),
       BindStat("max_working_pairs", &S::max_working_pairs,
                "most complementarity pairs in an element system (near-active filter)"),
+      BindStat("adjoint_memory_bytes", &S::adjoint_memory_bytes,
+               "bytes kept for the adjoint sweep (converged unknowns of every group)"),
+      BindStat("adjoint_file_bytes", &S::adjoint_file_bytes,
+               "bytes of adjoint checkpoints written to a file (beyond the memory limit)"),
+      BindStat("adjoint_cpu_seconds", &S::adjoint_cpu_seconds, "time of the adjoint sweep"),
       BindStat("cpu_seconds", &S::cpu_seconds, "thread CPU time"),
   };
   return MakeEntry<O, FesdResult>(
       spec, options, stats, SimulateFesd,
-      [](const Scene&, const FesdResult& result, SimulationResult* out) {
+      [](const Scene& scene, const FesdResult& result, SimulationResult* out) {
         out->num_steps = result.stats.num_elements;
         out->num_iterations = result.stats.num_newton_iterations;
         out->stage_trajectory = result.stage_trajectory;
@@ -104,12 +152,23 @@ IntegratorEntry FesdEntry() {
                                   e.complementarity, e.cross_complementarity});
         }
         out->step_sequence = result.step_sequence;
-        if (result.sensitivities.lowered.size() == 0) return;
+        for (const Vector& y : result.sample_states) {
+          out->sample_states.push_back(y.head(scene.num_states()));
+        }
+        if (result.adjoint) out->adjoint = std::make_shared<FesdAdjointSweep>(result.adjoint);
+        const FesdSensitivities& given = result.sensitivities;
+        if (given.lowered.size() == 0 && given.directional.size() == 0 &&
+            given.adjoint.size() == 0) {
+          return;
+        }
         SimulationSensitivities s;
-        s.initial_state = result.sensitivities.initial_state;
-        s.parameters = result.sensitivities.parameters;
-        s.inputs = result.sensitivities.inputs;
-        s.segment_starts = result.sensitivities.segment_starts;
+        s.initial_state = given.initial_state;
+        s.parameters = given.parameters;
+        s.inputs = given.inputs;
+        s.segment_starts = given.segment_starts;
+        s.directional = given.directional;
+        s.sample_directional = given.sample_directional;
+        s.adjoint = given.adjoint;
         out->sensitivities = s;
       },
       // rtol or atol switch adaptive steps on; without an initial h the controller picks the

@@ -69,12 +69,23 @@ class Relay(NamedTuple):
 
 
 class Sensitivities(NamedTuple):
-    """Derivatives of the final scene state (rows) for shooting codes."""
+    """Derivatives of the final scene state (rows) for shooting codes, with respect to
+    theta = (x0, p, u_1, ..., u_S) (initial state, parameters, inputs of every control segment).
+
+    ``dx_dx0``, ``dx_dp``, ``dx_du``: the full matrices (option ``sensitivities=True``; empty
+    otherwise). ``directional``: dx(T)/dtheta V for ``directions=V`` (an (n_theta, k) array),
+    ``sample_directional`` the same at every ``sample_times`` entry. ``adjoint``: the
+    (q, n_theta) gradients W^T dx(T)/dtheta (+ sample terms) for ``adjoint_weights=W`` (an
+    (n_x, q) array) and ``adjoint_sample_weights``. See docs/sensitivities.md.
+    """
 
     dx_dx0: np.ndarray  #: (n_x, n_x)
     dx_dp: np.ndarray  #: (n_x, n_p)
     dx_du: np.ndarray  #: (n_x, n_u * segments), segment k's inputs in columns k*n_u...
     segment_starts: List[float]
+    directional: Optional[np.ndarray] = None  #: (n_x, k)
+    sample_directional: Optional[List[np.ndarray]] = None  #: per sample time, (n_x, k)
+    adjoint: Optional[np.ndarray] = None  #: (q, n_theta)
 
 
 def _check_finite(name: str, value: Any) -> float:
@@ -368,7 +379,43 @@ class Result:
         if native is None:
             return None
         return Sensitivities(native["dx_dx0"], native["dx_dp"], native["dx_du"],
-                             list(native["segment_starts"]))
+                             list(native["segment_starts"]), native["directional"],
+                             list(native["sample_directional"]), native["adjoint"])
+
+    @functools.cached_property
+    def sample_states(self) -> np.ndarray:
+        """The scene state at every ``sample_times`` entry, shape (K, n_x)."""
+        states = self._native.sample_states()
+        return np.array(states).reshape(len(states), len(self.final_state))
+
+    def adjoint(self, final_weights: Optional[Any] = None,
+                sample_weights: Optional[Any] = None) -> np.ndarray:
+        """A reverse sweep of this run (needs ``keep_adjoint=True``): the (q, n_theta) gradients
+        W^T dx(T)/dtheta + sum_j W_j^T dx(t_j)/dtheta for final weights W of shape (n_x,) or
+        (n_x, q) and sample weights of shape (K, n_x) (q = 1) or (K, n_x, q), K the number of
+        ``sample_times``. For a scalar f(x(T), x(t_1), ..., x(t_K)) pass its partial derivatives:
+        the result's row is df/dtheta, theta = (x0, p, u_1, ..., u_S). Raises ValueError for
+        shapes that do not fit and RuntimeError if the sweep fails (a singular Jacobian)."""
+        if not self._native.has_adjoint():
+            raise ValueError("this result keeps no adjoint sweep: simulate with keep_adjoint=True")
+        n_x = len(self.final_state)
+        final = np.zeros((0, 0)) if final_weights is None else np.asarray(final_weights, float)
+        if final.ndim == 1:
+            final = final.reshape(n_x if final.size == n_x else final.size, 1)
+        samples = np.zeros((0, 0))
+        if sample_weights is not None:
+            given = np.asarray(sample_weights, float)
+            if given.ndim == 2:
+                given = given[:, :, None]
+            if given.ndim != 3:
+                raise ValueError(f"sample_weights must have shape (K, n_x) or (K, n_x, q), got "
+                                 f"{given.shape}")
+            # (n_x, q K): sample j in columns j q ... (j + 1) q - 1.
+            samples = np.concatenate(list(given), axis=1) if len(given) else samples
+        success, message, theta, _ = self._native.adjoint_gradient(final, samples)
+        if not success:
+            raise RuntimeError(message)
+        return theta
 
     @property
     def num_steps(self) -> int:

@@ -49,6 +49,11 @@ SettingValue ToSetting(const std::string& name, const py::handle& value) {
   const py::module_ numpy = py::module_::import("numpy");
   if (py::isinstance(value, numpy.attr("integer"))) return value.cast<long>();
   if (py::isinstance(value, numpy.attr("floating"))) return value.cast<double>();
+  // A 2-D array (a block of directions or weights, one column each) is read column by column,
+  // the order the options document.
+  if (py::isinstance<py::array>(value) && value.attr("ndim").cast<int>() == 2) {
+    return ToSetting(name, value.attr("flatten")("F"));
+  }
   if (py::isinstance<py::list>(value) || py::isinstance<py::tuple>(value) ||
       py::isinstance<py::array>(value)) {
     std::vector<double> list;
@@ -415,14 +420,32 @@ PYBIND11_MODULE(_moreau, m) {
              return out;
            })
       .def("step_sequence", [](const SimulationResult& r) { return r.step_sequence; })
-      .def("sensitivities", [](const SimulationResult& r) -> py::object {
-        if (!r.sensitivities) return py::none();
-        py::dict out;
-        out["dx_dx0"] = r.sensitivities->initial_state;
-        out["dx_dp"] = r.sensitivities->parameters;
-        out["dx_du"] = r.sensitivities->inputs;
-        out["segment_starts"] = r.sensitivities->segment_starts;
-        return out;
+      .def("sensitivities",
+           [](const SimulationResult& r) -> py::object {
+             if (!r.sensitivities) return py::none();
+             py::dict out;
+             out["dx_dx0"] = r.sensitivities->initial_state;
+             out["dx_dp"] = r.sensitivities->parameters;
+             out["dx_du"] = r.sensitivities->inputs;
+             out["segment_starts"] = r.sensitivities->segment_starts;
+             out["directional"] = r.sensitivities->directional;
+             out["sample_directional"] = r.sensitivities->sample_directional;
+             out["adjoint"] = r.sensitivities->adjoint;
+             return out;
+           })
+      .def("sample_states", [](const SimulationResult& r) { return r.sample_states; })
+      .def("has_adjoint", [](const SimulationResult& r) { return r.adjoint != nullptr; })
+      .def("adjoint_gradient", [](const SimulationResult& r, const Matrix& final_weights,
+                                  const Matrix& sample_weights) {
+        RequireArgument(r.adjoint != nullptr,
+                        "the result keeps no adjoint sweep: run with keep_adjoint=True");
+        AdjointGradient gradient;
+        {
+          py::gil_scoped_release release;
+          gradient = r.adjoint->Gradient(final_weights, sample_weights);
+        }
+        return py::make_tuple(gradient.success, gradient.message, gradient.theta,
+                              gradient.cpu_seconds);
       });
 
   m.def("_parse_grid", [](const std::string& text) {

@@ -30,6 +30,7 @@ endif()
 set(flags "")
 if(SANITIZE)  # a sanitized library needs a sanitized executable (runtime order)
   set(flags -DCMAKE_CXX_FLAGS=-fsanitize=address,undefined
+            -DCMAKE_C_FLAGS=-fsanitize=address,undefined
             -DCMAKE_EXE_LINKER_FLAGS=-fsanitize=address,undefined)
 endif()
 run(${CMAKE_COMMAND} -S ${SOURCE_DIR} -B ${WORK_DIR}/build -G ${GENERATOR}
@@ -37,4 +38,5 @@ run(${CMAKE_COMMAND} -S ${SOURCE_DIR} -B ${WORK_DIR}/build -G ${GENERATOR}
     -DMOREAU_EXPECTED_VERSION=${version} ${flags})
 run(${CMAKE_COMMAND} --build ${WORK_DIR}/build)
 run(${WORK_DIR}/build/consumer)
+run(${WORK_DIR}/build/c_consumer)
 message(STATUS "consumer ran against the installed package, version ${version} everywhere")

@@ -186,6 +186,37 @@ nlohmann::json SummaryJson(const SimulationResult& report) {
   }
   summary["stats"] = stats;
   if (!report.step_sequence.empty()) summary["step_sequence"] = report.step_sequence;
+  // Sensitivities (options sensitivities, directions, adjoint_weights), matrices as rows over
+  // theta = (x0, p, u per segment); the states at sample_times.
+  auto rows = [](const Matrix& m) {
+    nlohmann::json out = nlohmann::json::array();
+    for (Eigen::Index i = 0; i < m.rows(); ++i) {
+      nlohmann::json row = nlohmann::json::array();
+      for (Eigen::Index j = 0; j < m.cols(); ++j) row.push_back(NumberJson(m(i, j)));
+      out.push_back(row);
+    }
+    return out;
+  };
+  if (report.sensitivities) {
+    const SimulationSensitivities& s = *report.sensitivities;
+    nlohmann::json sensitivities = nlohmann::json::object();
+    if (s.initial_state.size() > 0) {
+      sensitivities["dx_dx0"] = rows(s.initial_state);
+      sensitivities["dx_dp"] = rows(s.parameters);
+      sensitivities["dx_du"] = rows(s.inputs);
+    }
+    if (s.directional.size() > 0) sensitivities["directional"] = rows(s.directional);
+    if (s.adjoint.size() > 0) sensitivities["adjoint"] = rows(s.adjoint);
+    summary["sensitivities"] = sensitivities;
+  }
+  if (!report.sample_states.empty()) {
+    Matrix states(static_cast<Eigen::Index>(report.sample_states.size()),
+                  report.final_state.size());
+    for (std::size_t j = 0; j < report.sample_states.size(); ++j) {
+      states.row(static_cast<Eigen::Index>(j)) = report.sample_states[j].transpose();
+    }
+    summary["sample_states"] = rows(states);
+  }
   return summary;
 }
 

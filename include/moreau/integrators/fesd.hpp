@@ -35,6 +35,10 @@
 /// dx(T)/dx(0), dx(T)/dp and dx(T)/du for the piecewise-constant inputs of every control
 /// segment. These are the derivatives of the discrete solution map; they converge to those of
 /// the exact flow, whereas the time-stepping baseline misses the dependence of switch times.
+/// The same derivative applied to a block of directions (FesdOptions::sensitivity_directions)
+/// and transposed onto adjoint weights by a reverse sweep over checkpoints of the run's groups
+/// (adjoint_weights, sample_times, keep_adjoint; FesdAdjoint) serves systems too large for
+/// the full matrices (docs/sensitivities.md).
 ///
 /// Effects: moving sets, switching surfaces and hysteresis relays; path constraints belong
 /// to the alpha-method stepper.
@@ -118,6 +122,40 @@ struct FesdOptions {
   double filter_safety = 4.0;
   /// Compute dx(T)/dx(0), dx(T)/dp, dx(T)/du (FesdResult::sensitivities).
   bool sensitivities = false;
+  /// Directional (forward) sensitivities (docs/sensitivities.md): a block V of k directions
+  /// over theta = (x0, p, u_1, ..., u_S) (n_x + n_p + n_u S rows, u_k the inputs of control
+  /// segment k) or over the lowered theta_L = (y0, p, u_1, ..., u_S) (n_y + n_p + n_u S rows,
+  /// y0 = (x0, relay memories, clock)); a single column of n k entries is read column by
+  /// column (front ends pass lists). Gives FesdSensitivities::directional = dx(T)/dtheta V
+  /// (and the same at sample_times) without forming dx(T)/dtheta: per group one solve per
+  /// direction with the run's own factorization at the solution. Empty: none.
+  Matrix sensitivity_directions;
+  /// Adjoint (reverse) sensitivities: weights W of the final state (n_x x q, or n_y x q over
+  /// the lowered y(T); a single column of n q entries is read column by column). Gives
+  /// FesdSensitivities::adjoint = W^T dx(T)/dtheta (+ the sample terms below), q x n_theta,
+  /// by a reverse sweep over the run's groups that transposes exactly the derivative of the
+  /// directional sensitivities (switch-determined element lengths, saltation at switches on
+  /// step boundaries, relay jumps). Memory: the run keeps every group's converged unknowns
+  /// and re-evaluates and refactorizes its Jacobian in the sweep (docs/sensitivities.md).
+  /// Empty (and no adjoint_sample_weights): none.
+  Matrix adjoint_weights;
+  /// Sample times in (t0, tf] (physical time, increasing): FesdResult::sample_states holds the
+  /// state there, the directional and adjoint sensitivities their terms. Each must be an
+  /// element end of the run (fixed steps: a multiple of h from a control breakpoint); the run
+  /// throws std::invalid_argument naming a sample time that is not.
+  std::vector<double> sample_times;
+  /// Adjoint weights of the states at sample_times: n_x x (q * samples) (or n_y rows), sample
+  /// j in columns j q, ..., (j + 1) q - 1; a single column is read column by column.
+  Matrix adjoint_sample_weights;
+  /// Keep the run's reverse-sweep data (FesdResult::adjoint) so that adjoints for weights
+  /// chosen after the run (the gradient of a function of x(T) and of sample_states) cost one
+  /// reverse sweep each.
+  bool keep_adjoint = false;
+  /// Memory bound of the adjoint's checkpoints, in megabytes (0: none). Checkpoints beyond it
+  /// (every further group's converged unknowns and start state) are written to a temporary
+  /// file and read back by the sweep, so that the resident memory of the tape stays below the
+  /// bound at the cost of file I/O (docs/sensitivities.md). >= 0.
+  double adjoint_memory_limit_mb = 0.0;
   /// Smooth elements: in an element whose statuses leave a smooth vector field (Stewart's form
   /// of one SwitchingSurfaces effect with exactly one active mode, no other effects or
   /// dynamics; moving sets only, with no active constraint; or hysteresis relays only, each in
@@ -164,6 +202,10 @@ struct FesdOptions {
   /// (empty: the scene's x0, initial memories and t0). A shooting code passes node states this
   /// way: with time-freezing a node may lie inside a frozen interval (0 < w < 1).
   Vector initial_state;
+  /// An initial state x0 outside the moving sets is projected onto them (the sweeping
+  /// process's jump at t0, with its derivative in the sensitivities) instead of refused, as
+  /// initial_state is: shooting codes whose node states leave the sets between iterations.
+  bool project_initial_state = false;
   /// Record the stage trajectory (FesdResult::stage_trajectory).
   bool record_stages = false;
   /// Record element ends in the trajectory (false: initial and final points only).
@@ -184,6 +226,9 @@ enum class FesdStatus {
                            ///< max_event_retries (Newton failure or inconsistent signs)
   kStatusDecisionFailure,  ///< no consistent continuation at a switch point
   kStepSizeTooSmall,       ///< adaptive: the error test failed with the step at min_step_size
+  /// the adjoint sweep found the Jacobian of a converged group singular at its checkpoint
+  /// (reciprocal condition below kSingularRcond): no adjoint sensitivities
+  kSensitivityFailure,
 };
 /// The status as text (snake case, as in summary.json).
 std::string ToString(FesdStatus status);
@@ -217,7 +262,22 @@ struct FesdSensitivities {
   /// n_y rows; columns y0 (n_y), then p (n_p), then u per segment (n_u each). The blocks above
   /// are its scene-state parts.
   Matrix lowered;
+  /// With FesdOptions::sensitivity_directions (k directions): dx(T)/dtheta V (n_x x k), the
+  /// same for the lowered y(T) (n_y x k), and dx(t_j)/dtheta V at every sample time.
+  Matrix directional;
+  Matrix directional_lowered;
+  std::vector<Matrix> sample_directional;
+  /// With adjoint weights (q functionals): q x (n_x + n_p + n_u S), the gradient of every
+  /// functional with respect to theta = (x0, p, u_1..u_S), and q x (n_y + n_p + n_u S) with
+  /// respect to the lowered theta_L = (y0, p, u).
+  Matrix adjoint;
+  Matrix adjoint_lowered;
 };
+
+class FesdAdjoint;
+namespace internal {
+class FesdRun;
+}
 
 /// Counters and certificates of a FESD run.
 struct FesdStats {
@@ -250,6 +310,12 @@ struct FesdStats {
   /// Elements solved as a Radau IIA step of a smooth field (FesdOptions::reduce_smooth_elements)
   /// whose full element system then held without a Newton iteration of its own.
   long num_reduced_elements = 0;
+  /// Adjoint sensitivities: bytes the run kept in memory for the reverse sweep (converged
+  /// unknowns and group data).
+  double adjoint_memory_bytes = 0.0;
+  double adjoint_file_bytes = 0.0;  ///< checkpoints beyond adjoint_memory_limit_mb (file)
+  /// Thread CPU time of the adjoint reverse sweep(s) in this result.
+  double adjoint_cpu_seconds = 0.0;
   /// CPU time of the run.
   double cpu_seconds = 0.0;
 
@@ -286,8 +352,39 @@ struct FesdResult {
   /// of its control segment.
   std::vector<double> step_sequence;
   FesdSensitivities sensitivities;  ///< with FesdOptions::sensitivities
+  /// The lowered state y = (x, relay memories, clock) at every FesdOptions::sample_times.
+  std::vector<Vector> sample_states;
+  /// With FesdOptions::keep_adjoint: the reverse sweep of this run (shared by copies).
+  std::shared_ptr<FesdAdjoint> adjoint;
   /// Counters and certificates.
   FesdStats stats;
+};
+
+/// Gradients of q functionals of one run (FesdAdjoint::Sweep).
+struct FesdGradient {
+  Matrix theta;    ///< q x (n_x + n_p + n_u S): with respect to (x0, p, u_1..u_S)
+  Matrix lowered;  ///< q x (n_y + n_p + n_u S): with respect to (y0, p, u_1..u_S)
+  double cpu_seconds = 0.0;
+  /// False if the Jacobian of a group was singular at its checkpoint (message says where).
+  bool success = true;
+  std::string message;
+};
+
+/// The reverse sweep of a finished run (FesdOptions::keep_adjoint): the transpose of the
+/// run's directional sensitivities, for weights chosen after the run, e.g. the gradient of a
+/// scalar function f(x(T), x(t_1), ..., x(t_K)) from its partial derivatives at the run's
+/// final and sample states. Holds the run's group data (FesdStats::adjoint_memory_bytes)
+/// and its lowered system. Not thread-safe; with FesdIntegrator, not concurrently with it.
+class FesdAdjoint {
+ public:
+  explicit FesdAdjoint(std::shared_ptr<internal::FesdRun> run);
+  /// final_weights: n_x x q or n_y x q (empty: zero); sample_weights: n_x x (q K) or n_y x
+  /// (q K) for the K sample times (empty: zero). Throws std::invalid_argument for other
+  /// shapes.
+  FesdGradient Sweep(const Matrix& final_weights, const Matrix& sample_weights = Matrix()) const;
+
+ private:
+  std::shared_ptr<internal::FesdRun> run_;  // the finished run, kept alive
 };
 
 /// Simulates `scene` over [t0, tf]. Throws std::invalid_argument for invalid options, an
@@ -313,7 +410,7 @@ class FesdIntegrator {
 
  private:
   FesdOptions options_;
-  std::unique_ptr<LoweredSystem> system_;
+  std::shared_ptr<LoweredSystem> system_;  // shared with kept adjoint sweeps
 };
 
 }  // namespace moreau

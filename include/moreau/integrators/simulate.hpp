@@ -106,12 +106,41 @@ struct SimulationSettings {
 };
 
 /// Derivatives of the final scene state, for shooting codes (integrators with a
-/// `sensitivities` option): rows are the scene's states.
+/// `sensitivities` option): rows are the scene's states. theta = (x0, p, u_1, ..., u_S) orders
+/// the data: initial state, parameters, then the inputs of every control segment.
 struct SimulationSensitivities {
-  Matrix initial_state;                ///< dx(T)/dx(0), n_x x n_x
+  Matrix initial_state;                ///< dx(T)/dx(0), n_x x n_x (option `sensitivities`)
   Matrix parameters;                   ///< dx(T)/dp, n_x x n_p
   Matrix inputs;                       ///< dx(T)/du, n_x x (n_u * segments)
   std::vector<double> segment_starts;  ///< start of each control segment
+  /// Option `directions` (V, n_theta x k): dx(T)/dtheta V (n_x x k), and dx(t_j)/dtheta V at
+  /// every sample time.
+  Matrix directional;
+  std::vector<Matrix> sample_directional;
+  /// Options `adjoint_weights` (W, n_x x q) and `adjoint_sample_weights`: the q x n_theta
+  /// gradient rows W^T dx(T)/dtheta + sum_j W_j^T dx(t_j)/dtheta.
+  Matrix adjoint;
+};
+
+/// Gradients from a reverse sweep (AdjointSweep::Gradient).
+struct AdjointGradient {
+  bool success = true;  ///< false: a Jacobian was singular at its checkpoint (message)
+  std::string message;
+  Matrix theta;  ///< q x n_theta: with respect to (x0, p, u_1..u_S)
+  double cpu_seconds = 0.0;
+};
+
+/// The reverse sweep of a finished run (option `keep_adjoint`): gradients for weights chosen
+/// after the run, e.g. of a scalar function of the final and sample states, each for the cost
+/// of one sweep. Not thread-safe (it re-evaluates the run's systems).
+class AdjointSweep {
+ public:
+  virtual ~AdjointSweep() = default;
+  /// final_weights: n_x x q (empty: zero); sample_weights: n_x x (q K) for the K sample
+  /// times, sample j in columns j q .. (j + 1) q - 1 (empty: zero). Throws
+  /// std::invalid_argument for other shapes.
+  virtual AdjointGradient Gradient(const Matrix& final_weights,
+                                   const Matrix& sample_weights) const = 0;
 };
 
 /// The common result of every integrator.
@@ -158,6 +187,10 @@ struct SimulationResult {
   std::optional<SimulationSensitivities> sensitivities;
   /// Adaptive FESD: the accepted steps, in the form its option `step_sequence` replays them.
   std::vector<double> step_sequence;
+  /// Option `sample_times`: the scene states at those times.
+  std::vector<Vector> sample_states;
+  /// Option `keep_adjoint`: the run's reverse sweep (shared by copies of the result).
+  std::shared_ptr<const AdjointSweep> adjoint;
 
   /// The statistic with this name (std::invalid_argument if the integrator has none).
   double Stat(const std::string& name) const;

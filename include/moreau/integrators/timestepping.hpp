@@ -52,6 +52,15 @@ struct TimeSteppingOptions {
   /// map is only piecewise smooth: a pair changing status inside a step is not a switch time,
   /// so these derivatives carry no switch-time terms; see docs/ocp.md).
   bool sensitivities = false;
+  /// Directional sensitivities dx(T)/dtheta V without the full matrix, and adjoint
+  /// sensitivities W^T dx(T)/dtheta by a reverse sweep over the kept step transfers, as
+  /// FesdOptions::sensitivity_directions and adjoint_weights (the same shapes; theta =
+  /// (x0, p, u per segment), or the lowered (y0, p, u)). They chain the same dense step
+  /// transfers as `sensitivities` (for the small systems time-stepping serves): the adjoint
+  /// keeps one n_y x (n_y + n_p + n_u) transfer per step. Sample times and kept sweeps are
+  /// FESD's only.
+  Matrix sensitivity_directions;
+  Matrix adjoint_weights;
   /// Near-active constraint filter (docs/sparse-systems.md), as FesdOptions::constraint_filter:
   /// moving-set constraints far from contact are left out of the step systems and checked at
   /// every stage afterwards (the step is solved again with those that are not positive there).
@@ -126,6 +135,10 @@ struct TimeSteppingResult {
   /// y0 (n_y), p (n_p), then u per segment (n_u each), as FesdSensitivities::lowered.
   Matrix sensitivities;
   std::vector<double> segment_starts;  ///< start time of every control segment
+  /// With sensitivity_directions (k): dx(T)/dtheta V (n_x x k) and the lowered dy(T) (n_y x k).
+  Matrix directional, directional_lowered;
+  /// With adjoint_weights (q): q x (n_x + n_p + n_u S), and over the lowered (y0, p, u).
+  Matrix adjoint, adjoint_lowered;
 };
 
 /// Simulates `scene` over [t0, tf]. Throws std::invalid_argument for invalid options, an
