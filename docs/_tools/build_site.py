@@ -55,6 +55,9 @@ ENABLE_PREPROCESSING   = YES
 MACRO_EXPANSION        = YES
 EXPAND_ONLY_PREDEF     = NO
 SKIP_FUNCTION_MACROS   = YES
+# The C header's `typedef enum moreau_status ... moreau_status;`: one entity, not an enum and
+# a typedef of the same name (a duplicate declaration for Sphinx).
+TYPEDEF_HIDES_STRUCT   = YES
 # Implementation details and the using-declarations that put moreau's math into namespace std
 # (dual.hpp) are not API: they stay out of the reference.
 EXCLUDE_SYMBOLS        = internal moreau::internal std Eigen detail MOREAU_DECLARE_MATH_IN_STD \

@@ -12,6 +12,9 @@ pages follow:
 * ```` ```console ````: lines starting with ``$ `` are shell commands (a trailing backslash
   continues a command on the next line); the lines after a command are its expected output.
   A command must exit with status 0, unless the block is preceded by ``<!-- exit: N -->``.
+  Commands run in the page's directory, unless the block is preceded by
+  ``<!-- cwd: repository -->``: then in the repository's root, as a reader who runs the
+  repository's own examples does (such commands must not write into the repository).
 * ```` ```python ````: run in one interpreter per page (later blocks see earlier names).
 * ```` ```output ````: the expected output of the block just before it.
 * Any other language (toml, cpp, cmake, ...): a file, preceded by ``<!-- file: NAME -->``; the
@@ -48,7 +51,7 @@ DOCS = ROOT / "docs"
 COMMAND_TIMEOUT = 600  # seconds; a tutorial command that takes longer is a bug in the tutorial
 
 FENCE = re.compile(r"^(?P<indent> {0,3})(?P<fence>`{3,}|~{3,})(?P<info>[^`\n]*)$")
-MARKER = re.compile(r"^<!--\s*(?P<key>file|skip|exit)\s*:\s*(?P<value>.*?)\s*-->$")
+MARKER = re.compile(r"^<!--\s*(?P<key>file|skip|exit|cwd)\s*:\s*(?P<value>.*?)\s*-->$")
 NUMBER = re.compile(r"[-+]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?")
 
 
@@ -196,10 +199,10 @@ class Page:
         answer = json.loads(reply)
         return answer["output"], answer["error"]
 
-    def run_shell(self, command: str) -> tuple[int, str]:
+    def run_shell(self, command: str, cwd: Path | None = None) -> tuple[int, str]:
         # Each command in a session of its own, so that whatever it leaves running in the
         # background (a Dask scheduler) can be stopped with the page.
-        process = subprocess.Popen(["bash", "-c", command], cwd=self.workdir, env=self.env,
+        process = subprocess.Popen(["bash", "-c", command], cwd=cwd or self.workdir, env=self.env,
                                    stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                                    start_new_session=True)
         self.sessions.append(process.pid)
@@ -271,9 +274,14 @@ def run_page(path: Path, base_env: dict[str, str], keep: bool) -> tuple[int, int
             started = time.monotonic()
             if block.language == "console":
                 expected_exit = int(block.markers.get("exit", "0"))
+                cwd = block.markers.get("cwd")
+                if cwd not in (None, "repository"):
+                    failures.append(f"{block.where()}: <!-- cwd: {cwd} -->: the only directory "
+                                    "a block may name is `repository`")
+                    continue
                 output_all = ""
                 for command, expected in console_commands(block):
-                    code, output = page.run_shell(command)
+                    code, output = page.run_shell(command, ROOT if cwd else None)
                     output_all += output
                     if code != expected_exit:
                         failures.append(f"{block.where()}: `{command}` exited with {code} "

@@ -262,15 +262,17 @@ struct FesdSensitivities {
   /// n_y rows; columns y0 (n_y), then p (n_p), then u per segment (n_u each). The blocks above
   /// are its scene-state parts.
   Matrix lowered;
-  /// With FesdOptions::sensitivity_directions (k directions): dx(T)/dtheta V (n_x x k), the
-  /// same for the lowered y(T) (n_y x k), and dx(t_j)/dtheta V at every sample time.
+  /// With FesdOptions::sensitivity_directions (k directions): dx(T)/dtheta V (n_x x k).
   Matrix directional;
+  /// The same for the lowered y(T) (n_y x k).
   Matrix directional_lowered;
+  /// dx(t_j)/dtheta V (n_x x k) at every FesdOptions::sample_times entry.
   std::vector<Matrix> sample_directional;
   /// With adjoint weights (q functionals): q x (n_x + n_p + n_u S), the gradient of every
   /// functional with respect to theta = (x0, p, u_1..u_S), and q x (n_y + n_p + n_u S) with
-  /// respect to the lowered theta_L = (y0, p, u).
+  /// respect to the lowered theta_L = (y0, p, u) (adjoint_lowered).
   Matrix adjoint;
+  /// q x (n_y + n_p + n_u S): the gradients with respect to theta_L = (y0, p, u_1..u_S).
   Matrix adjoint_lowered;
 };
 
@@ -364,10 +366,10 @@ struct FesdResult {
 struct FesdGradient {
   Matrix theta;    ///< q x (n_x + n_p + n_u S): with respect to (x0, p, u_1..u_S)
   Matrix lowered;  ///< q x (n_y + n_p + n_u S): with respect to (y0, p, u_1..u_S)
-  double cpu_seconds = 0.0;
+  double cpu_seconds = 0.0;  ///< thread CPU time of the sweep
   /// False if the Jacobian of a group was singular at its checkpoint (message says where).
   bool success = true;
-  std::string message;
+  std::string message;  ///< why the sweep failed (empty on success)
 };
 
 /// The reverse sweep of a finished run (FesdOptions::keep_adjoint): the transpose of the
@@ -377,6 +379,7 @@ struct FesdGradient {
 /// and its lowered system. Not thread-safe; with FesdIntegrator, not concurrently with it.
 class FesdAdjoint {
  public:
+  /// Made by the run (FesdOptions::keep_adjoint), which passes itself; not for applications.
   explicit FesdAdjoint(std::shared_ptr<internal::FesdRun> run);
   /// final_weights: n_x x q or n_y x q (empty: zero); sample_weights: n_x x (q K) or n_y x
   /// (q K) for the K sample times (empty: zero). Throws std::invalid_argument for other

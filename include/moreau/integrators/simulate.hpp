@@ -113,9 +113,9 @@ struct SimulationSensitivities {
   Matrix parameters;                   ///< dx(T)/dp, n_x x n_p
   Matrix inputs;                       ///< dx(T)/du, n_x x (n_u * segments)
   std::vector<double> segment_starts;  ///< start of each control segment
-  /// Option `directions` (V, n_theta x k): dx(T)/dtheta V (n_x x k), and dx(t_j)/dtheta V at
-  /// every sample time.
+  /// Option `directions` (V, n_theta x k): dx(T)/dtheta V (n_x x k).
   Matrix directional;
+  /// Option `directions` with `sample_times`: dx(t_j)/dtheta V (n_x x k) at every sample time.
   std::vector<Matrix> sample_directional;
   /// Options `adjoint_weights` (W, n_x x q) and `adjoint_sample_weights`: the q x n_theta
   /// gradient rows W^T dx(T)/dtheta + sum_j W_j^T dx(t_j)/dtheta.
@@ -125,9 +125,9 @@ struct SimulationSensitivities {
 /// Gradients from a reverse sweep (AdjointSweep::Gradient).
 struct AdjointGradient {
   bool success = true;  ///< false: a Jacobian was singular at its checkpoint (message)
-  std::string message;
-  Matrix theta;  ///< q x n_theta: with respect to (x0, p, u_1..u_S)
-  double cpu_seconds = 0.0;
+  std::string message;  ///< why the sweep failed (empty on success)
+  Matrix theta;         ///< q x n_theta: with respect to (x0, p, u_1..u_S)
+  double cpu_seconds = 0.0;  ///< thread CPU time of the sweep
 };
 
 /// The reverse sweep of a finished run (option `keep_adjoint`): gradients for weights chosen

@@ -60,6 +60,8 @@ struct TimeSteppingOptions {
   /// keeps one n_y x (n_y + n_p + n_u) transfer per step. Sample times and kept sweeps are
   /// FESD's only.
   Matrix sensitivity_directions;
+  /// Adjoint weights W (n_x x q, or n_y x q over the lowered state), as
+  /// FesdOptions::adjoint_weights: the gradients W^T dx(T)/dtheta (TimeSteppingResult::adjoint).
   Matrix adjoint_weights;
   /// Near-active constraint filter (docs/sparse-systems.md), as FesdOptions::constraint_filter:
   /// moving-set constraints far from contact are left out of the step systems and checked at
@@ -135,10 +137,14 @@ struct TimeSteppingResult {
   /// y0 (n_y), p (n_p), then u per segment (n_u each), as FesdSensitivities::lowered.
   Matrix sensitivities;
   std::vector<double> segment_starts;  ///< start time of every control segment
-  /// With sensitivity_directions (k): dx(T)/dtheta V (n_x x k) and the lowered dy(T) (n_y x k).
-  Matrix directional, directional_lowered;
-  /// With adjoint_weights (q): q x (n_x + n_p + n_u S), and over the lowered (y0, p, u).
-  Matrix adjoint, adjoint_lowered;
+  /// With sensitivity_directions (k): dx(T)/dtheta V (n_x x k).
+  Matrix directional;
+  /// With sensitivity_directions (k): the lowered dy(T)/dtheta V (n_y x k).
+  Matrix directional_lowered;
+  /// With adjoint_weights (q): the gradients, q x (n_x + n_p + n_u S).
+  Matrix adjoint;
+  /// With adjoint_weights (q): the gradients over the lowered (y0, p, u), q x (n_y + n_p + n_u S).
+  Matrix adjoint_lowered;
 };
 
 /// Simulates `scene` over [t0, tf]. Throws std::invalid_argument for invalid options, an
