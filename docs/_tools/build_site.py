@@ -5,7 +5,8 @@
 
 Every warning is an error: Doxygen's (an undocumented public function, class or member, a
 malformed comment) and Sphinx's (a broken link or reference, a page in no table of contents, a
-missing page, an undocumented Python object or an unrendered public header: docs/_ext/). The
+missing page, an undocumented Python object or an unrendered public header: docs/_ext/), and
+a README link to a missing file or heading (the README is no page of the site). The
 build is always complete (no incremental state), so that a warning is never hidden by a cache.
 Used by `scripts/docs`, the CMake target `docs` and the test `docs.site`. Debian packages only:
 doxygen, python3-sphinx, python3-breathe, python3-myst-parser, furo (scripts/bootstrap).
@@ -15,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -65,6 +67,33 @@ EXCLUDE_SYMBOLS        = internal moreau::internal std Eigen detail MOREAU_DECLA
 """
 
 
+def _slug(heading: str) -> str:
+    """GitHub's (and MyST's) anchor of a Markdown heading."""
+    text = re.sub(r"[^\w\- ]", "", heading.strip().lower())
+    return text.replace(" ", "-")
+
+
+def check_readme_links() -> list[str]:
+    """The README is GitHub's front page, not a page of the site: Sphinx does not see it, so
+    its relative links (files, and headings of Markdown files) are checked here."""
+    problems = []
+    readme = ROOT / "README.md"
+    for number, line in enumerate(readme.read_text(encoding="utf-8").splitlines(), 1):
+        for target in re.findall(r"\]\(([^)\s]+)\)", line):
+            if re.match(r"[a-z]+:", target):
+                continue  # an absolute URL
+            path, _, anchor = target.partition("#")
+            file = ROOT / path
+            if not file.exists():
+                problems.append(f"README.md:{number}: link to a missing file: {target}")
+            elif anchor and file.suffix == ".md":
+                headings = {_slug(h.lstrip("#")) for h in file.read_text(encoding="utf-8")
+                            .splitlines() if h.startswith("#")}
+                if anchor not in headings:
+                    problems.append(f"README.md:{number}: no heading #{anchor} in {path}")
+    return problems
+
+
 def run(command: list[str], env: dict[str, str] | None = None) -> None:
     result = subprocess.run(command, env=env, check=False)
     if result.returncode != 0:
@@ -89,6 +118,10 @@ def main() -> int:
         if shutil.which(tool) is None:
             sys.exit(f"build_site: {tool} not found: run scripts/bootstrap (Debian packages "
                      "doxygen, python3-sphinx, python3-breathe, python3-myst-parser, furo)")
+
+    problems = check_readme_links()
+    if problems:
+        sys.exit("build_site: broken links in the README:\n" + "\n".join(problems))
 
     work = out.parent / (out.name + "-work")
     shutil.rmtree(work, ignore_errors=True)
