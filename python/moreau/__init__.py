@@ -25,6 +25,10 @@ import numpy as np
 
 from . import _moreau
 
+#: The version of moreau (the file VERSION of the source tree; ``moreau --version`` and the C++
+#: macro ``MOREAU_VERSION`` show the same).
+__version__: str = _moreau.__version__
+
 __all__ = [
     "Event",
     "load_scene",
@@ -112,14 +116,17 @@ class Scene:
 
     @property
     def name(self) -> str:
+        """The scene's name (messages, output directories)."""
         return self._native.name
 
     @property
     def description(self) -> str:
+        """One line describing the scene."""
         return self._native.description
 
     @property
     def state_names(self) -> List[str]:
+        """The names of the states x, in order."""
         return self._native.state_names
 
     @property
@@ -129,10 +136,12 @@ class Scene:
 
     @property
     def t0(self) -> float:
+        """Initial time."""
         return self._native.t0
 
     @property
     def tf(self) -> float:
+        """Final time."""
         return self._native.tf
 
     @property
@@ -220,7 +229,7 @@ def load_scene(path: str) -> Scene:
 
 
 def scene_from_dict(data: Dict[str, Any] = None, **keywords: Any) -> Scene:
-    """A scene from a dict (or keywords) with the keys of a scene file and expression strings:
+    """A scene from a dict (or keywords) with the keys of a scene file and expression strings::
 
         moreau.scene_from_dict(name="S3", states=["x1", "x2"], x0=["sqrt(2)", "sqrt(2)"],
                                tf="11*pi/12 + sqrt(3)", dynamics=["x2", "-x1"],
@@ -280,6 +289,7 @@ class Result:
 
     @functools.cached_property
     def final_state(self) -> np.ndarray:
+        """The scene's states at ``final_time`` (n_x,)."""
         return self._native.final_state
 
     @functools.cached_property
@@ -293,10 +303,12 @@ class Result:
 
     @property
     def t(self) -> np.ndarray:
+        """The recorded times (N,), in physical time, ascending."""
         return self._trajectory["t"]
 
     @property
     def x(self) -> np.ndarray:
+        """The states at the recorded times (N, n_x), columns named by ``state_names``."""
         return self._trajectory["x"]
 
     @property
@@ -311,10 +323,12 @@ class Result:
 
     @property
     def state_names(self) -> List[str]:
+        """Names of the columns of ``x``."""
         return self._trajectory["state_names"]
 
     @property
     def algebraic_names(self) -> List[str]:
+        """Names of the columns of ``algebraic`` (e.g. ``floor.lambda_gap``)."""
         return self._trajectory["algebraic_names"]
 
     @functools.cached_property
@@ -329,22 +343,27 @@ class Result:
 
     @functools.cached_property
     def events(self) -> List[Event]:
+        """Switch, contact and relay events in time order."""
         return [Event(*e) for e in self._native.events()]
 
     @functools.cached_property
     def relays(self) -> List[Relay]:
+        """Hysteresis scenes: each relay's memory w(t) in physical time."""
         return [Relay(*r) for r in self._native.relays()]
 
     @functools.cached_property
     def stats(self) -> Dict[str, float]:
+        """The integrator's declared statistics by name (:func:`integrators` lists them)."""
         return self._native.stats()
 
     @functools.cached_property
     def options(self) -> Dict[str, Any]:
+        """Every option of the integrator with the value used (defaults included)."""
         return self._native.options()
 
     @functools.cached_property
     def records(self) -> Dict[str, np.ndarray]:
+        """Per-element (FESD) or per-step (alpha) certificates as arrays, by column name."""
         return self._native.records()
 
     @functools.cached_property
@@ -355,6 +374,7 @@ class Result:
 
     @functools.cached_property
     def sensitivities(self) -> Optional[Sensitivities]:
+        """With ``sensitivities=True``: exact derivatives of the final state (else None)."""
         native = self._native.sensitivities()
         if native is None:
             return None
@@ -399,14 +419,17 @@ class Result:
 
     @property
     def num_steps(self) -> int:
+        """Steps (FESD: finite elements) of the run; the unit is the integrator's."""
         return self._native.num_steps
 
     @property
     def num_iterations(self) -> int:
+        """Newton (IDA: nonlinear, alpha: SQP) iterations of the run."""
         return self._native.num_iterations
 
     @property
     def cpu_seconds(self) -> float:
+        """CPU time of the run."""
         return self._native.cpu_seconds
 
     def plot(self, states: Optional[Sequence[str]] = None, multipliers: bool = True,

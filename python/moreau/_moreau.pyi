@@ -4,6 +4,8 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+__version__: str
+
 class _Scene:
     def __init__(self, other: _Scene) -> None: ...
     @property

@@ -24,6 +24,7 @@
 #include "moreau/model/scene.hpp"
 #include "moreau/model/scene_file.hpp"
 #include "moreau/scenes/catalog.hpp"
+#include "moreau/version.hpp"
 
 namespace py = pybind11;
 
@@ -288,6 +289,7 @@ PYBIND11_MODULE(_moreau, m) {
   using namespace moreau;
   using namespace moreau::python;
   m.doc() = "Compiled core of the moreau package (use the `moreau` package, not this module).";
+  m.attr("__version__") = MOREAU_VERSION;  // moreau.__version__ (moreau/version.hpp)
 
   py::class_<Scene>(m, "_Scene")
       .def(py::init<const Scene&>())

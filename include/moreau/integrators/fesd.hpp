@@ -81,6 +81,7 @@
 
 namespace moreau {
 
+/// Options of FESD Radau IIA (docs/fesd-formulation.md); defaults are the values below.
 struct FesdOptions {
   /// Radau IIA stages s in [1, kMaxRadauStages]; order 2s - 1 (1, 3, 5, 7 for s = 1..4).
   int stages = 3;
@@ -174,6 +175,7 @@ struct FesdOptions {
   /// per state by atol + rtol max(|y_start|, |y_end|), is kept below H / (tf - t0) (error per
   /// unit step), so that the error at tf is about rtol relative to the solution scale.
   double relative_tolerance = 1e-6;
+  /// Absolute tolerance of the adaptive steps (see relative_tolerance), > 0.
   double absolute_tolerance = 1e-8;
   /// Smallest step of the adaptive controller and of the failure retries, > 0 (never below
   /// 64 ulps of the time); below it the run stops with kStepSizeTooSmall or the status of the
@@ -209,6 +211,8 @@ struct FesdOptions {
   /// Record element ends in the trajectory (false: initial and final points only).
   bool record_trajectory = true;
 
+  /// The Newton settings of the element solves when none are given (tolerances and iteration limits
+  /// tuned for the element systems).
   static SemismoothNewtonOptions DefaultNewtonOptions();
   /// Throws std::invalid_argument naming the first out-of-range option.
   void Validate() const;
@@ -226,6 +230,7 @@ enum class FesdStatus {
   /// (reciprocal condition below kSingularRcond): no adjoint sensitivities
   kSensitivityFailure,
 };
+/// The status as text (snake case, as in summary.json).
 std::string ToString(FesdStatus status);
 
 /// One finite element of the solution.
@@ -257,15 +262,17 @@ struct FesdSensitivities {
   /// n_y rows; columns y0 (n_y), then p (n_p), then u per segment (n_u each). The blocks above
   /// are its scene-state parts.
   Matrix lowered;
-  /// With FesdOptions::sensitivity_directions (k directions): dx(T)/dtheta V (n_x x k), the
-  /// same for the lowered y(T) (n_y x k), and dx(t_j)/dtheta V at every sample time.
+  /// With FesdOptions::sensitivity_directions (k directions): dx(T)/dtheta V (n_x x k).
   Matrix directional;
+  /// The same for the lowered y(T) (n_y x k).
   Matrix directional_lowered;
+  /// dx(t_j)/dtheta V (n_x x k) at every FesdOptions::sample_times entry.
   std::vector<Matrix> sample_directional;
   /// With adjoint weights (q functionals): q x (n_x + n_p + n_u S), the gradient of every
   /// functional with respect to theta = (x0, p, u_1..u_S), and q x (n_y + n_p + n_u S) with
-  /// respect to the lowered theta_L = (y0, p, u).
+  /// respect to the lowered theta_L = (y0, p, u) (adjoint_lowered).
   Matrix adjoint;
+  /// q x (n_y + n_p + n_u S): the gradients with respect to theta_L = (y0, p, u_1..u_S).
   Matrix adjoint_lowered;
 };
 
@@ -274,40 +281,58 @@ namespace internal {
 class FesdRun;
 }
 
+/// Counters and certificates of a FESD run.
 struct FesdStats {
+  /// Integration steps taken (accepted steps when adaptive).
   long num_steps = 0;
+  /// Finite elements of the accepted solution.
   long num_elements = 0;
   long num_groups = 0;    ///< group solves with the event equation
   long num_switches = 0;  ///< element boundaries with a switch
+  /// Newton iterations of all element and group solves.
   long num_newton_iterations = 0;
+  /// LU factorizations of the Newton matrices.
   long num_factorizations = 0;
+  /// Group solves repeated from another guess while locating a switch.
   long num_event_retries = 0;
   long num_rejected_steps = 0;  ///< adaptive: steps rejected by the error test
   long num_failed_steps = 0;    ///< adaptive: steps whose solves failed, retried smaller
+  /// Largest cross-complementarity certificate over the elements (FesdElement).
   double max_cross_complementarity = 0.0;
+  /// Largest stage complementarity residual |min(a, b)| over the elements.
   double max_complementarity = 0.0;
+  /// Shortest element length.
   double min_element_length = 0.0;
   double frozen_time = 0.0;  ///< numerical time spent with physical time frozen (relays)
   /// Near-active filter: steps solved again because a left-out constraint was not positive
   /// at a stage, and the largest number of pairs in an element system.
   long num_filter_rechecks = 0;
+  /// Largest number of complementarity pairs in one element system.
   long max_working_pairs = 0;
   /// Elements solved as a Radau IIA step of a smooth field (FesdOptions::reduce_smooth_elements)
   /// whose full element system then held without a Newton iteration of its own.
   long num_reduced_elements = 0;
-  /// Adjoint sensitivities: bytes the run kept for the reverse sweep (converged unknowns and
-  /// group data) and the thread CPU time of the sweep(s) in this result.
+  /// Adjoint sensitivities: bytes the run kept in memory for the reverse sweep (converged
+  /// unknowns and group data).
   double adjoint_memory_bytes = 0.0;
   double adjoint_file_bytes = 0.0;  ///< checkpoints beyond adjoint_memory_limit_mb (file)
+  /// Thread CPU time of the adjoint reverse sweep(s) in this result.
   double adjoint_cpu_seconds = 0.0;
+  /// CPU time of the run.
   double cpu_seconds = 0.0;
 
+  /// Sums counters and times; takes the max/min of the extreme values.
   FesdStats& operator+=(const FesdStats& other);
+  /// One line for the command line's summary.
   std::string Summary() const;
 };
 
+/// Result of SimulateFesd: status, final values, trajectories, events, elements with their
+/// certificates, sensitivities and statistics.
 struct FesdResult {
+  /// kSuccess, or why the run stopped.
   FesdStatus status = FesdStatus::kSuccess;
+  /// The time and reason when status != kSuccess.
   std::string message;
   double final_time = 0.0;      ///< physical time reached (the clock)
   Vector final_state;           ///< scene states
@@ -320,7 +345,9 @@ struct FesdResult {
   Trajectory numerical_trajectory;
   /// With hysteresis relays: each relay's memory w(t) in physical time.
   std::vector<RelaySignal> relays;
+  /// Switch events in physical time (enter, leave, switch, ...).
   std::vector<Event> events;
+  /// Every finite element with its certificates (in integration time).
   std::vector<FesdElement> elements;
   /// The accepted steps of an adaptive run (or of a replay) in the form FesdOptions::
   /// step_sequence takes them: the attempted length of every step, 0 for a step to the end
@@ -331,6 +358,7 @@ struct FesdResult {
   std::vector<Vector> sample_states;
   /// With FesdOptions::keep_adjoint: the reverse sweep of this run (shared by copies).
   std::shared_ptr<FesdAdjoint> adjoint;
+  /// Counters and certificates.
   FesdStats stats;
 };
 
@@ -338,10 +366,10 @@ struct FesdResult {
 struct FesdGradient {
   Matrix theta;    ///< q x (n_x + n_p + n_u S): with respect to (x0, p, u_1..u_S)
   Matrix lowered;  ///< q x (n_y + n_p + n_u S): with respect to (y0, p, u_1..u_S)
-  double cpu_seconds = 0.0;
+  double cpu_seconds = 0.0;  ///< thread CPU time of the sweep
   /// False if the Jacobian of a group was singular at its checkpoint (message says where).
   bool success = true;
-  std::string message;
+  std::string message;  ///< why the sweep failed (empty on success)
 };
 
 /// The reverse sweep of a finished run (FesdOptions::keep_adjoint): the transpose of the
@@ -351,6 +379,7 @@ struct FesdGradient {
 /// and its lowered system. Not thread-safe; with FesdIntegrator, not concurrently with it.
 class FesdAdjoint {
  public:
+  /// Made by the run (FesdOptions::keep_adjoint), which passes itself; not for applications.
   explicit FesdAdjoint(std::shared_ptr<internal::FesdRun> run);
   /// final_weights: n_x x q or n_y x q (empty: zero); sample_weights: n_x x (q K) or n_y x
   /// (q K) for the K sample times (empty: zero). Throws std::invalid_argument for other
@@ -373,6 +402,8 @@ FesdResult SimulateFesd(const Scene& scene, const FesdOptions& options,
 /// Not thread-safe (one object per thread).
 class FesdIntegrator {
  public:
+  /// Validates the options and lowers the scene once; throws std::invalid_argument as SimulateFesd
+  /// does.
   FesdIntegrator(const Scene& scene, const FesdOptions& options);
   ~FesdIntegrator();
   FesdIntegrator(const FesdIntegrator&) = delete;

@@ -23,6 +23,8 @@
 
 namespace moreau {
 
+/// Options of the smooth Radau IIA integrator (scenes without effects); defaults are the values
+/// below.
 struct RadauOptions {
   /// Number of stages s in [1, kMaxRadauStages]; the method has order 2s - 1.
   int stages = 3;
@@ -33,6 +35,7 @@ struct RadauOptions {
   bool adaptive = false;
   /// Relative and absolute tolerances of the local error (adaptive only), > 0.
   double relative_tolerance = 1e-6;
+  /// Absolute tolerance of the local error (adaptive only), > 0.
   double absolute_tolerance = 1e-8;
   /// Smallest step the controller may take (adaptive), > 0; below it the run stops with
   /// RadauStatus::kStepSizeTooSmall.
@@ -46,6 +49,7 @@ struct RadauOptions {
   int max_newton_iterations = 25;
   /// Accepted steps before the run stops with RadauStatus::kMaxStepsReached, >= 1.
   long max_steps = 10'000'000;
+  /// Dense or sparse LU for the Newton matrices (automatic: by size).
   LinearSolverKind linear_solver = LinearSolverKind::kAutomatic;
   /// Record every accepted step in the trajectory (false: only the initial and final point).
   bool record_trajectory = true;
@@ -63,27 +67,37 @@ enum class RadauStatus {
   kMaxStepsReached,   ///< max_steps accepted steps before the final time
   kNonFinite,         ///< NaN or infinity in the state or the dynamics
 };
+/// The status as text (snake case, as in summary.json).
 std::string ToString(RadauStatus status);
 
+/// Counters of a Radau run.
 struct RadauStats {
   long num_steps = 0;           ///< accepted steps
   long num_rejected_steps = 0;  ///< error-test and Newton rejections (adaptive)
+  /// Newton iterations of all steps.
   long num_newton_iterations = 0;
   long num_factorizations = 0;        ///< LU factorizations (Newton and error filter)
   long num_function_evaluations = 0;  ///< evaluations of F (with or without Jacobian)
   long num_jacobian_evaluations = 0;  ///< evaluations of F with its Jacobian
+  /// CPU time of the run.
   double cpu_seconds = 0.0;
 
+  /// Sums the counters and times.
   RadauStats& operator+=(const RadauStats& other);
+  /// One line for the command line's summary.
   std::string Summary() const;
 };
 
+/// Result of SimulateRadau: status, final values, trajectory and statistics.
 struct RadauResult {
+  /// kSuccess, or why the run stopped.
   RadauStatus status = RadauStatus::kSuccess;
   std::string message;      ///< time and reason when status != kSuccess
   double final_time = 0.0;  ///< time reached
   Vector final_state;       ///< scene states at final_time
+  /// Accepted steps (or the initial and final points without record_trajectory).
   Trajectory trajectory;
+  /// Counters of the run.
   RadauStats stats;
 };
 
