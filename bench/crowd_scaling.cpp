@@ -10,8 +10,6 @@
 // time spent in Simulate; the scene set-up is reported separately). Every recorded state is
 // certified against every pair and wall (CertifyCrowdState) and the run fails loudly if an
 // overlap beyond 1e-9 or a missed contact appears, so a faster run cannot be a wrong one.
-#include <sys/resource.h>
-
 #include <CLI/CLI.hpp>
 #include <cmath>
 #include <iostream>
@@ -20,21 +18,12 @@
 
 #include "moreau/integrators/simulate.hpp"
 #include "moreau/scenes/crowd.hpp"
+#include "process_usage.hpp"
 
 namespace {
 
-double ProcessCpuSeconds() {
-  rusage usage{};
-  getrusage(RUSAGE_SELF, &usage);
-  return static_cast<double>(usage.ru_utime.tv_sec + usage.ru_stime.tv_sec) +
-         1e-6 * static_cast<double>(usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
-}
-
-double PeakResidentMegabytes() {
-  rusage usage{};
-  getrusage(RUSAGE_SELF, &usage);
-  return static_cast<double>(usage.ru_maxrss) / 1024.0;  // ru_maxrss is in kB on Linux
-}
+using moreau::bench::PeakResidentMegabytes;
+using moreau::bench::ProcessCpuSeconds;
 
 // Overlap allowed in the certificate: the integrators' complementarity tolerances are 1e-10
 // and below; the acceptance bound for the crowd is 1e-9.

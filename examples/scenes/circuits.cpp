@@ -52,6 +52,10 @@ Scene MakeRectifier() {
       "diode.D", 1,
       [R](const auto&, const auto&, const auto&, const auto& p, auto& out) { out[0] = p[R]; });
   scene.effects.push_back(diode);
+  scene.view.units = {{"v_C", "V"}, {"i_L", "A"}, {"t", "s"}};
+  scene.view.labels = {{"v_C", "capacitor voltage"}, {"i_L", "inductor current"}};
+  // The phase plane (v_C, i_L): the state as a point with its path.
+  scene.view.bodies = {{"state", "v_C", "i_L", 0.0, true}};
   return scene;
 }
 

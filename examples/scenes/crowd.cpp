@@ -313,6 +313,36 @@ CrowdLayout RelistCrowdLayout(const CrowdLayout& layout, const ConstVectorRef& q
   return relisted;
 }
 
+namespace {
+
+// The agents as discs, the room's walls as segments and the jambs as discs; the window shows
+// the room and the corridor behind the door.
+void AddCrowdView(const CrowdLayout& layout, Scene* scene) {
+  const double r = layout.options.radius;
+  const int n = layout.options.agents;
+  SceneView& view = scene->view;
+  view.bodies.reserve(static_cast<std::size_t>(n));
+  for (int i = 0; i < n; ++i) {
+    view.bodies.push_back(
+        {"agent_" + std::to_string(i + 1), AgentName('x', i), AgentName('y', i), r, false});
+  }
+  const std::string half = Number(0.5 * layout.room_height);
+  const std::string door = Number(layout.door_x);
+  const std::string jamb_y = Number(layout.upper_jamb_y);
+  const std::string jamb_r = Number(layout.jamb_radius);
+  using Shape = ViewObstacle::Shape;
+  view.obstacles = {{"left", Shape::kSegment, {"0", "-" + half, "0", half}},
+                    {"bottom", Shape::kSegment, {"0", "-" + half, door, "-" + half}},
+                    {"top", Shape::kSegment, {"0", half, door, half}},
+                    {"upper_jamb", Shape::kCircle, {door, jamb_y, jamb_r}},
+                    {"lower_jamb", Shape::kCircle, {door, "-" + jamb_y, jamb_r}}};
+  const double margin = 2.0 * r;
+  view.window = {-margin, layout.door_x + 0.5 * layout.room_height,
+                 -0.5 * layout.room_height - margin, 0.5 * layout.room_height + margin};
+}
+
+}  // namespace
+
 Scene MakeCrowdScene(const CrowdLayout& layout) {
   const CrowdOptions& o = layout.options;
   const int n = o.agents;
@@ -339,6 +369,7 @@ Scene MakeCrowdScene(const CrowdLayout& layout) {
                      "eps^2)");
   scene.AddParameter("exit_x", layout.exit_x, "exit point e, x");
   scene.AddParameter("exit_y", 0.0, "exit point e, y");
+  AddCrowdView(layout, &scene);
 
   // Every output reads the two coordinates of one agent: a 2 x 2 block diagonal Jacobian.
   scene.dynamics = MakeSmoothFunction(
@@ -668,6 +699,25 @@ void WriteCrowdSceneFile(const CrowdOptions& options, std::ostream& out) {
     }
     out << "constraints = ";
     strings(constraints, 1);
+  }
+  // The view: agents as discs, walls and jambs as obstacles (docs/visualization.md).
+  const SceneView& view = scene.view;
+  out << "\n[view]\nwindow = [" << Number(view.window[0]) << ", " << Number(view.window[1]) << ", "
+      << Number(view.window[2]) << ", " << Number(view.window[3]) << "]\n";
+  for (const ViewBody& body : view.bodies) {
+    out << "\n[[view.bodies]]\nname = \"" << body.name << "\"\nx = \"" << body.x << "\"\ny = \""
+        << body.y << "\"\nradius = " << Number(body.radius) << "\n";
+  }
+  for (const ViewObstacle& obstacle : view.obstacles) {
+    const auto& e = obstacle.expressions;
+    out << "\n[[view.obstacles]]\nname = \"" << obstacle.name << "\"\n";
+    if (obstacle.shape == ViewObstacle::Shape::kCircle) {
+      out << "shape = \"circle\"\ncenter = [\"" << e[0] << "\", \"" << e[1] << "\"]\nradius = \""
+          << e[2] << "\"\n";
+    } else {
+      out << "shape = \"segment\"\nfrom = [\"" << e[0] << "\", \"" << e[1] << "\"]\nto = [\""
+          << e[2] << "\", \"" << e[3] << "\"]\n";
+    }
   }
 }
 

@@ -49,6 +49,8 @@ Scene MakeH1() {
   scene.initial_state = Vector{{15.0}};
   scene.final_time = 15.0;
   AddThermostat(&scene, 0, "thermostat", "", 0.2, 5.0, 18.0, 20.0, 0);
+  scene.view.units = {{"x", "°C"}};
+  scene.view.labels = {{"x", "temperature"}};
   return scene;
 }
 

@@ -30,6 +30,11 @@ Scene MakeS1() {
         out[0] = x[0] - p[speed] * t;
       });
   scene.effects.push_back(set);
+  // A point on a line, and the wall x = speed t that sweeps it.
+  scene.view.bodies = {{"x", "x", "", 0.06, false}};
+  scene.view.obstacles = {
+      {"wall", ViewObstacle::Shape::kSegment, {"speed*t", "-0.5", "speed*t", "0.5"}}};
+  scene.view.window = {-0.2, 2.4, -0.7, 0.7};
   return scene;
 }
 
@@ -56,6 +61,15 @@ Scene MakeS2() {
         out[1] = p[amplitude] * sin(t) + p[r] - x[0];
       });
   scene.effects.push_back(set);
+  // The play: a point kept between the two ends of the moving interval.
+  scene.view.bodies = {{"x", "x", "", 0.05, false}};
+  scene.view.obstacles = {{"lower",
+                           ViewObstacle::Shape::kSegment,
+                           {"amplitude*sin(t) - r", "-0.3", "amplitude*sin(t) - r", "0.3"}},
+                          {"upper",
+                           ViewObstacle::Shape::kSegment,
+                           {"amplitude*sin(t) + r", "-0.3", "amplitude*sin(t) + r", "0.3"}}};
+  scene.view.window = {-1.8, 1.8, -0.6, 0.6};
   return scene;
 }
 
@@ -83,6 +97,10 @@ Scene MakeS3() {
         out[0] = x[1] - p[floor];
       });
   scene.effects.push_back(set);
+  // The state as a point in the plane with its path, above the floor x2 = floor.
+  scene.view.bodies = {{"x", "x1", "x2", 0.05, true}};
+  scene.view.obstacles = {{"floor", ViewObstacle::Shape::kSegment, {"-3", "floor", "3", "floor"}}};
+  scene.view.window = {-2.2, 2.2, -1.5, 2.2};
   return scene;
 }
 
@@ -116,6 +134,18 @@ Scene MakeS4() {
         out[0] = x[0] + cos(x[1] - t);
       });
   scene.effects.push_back(set);
+  // The state with its path, and the moving boundary x1 = -cos(x2 - t) as a polyline.
+  scene.view.bodies = {{"x", "x1", "x2", 0.08, true}};
+  constexpr int kWaveSegments = 64;
+  constexpr double kWaveTop = 14.0;
+  auto node = [](int k) { return std::to_string(kWaveTop * k / kWaveSegments); };
+  for (int k = 0; k < kWaveSegments; ++k) {
+    scene.view.obstacles.push_back(
+        {"wave_" + std::to_string(k),
+         ViewObstacle::Shape::kSegment,
+         {"-cos(" + node(k) + " - t)", node(k), "-cos(" + node(k + 1) + " - t)", node(k + 1)}});
+  }
+  scene.view.window = {-1.5, 2.0, 0.0, kWaveTop};
   return scene;
 }
 
@@ -166,6 +196,17 @@ Scene MakeS5() {
         out[4] = square(x[2] - (centre - offset)) + square(x[3]) - square(p[radius]);
       });
   scene.effects.push_back(set);
+  // Slider and pusher as discs of radius contact/2 = 1 (they touch at centre distance
+  // `contact`). The doorway keeps their *centres* outside its discs of radius `radius`, so it
+  // is drawn with radius - contact/2: the drawn discs touch exactly when a constraint is active.
+  scene.view.bodies = {{"slider", "x1", "x2", 1.0, false}, {"pusher", "x3", "x4", 1.0, false}};
+  scene.view.obstacles = {{"right",
+                           ViewObstacle::Shape::kCircle,
+                           {"cos(t) + radius + gap/2", "0", "radius - contact/2"}},
+                          {"left",
+                           ViewObstacle::Shape::kCircle,
+                           {"cos(t) - radius - gap/2", "0", "radius - contact/2"}}};
+  scene.view.window = {-12.0, 12.0, -9.0, 9.0};
   return scene;
 }
 

@@ -5,6 +5,7 @@
 // declares its entry once (<name>/<name>_entry.cpp); simulate.cpp collects them.
 
 #include <functional>
+#include <map>
 #include <string>
 #include <type_traits>
 #include <utility>
@@ -22,6 +23,32 @@ namespace moreau::internal {
 // 'h' does not apply to integrator 'ida' (an option of fesd, radau, timestepping)" if another
 // integrator declares it, else "unknown option 'stage'; did you mean 'stages'?".
 [[noreturn]] void ThrowUnknownOption(const IntegratorSpec& spec, const std::string& name);
+
+// The step options of the error-controlled integrators (FESD, smooth Radau IIA), as their
+// entries' adjust step: without h the steps are error-controlled; with h they are fixed unless
+// an error-control option (adaptive, rtol, atol, h0) is given too, which makes h the initial
+// step. A given h = 0 (the structs' "no fixed step") is refused like any non-positive step,
+// never read as "choose for me"; adaptive = false without h and the controller's bounds
+// (h_min, h_max) with fixed steps are refused (they would be silently ignored).
+template <typename Options>
+void AdjustStepControl(const std::map<std::string, SettingValue>& given, Options* built) {
+  RequireArgument(given.count("h") == 0 || built->step_size > 0.0,
+                  "step size h must be positive and finite (leave h out for error-controlled "
+                  "steps), got ",
+                  built->step_size);
+  for (const char* control : {"rtol", "atol", "h0"}) {
+    if (given.count(control) > 0) built->adaptive = true;
+  }
+  RequireArgument(given.count("adaptive") == 0 || built->adaptive || given.count("h") > 0,
+                  "adaptive = false needs a fixed step h (without h the steps are "
+                  "error-controlled)");
+  for (const char* controller_option : {"h_min", "h_max"}) {
+    RequireArgument(built->ErrorControlled() || given.count(controller_option) == 0, "option '",
+                    controller_option,
+                    "' applies to error-controlled steps only (leave h out, or give adaptive, "
+                    "rtol or atol with it)");
+  }
+}
 
 // Converts a front end's value to the option's type; throws std::invalid_argument naming the
 // option, what it expects and what it got.
@@ -85,6 +112,24 @@ OptionBinding<Options> BindRealList(std::string name, std::vector<double> Option
     o->*member = SettingToRealList(spec, v);
   };
   binding.get = [member](const Options& o) { return SettingValue(o.*member); };
+  return binding;
+}
+
+// A Matrix field given as a list of numbers: a single column, which the integrator reads
+// column by column into its documented shape (FesdOptions::sensitivity_directions).
+template <class Options>
+OptionBinding<Options> BindMatrixList(std::string name, Matrix Options::*member,
+                                      std::string meaning) {
+  OptionBinding<Options> binding;
+  binding.spec = {std::move(name), std::move(meaning), OptionSpec::Type::kRealList, {}, {}};
+  binding.set = [member, spec = binding.spec](Options* o, const SettingValue& v) {
+    const std::vector<double> list = SettingToRealList(spec, v);
+    o->*member = Eigen::Map<const Vector>(list.data(), static_cast<Eigen::Index>(list.size()));
+  };
+  binding.get = [member](const Options& o) {
+    const Matrix& m = o.*member;
+    return SettingValue(std::vector<double>(m.data(), m.data() + m.size()));
+  };
   return binding;
 }
 

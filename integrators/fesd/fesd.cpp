@@ -68,6 +68,24 @@ void FesdOptions::Validate() const {
   }
   RequireArgument(std::isfinite(filter_safety) && filter_safety >= 1.0,
                   "filter safety must be >= 1, got ", filter_safety);
+  RequireArgument(sensitivity_directions.allFinite(), "sensitivity directions must be finite");
+  RequireArgument(adjoint_weights.allFinite() && adjoint_sample_weights.allFinite(),
+                  "adjoint weights must be finite");
+  for (std::size_t j = 0; j < sample_times.size(); ++j) {
+    RequireArgument(
+        std::isfinite(sample_times[j]) && (j == 0 || sample_times[j] > sample_times[j - 1]),
+        "sample times must be finite and increasing, got ", sample_times[j], " at position ", j);
+  }
+  const bool tracked = sensitivities || sensitivity_directions.size() > 0 ||
+                       adjoint_weights.size() > 0 || adjoint_sample_weights.size() > 0 ||
+                       keep_adjoint;
+  RequireArgument(sample_times.empty() || tracked,
+                  "sample_times need sensitivities: directions, adjoint weights or keep_adjoint");
+  RequireArgument(adjoint_sample_weights.size() == 0 || !sample_times.empty(),
+                  "adjoint sample weights need sample_times");
+  RequireArgument(std::isfinite(adjoint_memory_limit_mb) && adjoint_memory_limit_mb >= 0.0,
+                  "adjoint memory limit must be >= 0 megabytes (0: none), got ",
+                  adjoint_memory_limit_mb);
   newton.Validate();
 }
 
@@ -87,6 +105,8 @@ std::string ToString(FesdStatus status) {
       return "non_finite";
     case FesdStatus::kMaxStepsReached:
       return "max_steps_reached";
+    case FesdStatus::kSensitivityFailure:
+      return "sensitivity_failure";
   }
   return "?";
 }
@@ -111,6 +131,9 @@ FesdStats& FesdStats::operator+=(const FesdStats& other) {
   if (other.error_estimate >= 0.0)
     error_estimate = std::max(error_estimate, 0.0) + other.error_estimate;
   num_unestimated_steps += other.num_unestimated_steps;
+  adjoint_memory_bytes = std::max(adjoint_memory_bytes, other.adjoint_memory_bytes);
+  adjoint_file_bytes = std::max(adjoint_file_bytes, other.adjoint_file_bytes);
+  adjoint_cpu_seconds += other.adjoint_cpu_seconds;
   cpu_seconds += other.cpu_seconds;
   return *this;
 }
@@ -178,7 +201,10 @@ FesdResult FesdRun::Run() {
   keep_polynomials_ = error_control || dense_output_ || estimating_;
   check_jump_stages_ = error_control || replay;
   system_.ClearNonFinite();
-  if (options_.initial_state.size() > 0 && !ProjectInitialState()) return Finish(start);
+  if ((options_.initial_state.size() > 0 || options_.project_initial_state) &&
+      !ProjectInitialState()) {
+    return Finish(start);
+  }
   scale_.Reset(y_);
 
   // The near-active filter's first working set (no statuses or multipliers yet).
@@ -211,7 +237,9 @@ FesdResult FesdRun::Run() {
 
 SemismoothNewtonOptions FesdRun::NewtonOptions(const FesdOptions& options) {
   SemismoothNewtonOptions newton = options.newton;
-  newton.factorize_at_solution = options.sensitivities;
+  // The transfers of full and directional sensitivities solve with the factorization at the
+  // solution; the adjoint sweep refactorizes at its checkpoints instead.
+  newton.factorize_at_solution = options.sensitivities || options.sensitivity_directions.size() > 0;
   return newton;
 }
 
@@ -229,7 +257,8 @@ LoweringOptions FesdRun::Lowering(const FesdOptions& options) {
   LoweringOptions lowering;
   lowering.switching_form = options.switching_form;
   // A given initial state may lie outside the moving sets: it is projected (Run).
-  lowering.require_feasible_initial_state = options.initial_state.size() == 0;
+  lowering.require_feasible_initial_state =
+      options.initial_state.size() == 0 && !options.project_initial_state;
   lowering.storage = StorageForLinearSolver(options.newton.linear_solver);
   return lowering;
 }
@@ -293,9 +322,9 @@ void FesdRun::IntegrateTimeFreezing() {
         const double rest = target - y_[clock];
         const double n = std::max(1.0, std::ceil(rest / options_.step_size - 1e-9));
         length = rest / n;
-        if (options_.sensitivities) sensitivity_.row(ny_) = sensitivity_.row(clock) / n;
+        if (options_.sensitivities) TrackClock(clock, n);
       } else if (options_.sensitivities) {
-        sensitivity_.row(ny_).setZero();
+        TrackClock(clock, 0.0);
       }
       const double step_end = tau_ + length;
       int remaining = options_.finite_elements;
@@ -379,14 +408,7 @@ FesdResult FesdRun::Finish(std::chrono::steady_clock::time_point start) {
     result_.trajectory.Append(result_.final_time, result_.final_state, TrajectoryAlgebraic(z_last_),
                               0.0);
   }
-  if (options_.sensitivities) {
-    const int np = system_.num_parameters();
-    result_.sensitivities.initial_state = sensitivity_.topLeftCorner(nx_, nx_);
-    result_.sensitivities.parameters = sensitivity_.block(0, ny_, nx_, np);
-    result_.sensitivities.inputs = sensitivity_.topRightCorner(nx_, sensitivity_.cols() - ny_ - np);
-    result_.sensitivities.lowered = sensitivity_.topRows(ny_);
-    result_.sensitivities.segment_starts.assign(segment_ends_.begin(), segment_ends_.end() - 1);
-  }
+  if (options_.sensitivities) FinishSensitivities();
   if (result_.elements.empty()) result_.stats.min_element_length = 0.0;
   result_.stats.num_factorizations = factorizations_;
   result_.stats.cpu_seconds =
@@ -421,8 +443,12 @@ FesdResult SimulateFesd(const Scene& scene, const FesdOptions& options,
                         const ProgressCallback& progress) {
   options.Validate();
   RequireSupportedEffects(scene, "fesd");
-  internal::FesdRun run(scene, options, progress);
-  return run.Run();
+  auto run = std::make_shared<internal::FesdRun>(scene, options, progress);
+  FesdResult result = run->Run();
+  if (options.keep_adjoint && result.status == FesdStatus::kSuccess) {
+    result.adjoint = std::make_shared<FesdAdjoint>(run);
+  }
+  return result;
 }
 
 FesdIntegrator::FesdIntegrator(const Scene& scene, const FesdOptions& options) : options_(options) {
@@ -430,17 +456,24 @@ FesdIntegrator::FesdIntegrator(const Scene& scene, const FesdOptions& options) :
   RequireSupportedEffects(scene, "fesd");
   LoweringOptions lowering;
   lowering.switching_form = options_.switching_form;
+  lowering.require_feasible_initial_state = !options_.project_initial_state;
   lowering.storage = StorageForLinearSolver(options_.newton.linear_solver);
-  system_ = std::make_unique<LoweredSystem>(scene, lowering);
+  system_ = std::make_shared<LoweredSystem>(scene, lowering);
 }
 
 FesdIntegrator::~FesdIntegrator() = default;
 
 FesdResult FesdIntegrator::Simulate(const Scene& values, const ProgressCallback& progress) {
-  ValidateScene(values);  // as SimulateFesd (x0 in the moving sets, finite values, ...)
+  // As SimulateFesd (x0 in the moving sets unless projected, finite values, ...).
+  ValidateScene(values, options_.initial_state.size() == 0 && !options_.project_initial_state);
   system_->UpdateValues(values);
-  internal::FesdRun run(system_.get(), options_, progress);
-  return run.Run();
+  auto run = std::make_shared<internal::FesdRun>(system_.get(), options_, progress);
+  FesdResult result = run->Run();
+  if (options_.keep_adjoint && result.status == FesdStatus::kSuccess) {
+    run->ShareSystem(system_);
+    result.adjoint = std::make_shared<FesdAdjoint>(run);
+  }
+  return result;
 }
 
 }  // namespace moreau

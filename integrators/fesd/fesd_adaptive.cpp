@@ -97,6 +97,7 @@ void FesdRun::Save(Snapshot* snapshot) const {
   s.last_z_matrix = last_z_matrix_;
   s.sensitivity = sensitivity_;
   s.d_step_end = d_step_end_;
+  s.tape = tape_.Save();
   s.trajectory = result_.trajectory.size();
   s.stage_trajectory = result_.stage_trajectory.size();
   s.numerical_trajectory = result_.numerical_trajectory.size();
@@ -130,6 +131,7 @@ void FesdRun::Restore(const Snapshot& s) {
   last_z_matrix_ = s.last_z_matrix;
   sensitivity_ = s.sensitivity;
   d_step_end_ = s.d_step_end;
+  tape_.Restore(s.tape);
   Truncate(&result_.trajectory, s.trajectory);
   Truncate(&result_.stage_trajectory, s.stage_trajectory);
   Truncate(&result_.numerical_trajectory, s.numerical_trajectory);
@@ -208,7 +210,7 @@ void FesdRun::IntegrateAdaptive(bool clock_targets) {
                 : options_.step_size > 0.0       ? options_.step_size
                                                  : StartingStep(horizon);
   std::size_t next_replay = 0;
-  if (options_.sensitivities) d_step_end_ = Eigen::RowVectorXd::Zero(sensitivity_.cols());
+  if (full_) d_step_end_ = Eigen::RowVectorXd::Zero(sensitivity_.cols());
   Snapshot before;  // the state before the current attempt (kept across attempts)
   for (std::size_t segment = 0; segment + 1 < segment_ends_.size() && !failed(); ++segment) {
     segment_ = static_cast<int>(segment);
@@ -245,19 +247,10 @@ void FesdRun::IntegrateAdaptive(bool clock_targets) {
       // Running clock at rate 1: landing in numerical time takes the clock distance.
       const double step_end = lands && !clock_targets ? segment_end : tau_ + length;
       if (!replay) Save(&before);  // (replay: not read)
-      if (options_.sensitivities) {
-        // Row n_y of sensitivity_ is d(tau - step_end). Step lengths are held fixed (internal
-        // differentiation), so a step's end moves with its start, except a landing step whose
-        // end is the segment end (a constant; with time-freezing the clock's target).
-        const Eigen::RowVectorXd d_tau = sensitivity_.row(ny_) + d_step_end_;
-        Eigen::RowVectorXd d_end = d_tau;
-        if (lands) {
-          d_end = clock_targets ? Eigen::RowVectorXd(d_tau - sensitivity_.row(clock))
-                                : Eigen::RowVectorXd::Zero(d_tau.size());
-        }
-        sensitivity_.row(ny_) = d_tau - d_end;
-        d_step_end_ = d_end;
-      }
+      // Row n_y of sensitivity_ is d(tau - step_end). Step lengths are held fixed (internal
+      // differentiation), so a step's end moves with its start, except a landing step whose
+      // end is the segment end (a constant; with time-freezing the clock's target).
+      if (options_.sensitivities) TrackStepStart(lands, clock_targets);
       capture_piece_ = keep_polynomials_;
       piece_.clear();
       ProgressCallback progress;

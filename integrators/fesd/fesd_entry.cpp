@@ -4,6 +4,28 @@
 #include "moreau/linalg/linear_solver.hpp"
 
 namespace moreau::internal {
+namespace {
+
+// A kept FESD reverse sweep as Simulate's results offer it.
+class FesdAdjointSweep final : public AdjointSweep {
+ public:
+  explicit FesdAdjointSweep(std::shared_ptr<FesdAdjoint> adjoint) : adjoint_(std::move(adjoint)) {}
+  AdjointGradient Gradient(const Matrix& final_weights,
+                           const Matrix& sample_weights) const override {
+    const FesdGradient gradient = adjoint_->Sweep(final_weights, sample_weights);
+    AdjointGradient out;
+    out.success = gradient.success;
+    out.message = gradient.message;
+    out.theta = gradient.theta;
+    out.cpu_seconds = gradient.cpu_seconds;
+    return out;
+  }
+
+ private:
+  std::shared_ptr<FesdAdjoint> adjoint_;
+};
+
+}  // namespace
 
 IntegratorEntry FesdEntry() {
   using O = FesdOptions;
@@ -53,10 +75,31 @@ IntegratorEntry FesdEntry() {
                "remainders shorter than this fraction of H / N_fe merge into the next step, "
                "in (0, 0.5]"),
       BindInteger("max_event_retries", &O::max_event_retries, "re-solves per switch, >= 1"),
+      BindBool("project_initial_state", &O::project_initial_state,
+               "an initial state outside the moving sets is projected onto them (shooting "
+               "nodes), not refused"),
       BindBool("keep_elements_after_early_switch", &O::keep_elements_after_early_switch,
                "a switch right after a step's start does not use up an element (shooting)"),
       BindBool("sensitivities", &O::sensitivities,
                "dx(T)/dx(0), dx(T)/dp, dx(T)/du through switches (IFT on every group)"),
+      BindMatrixList("directions", &O::sensitivity_directions,
+                     "directional sensitivities dx(T)/dtheta V: V column by column, n_theta = "
+                     "n_x + n_p + n_u S entries per direction (theta = x0, p, u per segment)"),
+      BindMatrixList("adjoint_weights", &O::adjoint_weights,
+                     "adjoint sensitivities W^T dx(T)/dtheta by a reverse sweep: W (n_x x q) "
+                     "column by column"),
+      BindRealList("sample_times", &O::sample_times,
+                   "times in (t0, tf] whose states the sensitivities also cover (element ends "
+                   "of the run: multiples of h from a control breakpoint)"),
+      BindMatrixList("adjoint_sample_weights", &O::adjoint_sample_weights,
+                     "adjoint weights of the sample states: n_x x q per sample time, column by "
+                     "column"),
+      BindReal("adjoint_memory_limit_mb", &O::adjoint_memory_limit_mb,
+               "memory bound of the adjoint's checkpoints in MB (0: none); beyond it they go to "
+               "a temporary file"),
+      BindBool("keep_adjoint", &O::keep_adjoint,
+               "keep the reverse sweep in the result: gradients for weights chosen after the "
+               "run"),
       BindBool("reduce_smooth_elements", &O::reduce_smooth_elements,
                "elements whose statuses leave a smooth field (one Stewart mode, no active "
                "constraint) solved as Radau IIA steps of it, then checked on the full system"),
@@ -98,11 +141,16 @@ IntegratorEntry FesdEntry() {
                "estimated)"),
       BindStat("num_unestimated_steps", &S::num_unestimated_steps,
                "fixed steps whose error could not be estimated"),
+      BindStat("adjoint_memory_bytes", &S::adjoint_memory_bytes,
+               "bytes kept for the adjoint sweep (converged unknowns of every group)"),
+      BindStat("adjoint_file_bytes", &S::adjoint_file_bytes,
+               "bytes of adjoint checkpoints written to a file (beyond the memory limit)"),
+      BindStat("adjoint_cpu_seconds", &S::adjoint_cpu_seconds, "time of the adjoint sweep"),
       BindStat("cpu_seconds", &S::cpu_seconds, "thread CPU time"),
   };
   return MakeEntry<O, FesdResult>(
       spec, options, stats, SimulateFesd,
-      [](const Scene&, const FesdResult& result, SimulationResult* out) {
+      [](const Scene& scene, const FesdResult& result, SimulationResult* out) {
         out->num_steps = result.stats.num_elements;
         out->num_iterations = result.stats.num_newton_iterations;
         out->stage_trajectory = result.stage_trajectory;
@@ -118,38 +166,27 @@ IntegratorEntry FesdEntry() {
                                   e.complementarity, e.cross_complementarity});
         }
         out->step_sequence = result.step_sequence;
-        if (result.sensitivities.lowered.size() == 0) return;
+        for (const Vector& y : result.sample_states) {
+          out->sample_states.push_back(y.head(scene.num_states()));
+        }
+        if (result.adjoint) out->adjoint = std::make_shared<FesdAdjointSweep>(result.adjoint);
+        const FesdSensitivities& given = result.sensitivities;
+        if (given.lowered.size() == 0 && given.directional.size() == 0 &&
+            given.adjoint.size() == 0) {
+          return;
+        }
         SimulationSensitivities s;
-        s.initial_state = result.sensitivities.initial_state;
-        s.parameters = result.sensitivities.parameters;
-        s.inputs = result.sensitivities.inputs;
-        s.segment_starts = result.sensitivities.segment_starts;
+        s.initial_state = given.initial_state;
+        s.parameters = given.parameters;
+        s.inputs = given.inputs;
+        s.segment_starts = given.segment_starts;
+        s.directional = given.directional;
+        s.sample_directional = given.sample_directional;
+        s.adjoint = given.adjoint;
         out->sensitivities = s;
       },
-      // Without h the steps are error-controlled (the default); with h they are fixed unless
-      // an error-control option (adaptive, rtol, atol, h0) is given too, which makes h the
-      // initial step. The controller's bounds with fixed steps would be silently ignored, so
-      // they are refused.
-      [](const std::map<std::string, SettingValue>& given, O* built) {
-        // A given h is a step: 0 (the structs' "no fixed step") is refused as any
-        // non-positive step, so that h = 0 is never silently read as "choose for me".
-        RequireArgument(given.count("h") == 0 || built->step_size > 0.0,
-                        "step size h must be positive and finite (leave h out for "
-                        "error-controlled steps), got ",
-                        built->step_size);
-        for (const char* control : {"rtol", "atol", "h0"}) {
-          if (given.count(control) > 0) built->adaptive = true;
-        }
-        RequireArgument(given.count("adaptive") == 0 || built->adaptive || given.count("h") > 0,
-                        "adaptive = false needs a fixed step h (without h the steps are "
-                        "error-controlled)");
-        for (const char* controller_option : {"h_min", "h_max"}) {
-          RequireArgument(built->ErrorControlled() || given.count(controller_option) == 0,
-                          "option '", controller_option,
-                          "' applies to error-controlled steps only (leave h out, or give "
-                          "adaptive, rtol or atol with it)");
-        }
-      },
+      // Without h error-controlled steps, with h fixed ones (see AdjustStepControl).
+      AdjustStepControl<O>,
       // Lowered once, run many times (Simulator, Python's moreau.Integrator).
       [](const Scene& scene, const O& built) {
         auto integrator = std::make_shared<FesdIntegrator>(scene, built);

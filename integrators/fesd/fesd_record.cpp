@@ -27,7 +27,7 @@ void FesdRun::Record(const Vector& w, double h, bool ends_at_switch,
   record.ClearLists();
   record.length = 0.0;
   record.frozen = system_.TimeFrozen(a_zero_);
-  if (options_.sensitivities) record.transfer = LocalTransfer(w, m, remaining);
+  if (options_.sensitivities) TrackGroup(w, m, remaining, a0, &record);
   Vector& y0 = record.y_end;  // the start of each element, at the end the record's end state
   y0 = setup.y_start;
   // Boundary values of each element: a0, b0, then the last stage of the element before.
@@ -125,7 +125,7 @@ void FesdRun::Commit(SolveRecord& record) {
   z_last_ = record.z_last;
   boundary_a_ = record.a_last;
   boundary_b_ = record.b_last;
-  if (options_.sensitivities) ApplyTransfer(record.transfer);
+  if (options_.sensitivities) CommitTracks(record);
   if (progress_) progress_(y_[system_.clock_index()]);
 }
 

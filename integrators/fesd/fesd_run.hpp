@@ -7,11 +7,13 @@
 //   fesd_switches.cpp      status decisions at t0, at switches and at step boundaries
 //   fesd_record.cpp        committing solved elements: trajectories and certificates
 //   fesd_sensitivities.cpp implicit-function-theorem transfers and saltation
+//   fesd_directional.cpp   directional and adjoint sensitivities (sensitivity_tape.hpp)
 //   fesd_adaptive.cpp      adaptive steps: the step loop, error estimate, rejection, retries
 //   dense_output.cpp       values at requested output times from the collocation polynomials
 
 #include <array>
 #include <chrono>
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -23,6 +25,7 @@
 #include "group_system.hpp"
 #include "moreau/integrators/fesd.hpp"
 #include "moreau/newton/semismooth_newton.hpp"
+#include "sensitivity_tape.hpp"
 #include "step_control.hpp"
 
 namespace moreau::internal {
@@ -71,6 +74,8 @@ struct SolveRecord {
   double length = 0.0;    // total integration time covered
   bool frozen = false;    // physical time frozen (a relay jumping): not in physical outputs
   Transfer transfer;
+  Matrix directions_end;  // directional sensitivities at its end (SensitivityTape::d)
+  GroupStep step;         // its checkpoint for the adjoint sweep
   std::vector<ElementPolynomial> polynomials;  // per element, with keep_polynomials_
 
   // Empties what Record appends to, keeping the capacity (a record reused across steps).
@@ -97,7 +102,8 @@ class FesdRun {
  private:
   FesdRun(LoweredSystem* external, const Scene& scene, const FesdOptions& options,
           const ProgressCallback& progress)
-      : options_(options),
+      : options_(Tracking(options)),
+        full_(options.sensitivities),
         progress_(progress),
         owned_(external ? std::nullopt
                         : std::make_optional<LoweredSystem>(scene, Lowering(options))),
@@ -112,7 +118,7 @@ class FesdRun {
         ny_(system_.num_states()),
         nz_(system_.num_algebraic()),
         np_(system_.num_pairs()) {
-    if (nz_ == 0 && !options.sensitivities) {
+    if (nz_ == 0 && !options_.sensitivities) {
       smooth_ = std::make_unique<internal::SmoothCollocationSolver>(&system_, options.stages,
                                                                     options.newton.linear_solver);
     }
@@ -121,6 +127,13 @@ class FesdRun {
 
  public:
   FesdResult Run();
+
+  // A kept adjoint (FesdOptions::keep_adjoint) keeps the integrator's lowered system alive.
+  void ShareSystem(std::shared_ptr<LoweredSystem> system) { shared_system_ = std::move(system); }
+
+  // The reverse sweep of the finished run (fesd_directional.cpp): weights of y(T) or x(T)
+  // (n_y or n_x rows, q columns; empty: zero) and of the sample states (q per sample).
+  FesdGradient ReverseSweep(const Matrix& final_weights, const Matrix& sample_weights);
 
  private:
   static SemismoothNewtonOptions NewtonOptions(const FesdOptions& options);
@@ -131,6 +144,10 @@ class FesdRun {
   static SemismoothNewtonOptions ReducedNewtonOptions(const FesdOptions& options);
 
   static LoweringOptions Lowering(const FesdOptions& options);
+  // The options the run works with: `sensitivities` on (the derivative is tracked) whenever
+  // directional or adjoint sensitivities are asked for; full_ says whether the full matrices
+  // are formed.
+  static FesdOptions Tracking(const FesdOptions& options);
 
   bool failed() const { return result_.status != FesdStatus::kSuccess; }
 
@@ -392,6 +409,37 @@ class FesdRun {
 
   void ApplyTransfer(const Transfer& transfer);
 
+  // --- directional and adjoint sensitivities (fesd_directional.cpp) -----------------------
+  // Each Track* applies one step of the derivative to what the run tracks: the full
+  // matrices (full_), the directions (tape_.d) and the adjoint tape.
+  void InitializeTape();
+  // A solved group (Record): its full transfer, its directions at the end from those at its
+  // start (the committed ones, or the previous record's when a0 is that record's a_last: the
+  // trial pass records elements before committing them), its checkpoint.
+  void TrackGroup(const Vector& w, int group_elements, int remaining, const Vector& a0,
+                  SolveRecord* record);
+  // A committed record (Commit), then the sample time it may reach.
+  void CommitTracks(SolveRecord& record);
+  // Time-freezing: a running step of length (target - clock) / n (n > 0), or a frozen one
+  // (n = 0), sets the tau row.
+  void TrackClock(int clock, double n);
+  // Adaptive steps and replays: a step starts (sensitivity_tape.hpp, StepStart).
+  void TrackStepStart(bool lands, bool clock_targets);
+  // The initial projection onto the moving sets (its derivative).
+  void TrackProjection(const Matrix& d_x0, const Vector& d_t, const Matrix& d_p, const Matrix& d_u);
+  // Directional: dw = -R_w^{-1} (B [d]) for every direction, from the factorization at the
+  // solution; *end = the directions after the group.
+  void GroupForward(const Vector& w, int group_elements, int remaining, const Matrix& start,
+                    Matrix* end);
+  // Adjoint: the transpose of GroupForward at a checkpoint (re-evaluated and refactorized).
+  // Returns false (with *message) if the Jacobian at the checkpoint is singular.
+  bool GroupTransposed(const GroupStep& step, Matrix* lambda, Matrix* gradient,
+                       std::string* message);
+  // The FB derivatives of the element-length pair that the transfers use.
+  void EventWeights(const Vector& w, double* da, double* db) const;
+  // Results of the directional and adjoint sensitivities (Finish).
+  void FinishSensitivities();
+
   // --- adaptive steps (fesd_adaptive.cpp) ---------------------------------------------------
   // The run loop with adaptive steps (or a replayed step sequence): per control segment, steps
   // of length H chosen by the controller, each one Advance (it ends at the first switch),
@@ -409,6 +457,7 @@ class FesdRun {
     std::vector<bool> working;  // the near-active filter's working set
     Matrix last_z_matrix, sensitivity;
     Eigen::RowVectorXd d_step_end;
+    SensitivityTape::Mark tape;
     std::size_t trajectory = 0, stage_trajectory = 0, numerical_trajectory = 0, events = 0,
                 elements = 0, next_output = 0;
     std::vector<std::size_t> relay_jumps;
@@ -468,8 +517,10 @@ class FesdRun {
   void DenseOutput(const ElementPolynomial& element);
 
   FesdOptions options_;
+  bool full_ = false;  // FesdOptions::sensitivities as given: full matrices
   ProgressCallback progress_;
-  std::optional<LoweredSystem> owned_;  // empty when running on an external system
+  std::shared_ptr<LoweredSystem> shared_system_;  // kept alive for a kept adjoint
+  std::optional<LoweredSystem> owned_;            // empty when running on an external system
   LoweredSystem& system_;
   GroupSystem group_;
   NearActiveFilter filter_;
@@ -562,7 +613,12 @@ class FesdRun {
     Matrix node_values, dense;
   };
   mutable ResolutionBuffers resolution_;
-  Eigen::RowVectorXd d_step_end_;     // d(step end)/d(x0, p, u) of the last step
+  Eigen::RowVectorXd d_step_end_;               // d(step end)/d(x0, p, u) of the last step
+  SensitivityTape tape_;                        // directional and adjoint sensitivities
+  const Vector* pending_a_last_ = nullptr;      // TrackGroup's last record (its a_last) ...
+  const Matrix* pending_directions_ = nullptr;  // ... and its directions at its end
+  std::map<int, std::unique_ptr<LinearSolver>> reverse_solvers_;  // the sweep's, by size
+  SystemMatrix reverse_jacobian_;
   bool dense_output_ = false;         // output times replace element ends
   std::vector<double> output_times_;  // sorted, in (t0, tf]
   std::size_t next_output_ = 0;

@@ -42,10 +42,25 @@ void FesdRun::ApplySaltation(const std::vector<bool>& before, const Vector& v_be
   const double rate = g_y.dot(before_switch.F);
   // A grazing switch (zero rate) has no derivative; leave the transfers as they are.
   if (std::fabs(rate) <= 1e-12 * (1.0 + g_y.norm() * before_switch.F.norm())) return;
-  Eigen::RowVectorXd d_iota = g_y * sensitivity_.topRows(ny_);
-  d_iota.segment(ny_, np) += g_p;
-  d_iota.segment(ny_ + np + nu * segment_, nu) += g_u;
-  sensitivity_.topRows(ny_) -= (before_switch.F - after_switch.F) * (d_iota / rate);
+  if (full_) {
+    Eigen::RowVectorXd d_iota = g_y * sensitivity_.topRows(ny_);
+    d_iota.segment(ny_, np) += g_p;
+    d_iota.segment(ny_ + np + nu * segment_, nu) += g_u;
+    sensitivity_.topRows(ny_) -= (before_switch.F - after_switch.F) * (d_iota / rate);
+  }
+  if (!tape_.directional && !tape_.adjoint) return;
+  SaltationStep step;
+  step.jump = before_switch.F - after_switch.F;
+  step.g_y = g_y;
+  step.g_p = g_p;
+  step.g_u = g_u;
+  step.rate = rate;
+  step.segment = segment_;
+  if (tape_.directional) ApplyForward(step, np, nu, tape_.theta, &tape_.d);
+  if (tape_.adjoint) {
+    tape_.bytes += sizeof(double) * static_cast<std::size_t>(2 * ny_ + np + nu);
+    tape_.steps.emplace_back(std::move(step));
+  }
 }
 
 // --- sensitivities ------------------------------------------------------------------------
@@ -53,6 +68,8 @@ void FesdRun::InitializeSensitivities() {
   RequireArgument(!system_.scene().dynamics.has_sparse_state_jacobian(),
                   "FESD sensitivities need dense Jacobians (hand-written sparse dynamics are "
                   "not supported)");
+  InitializeTape();
+  if (!full_) return;
   const int np = system_.num_parameters();
   const int nu = system_.num_inputs();
   const int segments = static_cast<int>(segment_ends_.size()) - 1;

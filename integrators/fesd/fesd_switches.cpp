@@ -131,14 +131,7 @@ bool FesdRun::ProjectInitialState() {
     y_.head(nx_) = projection.x;
   }
   if (options_.sensitivities) {
-    // New rows x: dx/dx0 (x columns), dx/dclock (clock column), dx/dp, dx/du (segment 0).
-    const int np = system_.num_parameters(), nu = system_.num_inputs();
-    Matrix rows = Matrix::Zero(nx_, sensitivity_.cols());
-    rows.leftCols(nx_) = projection.d_x0;
-    rows.col(clock) = projection.d_t;
-    rows.middleCols(ny_, np) = projection.d_p;
-    rows.middleCols(ny_ + np, nu) = projection.d_u;
-    sensitivity_.topRows(nx_) = rows;
+    TrackProjection(projection.d_x0, projection.d_t, projection.d_p, projection.d_u);
   }
   return true;
 }

@@ -141,7 +141,8 @@ bool GroupSystem::Evaluate(const Vector& w, bool with_jacobian, Vector* r, Vecto
   std::vector<CollocationStages>& target = with_jacobian ? elements_ : value_elements_;
   last_with_jacobian_ = with_jacobian;
   if (with_jacobian) h_jacobian_ = h;
-  EvaluateAll(w, with_jacobian ? Derivatives::kStates : Derivatives::kNone, &target);
+  const Derivatives with = parameter_derivatives_ ? Derivatives::kAll : Derivatives::kStates;
+  EvaluateAll(w, with_jacobian ? with : Derivatives::kNone, &target);
   r->resize(num_equations());
   pair_a_.resize(s_ * np_);
   pair_b_.resize(s_ * np_);
@@ -163,7 +164,7 @@ bool GroupSystem::Evaluate(const Vector& w, bool with_jacobian, Vector* r, Vecto
     Vector& y_end = end_scratch_;
     EndState(w, &y_end);
     const auto v = w.segment(v_offset(), nz_);
-    const Derivatives level = with_jacobian ? Derivatives::kStates : Derivatives::kNone;
+    const Derivatives level = with_jacobian ? with : Derivatives::kNone;
     // Into the members that AssembleJacobian reads (with derivatives) or into scratch (values
     // for the line search), so that no evaluation allocates.
     VelocityLevelEvaluation& velocity = with_jacobian ? velocity_ : value_velocity_;

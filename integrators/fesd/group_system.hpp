@@ -78,8 +78,26 @@ class GroupSystem final : public MixedComplementaritySystem {
     Vector h_fixed, h_max, h_reference;
   };
   void EvaluateForSensitivities(const Vector& w);
+  // With-Jacobian evaluations also compute the derivatives with respect to p and u, so that
+  // one evaluation serves the Jacobian and the parameter blocks (the adjoint sweep).
+  void set_parameter_derivatives(bool on) { parameter_derivatives_ = on; }
   void SensitivityBlocks(const Vector& w, double event_da, double event_db,
                          ParameterBlocks* out) const;
+  // The same blocks as products, without forming them (group_sensitivity.cpp; directional
+  // and adjoint sensitivities of large systems): rhs += B_y dy + B_p dp + B_u du + b_fixed
+  // dh_fixed + b_max dh_max + b_reference dh_reference, with B the blocks of
+  // SensitivityBlocks (rhs: num_equations() + num_pairs() rows).
+  struct LengthChanges {
+    double fixed = 0.0, max = 0.0, reference = 0.0;
+  };
+  void AddBlockProduct(const Vector& w, double event_da, double event_db, const ConstVectorRef& dy,
+                       const ConstVectorRef& dp, const ConstVectorRef& du, const LengthChanges& dh,
+                       VectorRef rhs) const;
+  // The transposed products for weights nu on the rows: dy += B_y^T nu, dp += B_p^T nu,
+  // du += B_u^T nu; returns (b_fixed . nu, b_max . nu, b_reference . nu).
+  LengthChanges AddTransposedBlockProduct(const Vector& w, double event_da, double event_db,
+                                          const ConstVectorRef& nu, VectorRef dy, VectorRef dp,
+                                          VectorRef du) const;
 
  private:
   void EvaluateAll(const Vector& w, Derivatives derivatives,
@@ -111,6 +129,7 @@ class GroupSystem final : public MixedComplementaritySystem {
   double event_b_ = 0.0;
   int event_pair_ = -1;
   double tau_ = 1.0;
+  bool parameter_derivatives_ = false;
 };
 
 }  // namespace moreau::internal

@@ -63,29 +63,8 @@ IntegratorEntry RadauEntry() {
         out->num_steps = result.stats.num_steps;
         out->num_iterations = result.stats.num_newton_iterations;
       },
-      // As FESD: without h the steps are error-controlled; with h they are fixed unless an
-      // error-control option is given too (h is then the initial step); the controller's
-      // bounds with fixed steps are refused (they would be silently ignored).
-      [](const std::map<std::string, SettingValue>& given, O* built) {
-        // A given h is a step: 0 (the structs' "no fixed step") is refused as any
-        // non-positive step, so that h = 0 is never silently read as "choose for me".
-        RequireArgument(given.count("h") == 0 || built->step_size > 0.0,
-                        "step size h must be positive and finite (leave h out for "
-                        "error-controlled steps), got ",
-                        built->step_size);
-        for (const char* control : {"rtol", "atol", "h0"}) {
-          if (given.count(control) > 0) built->adaptive = true;
-        }
-        RequireArgument(given.count("adaptive") == 0 || built->adaptive || given.count("h") > 0,
-                        "adaptive = false needs a fixed step h (without h the steps are "
-                        "error-controlled)");
-        for (const char* controller_option : {"h_min", "h_max"}) {
-          RequireArgument(built->ErrorControlled() || given.count(controller_option) == 0,
-                          "option '", controller_option,
-                          "' applies to error-controlled steps only (leave h out, or give "
-                          "adaptive, rtol or atol with it)");
-        }
-      });
+      // As FESD: without h error-controlled steps, with h fixed ones (AdjustStepControl).
+      AdjustStepControl<O>);
 }
 
 }  // namespace moreau::internal

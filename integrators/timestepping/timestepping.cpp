@@ -8,6 +8,7 @@
 
 #include "../common/collocation.hpp"
 #include "../common/constraint_filter.hpp"
+#include "../common/sensitivity_arguments.hpp"
 #include "moreau/core/error.hpp"
 #include "moreau/integrators/simulate.hpp"
 
@@ -29,6 +30,8 @@ void TimeSteppingOptions::Validate() const {
   RequireArgument(std::isfinite(filter_safety) && filter_safety >= 1.0,
                   "filter safety must be >= 1, got ", filter_safety);
   RequireArgument(max_steps >= 1, "max_steps must be >= 1, got ", max_steps);
+  RequireArgument(sensitivity_directions.allFinite() && adjoint_weights.allFinite(),
+                  "sensitivity directions and adjoint weights must be finite");
   newton.Validate();
 }
 
@@ -244,12 +247,35 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
       SegmentEnds(scene.initial_time, scene.final_time, scene.ControlBreakpoints());
   bool failed = false;
   Matrix& sensitivity = result.sensitivities;
+  const int segments = static_cast<int>(ends.size()) - 1;
+  const int n_theta = np + nu * segments;
   if (options.sensitivities) {
-    const int segments = static_cast<int>(ends.size()) - 1;
     sensitivity.setZero(ny, ny + np + nu * segments);
     sensitivity.leftCols(ny).setIdentity();
-    result.segment_starts.assign(ends.begin(), ends.end() - 1);
   }
+  // Directional: d = dy/dtheta V (n_y x k) and the parameter directions; adjoint: the step
+  // transfers, applied transposed after the run.
+  const bool directional = options.sensitivity_directions.size() > 0;
+  const bool adjoint = options.adjoint_weights.size() > 0;
+  Matrix directions, parameter_directions;
+  std::vector<std::pair<int, Matrix>> transfers;
+  if (directional) {
+    bool lowered = false;
+    const Matrix v =
+        internal::ShapedSensitivityArgument(options.sensitivity_directions, nx + n_theta,
+                                            ny + n_theta, 1, "sensitivity directions", &lowered);
+    directions.setZero(ny, v.cols());
+    directions.topRows(lowered ? ny : nx) = v.topRows(lowered ? ny : nx);
+    parameter_directions = v.bottomRows(n_theta);
+  }
+  bool lowered_weights = false;
+  Matrix weights;
+  if (adjoint) {
+    weights = internal::ShapedSensitivityArgument(options.adjoint_weights, nx, ny, 1,
+                                                  "adjoint weights", &lowered_weights);
+  }
+  const bool derivatives = options.sensitivities || directional || adjoint;
+  if (derivatives) result.segment_starts.assign(ends.begin(), ends.end() - 1);
   Matrix transfer;
   for (std::size_t segment = 0; segment + 1 < ends.size() && !failed; ++segment) {
     system.SetInputs(scene.InputValues(ends[segment]));
@@ -315,7 +341,7 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
         continue;
       }
       filter.StepAccepted();
-      if (options.sensitivities) {
+      if (derivatives) {
         if (!StepTransfer(&stages, y, w, h, options.newton, &transfer)) {
           std::ostringstream message;
           message.precision(17);
@@ -326,12 +352,23 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
           failed = true;
           break;
         }
-        sensitivity.leftCols(ny + np) = transfer.leftCols(ny) * sensitivity.leftCols(ny + np);
-        sensitivity.middleCols(ny, np) += transfer.middleCols(ny, np);
         const int column = ny + np + nu * static_cast<int>(segment);
-        sensitivity.rightCols(sensitivity.cols() - ny - np) =
-            transfer.leftCols(ny) * sensitivity.rightCols(sensitivity.cols() - ny - np);
-        sensitivity.middleCols(column, nu) += transfer.rightCols(nu);
+        if (options.sensitivities) {
+          sensitivity.leftCols(ny + np) = transfer.leftCols(ny) * sensitivity.leftCols(ny + np);
+          sensitivity.middleCols(ny, np) += transfer.middleCols(ny, np);
+          sensitivity.rightCols(sensitivity.cols() - ny - np) =
+              transfer.leftCols(ny) * sensitivity.rightCols(sensitivity.cols() - ny - np);
+          sensitivity.middleCols(column, nu) += transfer.rightCols(nu);
+        }
+        if (directional) {
+          Matrix next = transfer.leftCols(ny) * directions;
+          if (np > 0) next += transfer.middleCols(ny, np) * parameter_directions.topRows(np);
+          if (nu > 0) {
+            next += transfer.rightCols(nu) * parameter_directions.middleRows(column - ny, nu);
+          }
+          directions = std::move(next);
+        }
+        if (adjoint) transfers.emplace_back(static_cast<int>(segment), transfer);
       }
       y = stages.EndState(y, w);
       // The clock on the exact grid (shifted with a given initial clock, which the
@@ -366,6 +403,27 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
   result.final_state = y.head(nx);
   result.final_lowered_state = y;
   result.final_algebraic = declared(z);
+  if (directional && !failed) {
+    result.directional_lowered = directions;
+    result.directional = directions.topRows(nx);
+  }
+  if (adjoint && !failed) {
+    // The transposes in reverse order: lambda = T_y^T lambda, gradient += T_(p, u)^T lambda.
+    Matrix lambda = Matrix::Zero(ny, weights.cols());
+    lambda.topRows(weights.rows()) = weights;
+    Matrix gradient = Matrix::Zero(n_theta, weights.cols());
+    for (auto it = transfers.rbegin(); it != transfers.rend(); ++it) {
+      const Matrix& t = it->second;
+      if (np > 0) gradient.topRows(np) += t.middleCols(ny, np).transpose() * lambda;
+      if (nu > 0)
+        gradient.middleRows(np + nu * it->first, nu) += t.rightCols(nu).transpose() * lambda;
+      lambda = t.leftCols(ny).transpose() * lambda;
+    }
+    result.adjoint_lowered.resize(weights.cols(), ny + n_theta);
+    result.adjoint_lowered << lambda.transpose(), gradient.transpose();
+    result.adjoint.resize(weights.cols(), nx + n_theta);
+    result.adjoint << lambda.topRows(nx).transpose(), gradient.transpose();
+  }
   if (!options.record_trajectory || failed) {
     if (result.trajectory.t.back() != result.final_time) {
       result.trajectory.Append(result.final_time, result.final_state, declared(z), previous_h);

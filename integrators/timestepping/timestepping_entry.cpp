@@ -25,6 +25,11 @@ IntegratorEntry TimeSteppingEntry() {
                "record every step (false: initial and final points only)"),
       BindBool("sensitivities", &O::sensitivities,
                "dx(T)/dx(0), dx(T)/dp, dx(T)/du by the IFT on every step (no switch-time terms)"),
+      BindMatrixList("directions", &O::sensitivity_directions,
+                     "directional sensitivities dx(T)/dtheta V: V column by column, n_theta = "
+                     "n_x + n_p + n_u S entries per direction"),
+      BindMatrixList("adjoint_weights", &O::adjoint_weights,
+                     "adjoint sensitivities W^T dx(T)/dtheta: W (n_x x q) column by column"),
   };
   for (auto& binding : BindConstraintFilter(&O::constraint_filter, &O::filter_safety)) {
     options.push_back(binding);
@@ -51,6 +56,13 @@ IntegratorEntry TimeSteppingEntry() {
       [](const Scene& scene, const TimeSteppingResult& result, SimulationResult* out) {
         out->num_steps = result.stats.num_steps;
         out->num_iterations = result.stats.num_newton_iterations;
+        if (result.directional.size() > 0 || result.adjoint.size() > 0) {
+          SimulationSensitivities s;
+          s.segment_starts = result.segment_starts;
+          s.directional = result.directional;
+          s.adjoint = result.adjoint;
+          out->sensitivities = s;
+        }
         if (result.sensitivities.size() == 0) return;
         // Columns of the lowered derivative: y0 (n_y = n_x + clock), p, then u per segment.
         const Eigen::Index nx = scene.num_states(), np = scene.num_parameters();
@@ -61,6 +73,8 @@ IntegratorEntry TimeSteppingEntry() {
         s.initial_state = result.sensitivities.topLeftCorner(nx, nx);
         s.parameters = result.sensitivities.block(0, ny, nx, np);
         s.inputs = result.sensitivities.block(0, ny + np, nx, nu_all);
+        s.directional = result.directional;
+        s.adjoint = result.adjoint;
         out->sensitivities = s;
       });
 }

@@ -401,6 +401,7 @@ void ValidateScene(const Scene& scene, bool check_initial_feasibility) {
         effect);
   }
   RequireUniqueNames(names, s + ": effects");
+  ValidateView(scene);
 }
 
 std::string NonFiniteModelValue(const Scene& scene, const Vector& x, const Vector& u, double t,

@@ -1,6 +1,7 @@
 // Scene files (TOML, read by toml++): include/moreau/model/scene_file.hpp, docs/scene-files.md.
 #include "moreau/model/scene_file.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -10,6 +11,7 @@
 
 #include "moreau/core/error.hpp"
 #include "moreau/model/expression.hpp"
+#include "toml_screen.hpp"
 
 // toml++ (Debian libtomlplusplus-dev), header-only, private to this file. Its internal
 // assertions are compiled as in release builds in every build type: toml++ 3.3 asserts (and so
@@ -237,6 +239,11 @@ class SceneReader {
   void ReadHysteresis(const toml::table& table, const std::string& path, Scene* scene);
   void ReadPathConstraints(const toml::table& table, const std::string& path, Scene* scene);
   void ReadComplementarity(const toml::table& table, const std::string& path, Scene* scene);
+  // [view]: names, units and planar geometry, each problem located (end of this file).
+  void ReadView(const toml::table& table, Scene* scene);
+  void ReadViewBody(const toml::table& table, const std::string& path, Scene* scene);
+  void ReadViewObstacle(const toml::table& table, const std::string& path, Scene* scene);
+  std::string StateName(const toml::node& node, const std::string& path, const Scene& scene) const;
   // A matrix of expressions given as `rows` arrays of `cols` entries, row-major.
   SmoothFunction MatrixFunction(const toml::node& node, const std::string& path,
                                 const std::string& name, std::size_t rows, std::size_t cols,
@@ -622,6 +629,7 @@ void SceneReader::ReadDefaults(const toml::node& node, Scene* scene) {
 Scene SceneReader::Read(const std::string& text) {
   RequireArgument(text.size() <= kMaxFileBytes, source_, ": file larger than ", kMaxFileBytes,
                   " bytes");
+  detail::ScreenTomlText(text, source_);  // keeps toml++ 3.3 off its undefined behaviour
   toml::table root;
   try {
     root = toml::parse(text, source_);
@@ -630,7 +638,7 @@ Scene SceneReader::Read(const std::string& text) {
   }
   CheckKeys(root, "",
             {"name", "description", "t0", "tf", "states", "x0", "dynamics", "time_scale_input",
-             "parameters", "inputs", "defs", "defaults", "effects"});
+             "parameters", "inputs", "defs", "defaults", "effects", "view"});
   Scene scene;
   const toml::node& name_node = Require(root, "name", "", "the scene's name");
   scene.name = String(name_node, "name");
@@ -732,6 +740,7 @@ Scene SceneReader::Read(const std::string& text) {
       }
     }
   }
+  if (const toml::node* view = root.get("view")) ReadView(Table(*view, "view"), &scene);
   // The scene's own checks (non-finite values at x0, x0 outside a moving set, ...), located
   // at x0 when they are about the initial state.
   try {
@@ -744,6 +753,155 @@ Scene SceneReader::Read(const std::string& text) {
     ThrowInvalidArgument(source_, ": ", message);
   }
   return scene;
+}
+
+// ---- [view] ----------------------------------------------------------------------------------
+
+std::string SceneReader::StateName(const toml::node& node, const std::string& path,
+                                   const Scene& scene) const {
+  const std::string name = String(node, path);
+  const auto& names = scene.state_names;
+  if (std::find(names.begin(), names.end(), name) != names.end()) return name;
+  const std::string closest = ClosestName(name, names);
+  Fail(node, path, "unknown state '", name, "'",
+       closest.empty() ? std::string() : "; did you mean '" + closest + "'?");
+}
+
+void SceneReader::ReadView(const toml::table& table, Scene* scene) {
+  CheckKeys(table, "view", {"units", "labels", "window", "bodies", "obstacles"});
+  SceneView& view = scene->view;
+  for (const char* key : {"units", "labels"}) {
+    const toml::node* node = table.get(key);
+    if (node == nullptr) continue;
+    const std::string path = Join("view", key);
+    for (const auto& [state, text] : Table(*node, path)) {
+      const std::string name(state.str());
+      const std::string entry = Join(path, name);
+      const auto& names = scene->state_names;
+      if (name != "t" && std::find(names.begin(), names.end(), name) == names.end()) {
+        const std::string closest = ClosestName(name, names);
+        FailAt(state.source().begin.line > 0 ? state.source() : text.source(), entry,
+               "unknown state '", name, "'",
+               closest.empty() ? std::string() : "; did you mean '" + closest + "'?");
+      }
+      (std::string(key) == "units" ? view.units : view.labels)[name] = String(text, entry);
+    }
+  }
+  if (const toml::node* window = table.get("window")) {
+    const toml::array& array = Array(*window, "view.window", "xmin, xmax, ymin, ymax");
+    RequireLength(array, "view.window", 4, "xmin, xmax, ymin, ymax");
+    for (std::size_t i = 0; i < 4; ++i) {
+      view.window.push_back(Value(*array.get(i), Index("view.window", i)));
+    }
+    if (!(view.window[0] < view.window[1] && view.window[2] < view.window[3])) {
+      Fail(*window, "view.window", "expected xmin < xmax and ymin < ymax, got [", view.window[0],
+           ", ", view.window[1], ", ", view.window[2], ", ", view.window[3], "]");
+    }
+  }
+  if (const toml::node* bodies = table.get("bodies")) {
+    const toml::array& list = Array(*bodies, "view.bodies", "[[view.bodies]] tables");
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      const std::string path = Index("view.bodies", i);
+      ReadViewBody(Table(*list.get(i), path), path, scene);
+    }
+  }
+  if (const toml::node* obstacles = table.get("obstacles")) {
+    const toml::array& list = Array(*obstacles, "view.obstacles", "[[view.obstacles]] tables");
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      const std::string path = Index("view.obstacles", i);
+      ReadViewObstacle(Table(*list.get(i), path), path, scene);
+    }
+  }
+}
+
+void SceneReader::ReadViewBody(const toml::table& table, const std::string& path, Scene* scene) {
+  CheckKeys(table, path, {"name", "x", "y", "radius", "trail"});
+  ViewBody body;
+  const toml::node& name = Require(table, "name", path, "the body's name");
+  body.name = String(name, Join(path, "name"));
+  for (const ViewBody& other : scene->view.bodies) {
+    if (other.name == body.name) {
+      Fail(name, Join(path, "name"), "duplicate body name '", body.name, "'");
+    }
+  }
+  body.x =
+      StateName(Require(table, "x", path, "the state of the centre's x"), Join(path, "x"), *scene);
+  if (const toml::node* y = table.get("y")) body.y = StateName(*y, Join(path, "y"), *scene);
+  if (const toml::node* radius = table.get("radius")) {
+    body.radius = Value(*radius, Join(path, "radius"));
+    if (body.radius < 0.0) {
+      Fail(*radius, Join(path, "radius"), "radius must be >= 0, got ", body.radius);
+    }
+  }
+  if (const toml::node* trail = table.get("trail")) {
+    if (!trail->is_boolean()) {
+      Fail(*trail, Join(path, "trail"), "expected a boolean, got ", TypeName(*trail));
+    }
+    body.trail = **trail->as_boolean();
+  }
+  scene->view.bodies.push_back(body);
+}
+
+void SceneReader::ReadViewObstacle(const toml::table& table, const std::string& path,
+                                   Scene* scene) {
+  const toml::node& shape_node = Require(table, "shape", path, "\"circle\" or \"segment\"");
+  const std::string shape = String(shape_node, Join(path, "shape"));
+  ViewObstacle obstacle;
+  std::vector<std::pair<std::string, std::size_t>> parts;  // key, number of expressions
+  if (shape == "circle") {
+    obstacle.shape = ViewObstacle::Shape::kCircle;
+    CheckKeys(table, path, {"name", "shape", "center", "radius"});
+    parts = {{"center", 2}, {"radius", 1}};
+  } else if (shape == "segment") {
+    obstacle.shape = ViewObstacle::Shape::kSegment;
+    CheckKeys(table, path, {"name", "shape", "from", "to"});
+    parts = {{"from", 2}, {"to", 2}};
+  } else {
+    Fail(shape_node, Join(path, "shape"), "expected \"circle\" or \"segment\", got \"", shape,
+         "\"");
+  }
+  const toml::node& name = Require(table, "name", path, "the obstacle's name");
+  obstacle.name = String(name, Join(path, "name"));
+  for (const ViewObstacle& other : scene->view.obstacles) {
+    if (other.name == obstacle.name) {
+      Fail(name, Join(path, "name"), "duplicate obstacle name '", obstacle.name, "'");
+    }
+  }
+  // Expressions of t and the parameters only: compiled here so that an unknown name points
+  // at its line and column.
+  ExpressionSymbols symbols;
+  for (const ParameterSpec& p : scene->parameters) symbols.parameters.push_back(p.name);
+  ExpressionModel geometry(symbols, source_);
+  const Vector p = Eigen::Map<const Vector>(parameter_values_.data(),
+                                            static_cast<Eigen::Index>(parameter_values_.size()));
+  for (const auto& [key, count] : parts) {
+    const std::string key_path = Join(path, key);
+    const toml::node& node =
+        Require(table, key, path, key == "radius" ? "an expression" : "[x, y]");
+    std::vector<const toml::node*> entries;
+    if (count == 1) {
+      entries.push_back(&node);
+    } else {
+      const toml::array& array = Array(node, key_path, "[x, y]");
+      RequireLength(array, key_path, count, "x and y");
+      for (std::size_t i = 0; i < count; ++i) entries.push_back(array.get(i));
+    }
+    for (std::size_t i = 0; i < entries.size(); ++i) {
+      const std::string entry_path = count == 1 ? key_path : Index(key_path, i);
+      auto [text, origin] = Expression(*entries[i], entry_path);
+      const SmoothFunction f = geometry.Function(obstacle.name, {text}, {origin});
+      Vector value;
+      f.Evaluate(Vector(), Vector(), scene->initial_time, p, &value);
+      if (!std::isfinite(value[0])) {
+        Fail(*entries[i], entry_path, "'", text, "' is not finite at t0 (got ", value[0], ")");
+      }
+      if (key == "radius" && value[0] < 0.0) {
+        Fail(*entries[i], entry_path, "radius must be >= 0, got ", value[0], " at t0");
+      }
+      obstacle.expressions.push_back(text);
+    }
+  }
+  scene->view.obstacles.push_back(obstacle);
 }
 
 }  // namespace

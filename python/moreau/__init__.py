@@ -26,6 +26,10 @@ import numpy as np
 
 from . import _moreau
 
+#: The version of moreau (the file VERSION of the source tree; ``moreau --version`` and the C++
+#: macro ``MOREAU_VERSION`` show the same).
+__version__: str = _moreau.__version__
+
 __all__ = [
     "Event",
     "load_scene",
@@ -33,6 +37,7 @@ __all__ = [
     "scene_from_dict",
     "scene_from_data",
     "sweep",
+    "plot_sweep",
     "Integrator",
     "Relay",
     "Result",
@@ -66,12 +71,23 @@ class Relay(NamedTuple):
 
 
 class Sensitivities(NamedTuple):
-    """Derivatives of the final scene state (rows) for shooting codes."""
+    """Derivatives of the final scene state (rows) for shooting codes, with respect to
+    theta = (x0, p, u_1, ..., u_S) (initial state, parameters, inputs of every control segment).
+
+    ``dx_dx0``, ``dx_dp``, ``dx_du``: the full matrices (option ``sensitivities=True``; empty
+    otherwise). ``directional``: dx(T)/dtheta V for ``directions=V`` (an (n_theta, k) array),
+    ``sample_directional`` the same at every ``sample_times`` entry. ``adjoint``: the
+    (q, n_theta) gradients W^T dx(T)/dtheta (+ sample terms) for ``adjoint_weights=W`` (an
+    (n_x, q) array) and ``adjoint_sample_weights``. See docs/sensitivities.md.
+    """
 
     dx_dx0: np.ndarray  #: (n_x, n_x)
     dx_dp: np.ndarray  #: (n_x, n_p)
     dx_du: np.ndarray  #: (n_x, n_u * segments), segment k's inputs in columns k*n_u...
     segment_starts: List[float]
+    directional: Optional[np.ndarray] = None  #: (n_x, k)
+    sample_directional: Optional[List[np.ndarray]] = None  #: per sample time, (n_x, k)
+    adjoint: Optional[np.ndarray] = None  #: (q, n_theta)
 
 
 def _check_finite(name: str, value: Any) -> float:
@@ -102,14 +118,17 @@ class Scene:
 
     @property
     def name(self) -> str:
+        """The scene's name (messages, output directories)."""
         return self._native.name
 
     @property
     def description(self) -> str:
+        """One line describing the scene."""
         return self._native.description
 
     @property
     def state_names(self) -> List[str]:
+        """The names of the states x, in order."""
         return self._native.state_names
 
     @property
@@ -119,10 +138,12 @@ class Scene:
 
     @property
     def t0(self) -> float:
+        """Initial time."""
         return self._native.t0
 
     @property
     def tf(self) -> float:
+        """Final time."""
         return self._native.tf
 
     @property
@@ -210,7 +231,7 @@ def load_scene(path: str) -> Scene:
 
 
 def scene_from_dict(data: Dict[str, Any] = None, **keywords: Any) -> Scene:
-    """A scene from a dict (or keywords) with the keys of a scene file and expression strings:
+    """A scene from a dict (or keywords) with the keys of a scene file and expression strings::
 
         moreau.scene_from_dict(name="S3", states=["x1", "x2"], x0=["sqrt(2)", "sqrt(2)"],
                                tf="11*pi/12 + sqrt(3)", dynamics=["x2", "-x1"],
@@ -277,6 +298,7 @@ class Result:
 
     @functools.cached_property
     def final_state(self) -> np.ndarray:
+        """The scene's states at ``final_time`` (n_x,)."""
         return self._native.final_state
 
     @functools.cached_property
@@ -290,10 +312,12 @@ class Result:
 
     @property
     def t(self) -> np.ndarray:
+        """The recorded times (N,), in physical time, ascending."""
         return self._trajectory["t"]
 
     @property
     def x(self) -> np.ndarray:
+        """The states at the recorded times (N, n_x), columns named by ``state_names``."""
         return self._trajectory["x"]
 
     @property
@@ -308,10 +332,12 @@ class Result:
 
     @property
     def state_names(self) -> List[str]:
+        """Names of the columns of ``x``."""
         return self._trajectory["state_names"]
 
     @property
     def algebraic_names(self) -> List[str]:
+        """Names of the columns of ``algebraic`` (e.g. ``floor.lambda_gap``)."""
         return self._trajectory["algebraic_names"]
 
     @functools.cached_property
@@ -326,22 +352,27 @@ class Result:
 
     @functools.cached_property
     def events(self) -> List[Event]:
+        """Switch, contact and relay events in time order."""
         return [Event(*e) for e in self._native.events()]
 
     @functools.cached_property
     def relays(self) -> List[Relay]:
+        """Hysteresis scenes: each relay's memory w(t) in physical time."""
         return [Relay(*r) for r in self._native.relays()]
 
     @functools.cached_property
     def stats(self) -> Dict[str, float]:
+        """The integrator's declared statistics by name (:func:`integrators` lists them)."""
         return self._native.stats()
 
     @functools.cached_property
     def options(self) -> Dict[str, Any]:
+        """Every option of the integrator with the value used (defaults included)."""
         return self._native.options()
 
     @functools.cached_property
     def records(self) -> Dict[str, np.ndarray]:
+        """Per-element (FESD) or per-step (alpha) certificates as arrays, by column name."""
         return self._native.records()
 
     @functools.cached_property
@@ -352,30 +383,97 @@ class Result:
 
     @functools.cached_property
     def sensitivities(self) -> Optional[Sensitivities]:
+        """With ``sensitivities=True``: exact derivatives of the final state (else None)."""
         native = self._native.sensitivities()
         if native is None:
             return None
         return Sensitivities(native["dx_dx0"], native["dx_dp"], native["dx_du"],
-                             list(native["segment_starts"]))
+                             list(native["segment_starts"]), native["directional"],
+                             list(native["sample_directional"]), native["adjoint"])
+
+    @functools.cached_property
+    def sample_states(self) -> np.ndarray:
+        """The scene state at every ``sample_times`` entry, shape (K, n_x)."""
+        states = self._native.sample_states()
+        return np.array(states).reshape(len(states), len(self.final_state))
+
+    def adjoint(self, final_weights: Optional[Any] = None,
+                sample_weights: Optional[Any] = None) -> np.ndarray:
+        """A reverse sweep of this run (needs ``keep_adjoint=True``): the (q, n_theta) gradients
+        W^T dx(T)/dtheta + sum_j W_j^T dx(t_j)/dtheta for final weights W of shape (n_x,) or
+        (n_x, q) and sample weights of shape (K, n_x) (q = 1) or (K, n_x, q), K the number of
+        ``sample_times``. For a scalar f(x(T), x(t_1), ..., x(t_K)) pass its partial derivatives:
+        the result's row is df/dtheta, theta = (x0, p, u_1, ..., u_S). Raises ValueError for
+        shapes that do not fit and RuntimeError if the sweep fails (a singular Jacobian)."""
+        if not self._native.has_adjoint():
+            raise ValueError("this result keeps no adjoint sweep: simulate with keep_adjoint=True")
+        n_x = len(self.final_state)
+        final = np.zeros((0, 0)) if final_weights is None else np.asarray(final_weights, float)
+        if final.ndim == 1:
+            final = final.reshape(n_x if final.size == n_x else final.size, 1)
+        samples = np.zeros((0, 0))
+        if sample_weights is not None:
+            given = np.asarray(sample_weights, float)
+            if given.ndim == 2:
+                given = given[:, :, None]
+            if given.ndim != 3:
+                raise ValueError(f"sample_weights must have shape (K, n_x) or (K, n_x, q), got "
+                                 f"{given.shape}")
+            # (n_x, q K): sample j in columns j q ... (j + 1) q - 1.
+            samples = np.concatenate(list(given), axis=1) if len(given) else samples
+        success, message, theta, _ = self._native.adjoint_gradient(final, samples)
+        if not success:
+            raise RuntimeError(message)
+        return theta
 
     @property
     def num_steps(self) -> int:
+        """Steps (FESD: finite elements) of the run; the unit is the integrator's."""
         return self._native.num_steps
 
     @property
     def num_iterations(self) -> int:
+        """Newton (IDA: nonlinear, alpha: SQP) iterations of the run."""
         return self._native.num_iterations
 
     @property
     def cpu_seconds(self) -> float:
+        """CPU time of the run."""
         return self._native.cpu_seconds
 
     def plot(self, states: Optional[Sequence[str]] = None, multipliers: bool = True,
-             events: bool = True, ax=None):
-        """Plots states (and multipliers in a second panel) over time with matplotlib, switch
-        events as dashed vertical lines, relay memories as steps. Returns the figure."""
+             events: bool = True, ax=None, internal: bool = False,
+             phase: Optional[bool] = None):
+        """The figure of the run (matplotlib), built from what the scene contains: states with
+        labels and units; the effects' multipliers as steps (jumps stay jumps); active
+        constraints and relay memories as bands; events in rows by constraint and kind; and for
+        two-state scenes (or ``phase=True``) the phase portrait with the set boundaries at the
+        event times or the switching surfaces. ``internal=True`` adds the lowering's own
+        variables (Filippov theta/lambda/mu, time-freezing variables). Returns the figure."""
         from ._plot import plot_result
-        return plot_result(self, states=states, multipliers=multipliers, events=events, ax=ax)
+        return plot_result(self, states=states, multipliers=multipliers, events=events, ax=ax,
+                           internal=internal, phase=phase)
+
+    def animate(self, path: str, fps: float = 25.0, duration: float = 10.0, speed: float = 0.0,
+                width: int = 720, gif_width: int = 360, snapshots: Optional[str] = None,
+                max_snapshots: int = 12, frames: Optional[str] = None) -> List[str]:
+        """Animates a planar scene (one with a view: bodies, obstacles) into ``path`` (.mp4 or
+        .gif; needs ffmpeg): frames at ``fps`` per second of video, the horizon lasting
+        ``duration`` seconds (or ``speed`` simulation time per second). ``snapshots``: a
+        directory for PNG snapshots at event times (at most ``max_snapshots``); ``frames``: a
+        directory for every frame as PNG. Returns the files written. Raises ValueError for a
+        scene without bodies or bad options, RuntimeError if ffmpeg is missing or fails."""
+        scene = getattr(self, "_scene", None)
+        if scene is None:
+            raise ValueError("this result does not know its scene (made by moreau.simulate or "
+                             "moreau.Integrator, it would)")
+        if not isinstance(path, str) or not path.endswith((".mp4", ".gif")):
+            raise ValueError(f"path must end in .mp4 or .gif, got {path!r}")
+        mp4 = path if path.endswith(".mp4") else ""
+        gif = path if path.endswith(".gif") else ""
+        return _moreau._animate(scene._native, self._native, mp4, gif, snapshots or "",
+                                frames or "", float(fps), float(duration), float(speed),
+                                int(width), int(gif_width), int(max_snapshots))
 
     def __repr__(self) -> str:
         return (f"<moreau.Result {self.scene} ({self.integrator}): {self.status}, "
@@ -399,8 +497,9 @@ def simulate(scene: Scene, integrator: str = "auto",
         raise ValueError(f"scene must be a moreau.Scene, got {type(scene).__name__}")
     if not isinstance(integrator, str):
         raise ValueError(f"integrator must be a string, got {type(integrator).__name__}")
-    return _warned(Result(_moreau._simulate(scene._native, integrator, options,
-                                            _progress_arg(progress))))
+    result = Result(_moreau._simulate(scene._native, integrator, options, _progress_arg(progress)))
+    result._scene = scene.copy()  # as simulated: figures and animations read its view
+    return _warned(result)
 
 
 class SimulationWarning(UserWarning):
@@ -451,7 +550,12 @@ class Integrator:
                 raise ValueError(f"parameters must be a dict name -> value, got "
                                  f"{type(parameters).__name__}")
             values += [(name, _check_finite(name, value)) for name, value in parameters.items()]
-        return _warned(Result(self._native.run(values, _progress_arg(progress))))
+        result = Result(self._native.run(values, _progress_arg(progress)))
+        result._scene = self.scene.copy()
+        for name, value in values:
+            result._scene._native.set_value(name, value)
+        return _warned(result)
 
 
 from ._ensemble import sweep  # noqa: E402  (needs Scene and simulate above)
+from ._plot import plot_sweep  # noqa: E402

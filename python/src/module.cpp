@@ -24,10 +24,12 @@
 #include "moreau/model/scene.hpp"
 #include "moreau/model/scene_file.hpp"
 #include "moreau/scenes/catalog.hpp"
+#include "moreau/version.hpp"
 
 namespace py = pybind11;
 
 namespace moreau::python {
+void BindView(py::module_& m);  // view.cpp
 namespace {
 
 // A front end's keyword value as a SettingValue (bool before int: Python's bool is an int).
@@ -47,6 +49,11 @@ SettingValue ToSetting(const std::string& name, const py::handle& value) {
   const py::module_ numpy = py::module_::import("numpy");
   if (py::isinstance(value, numpy.attr("integer"))) return value.cast<long>();
   if (py::isinstance(value, numpy.attr("floating"))) return value.cast<double>();
+  // A 2-D array (a block of directions or weights, one column each) is read column by column,
+  // the order the options document.
+  if (py::isinstance<py::array>(value) && value.attr("ndim").cast<int>() == 2) {
+    return ToSetting(name, value.attr("flatten")("F"));
+  }
   if (py::isinstance<py::list>(value) || py::isinstance<py::tuple>(value) ||
       py::isinstance<py::array>(value)) {
     std::vector<double> list;
@@ -299,6 +306,7 @@ PYBIND11_MODULE(_moreau, m) {
   using namespace moreau;
   using namespace moreau::python;
   m.doc() = "Compiled core of the moreau package (use the `moreau` package, not this module).";
+  m.attr("__version__") = MOREAU_VERSION;  // moreau.__version__ (moreau/version.hpp)
 
   py::class_<Scene>(m, "_Scene")
       .def(py::init<const Scene&>())
@@ -435,14 +443,32 @@ PYBIND11_MODULE(_moreau, m) {
                                if (!r.error_estimate) return py::none();
                                return py::float_(*r.error_estimate);
                              })
-      .def("sensitivities", [](const SimulationResult& r) -> py::object {
-        if (!r.sensitivities) return py::none();
-        py::dict out;
-        out["dx_dx0"] = r.sensitivities->initial_state;
-        out["dx_dp"] = r.sensitivities->parameters;
-        out["dx_du"] = r.sensitivities->inputs;
-        out["segment_starts"] = r.sensitivities->segment_starts;
-        return out;
+      .def("sensitivities",
+           [](const SimulationResult& r) -> py::object {
+             if (!r.sensitivities) return py::none();
+             py::dict out;
+             out["dx_dx0"] = r.sensitivities->initial_state;
+             out["dx_dp"] = r.sensitivities->parameters;
+             out["dx_du"] = r.sensitivities->inputs;
+             out["segment_starts"] = r.sensitivities->segment_starts;
+             out["directional"] = r.sensitivities->directional;
+             out["sample_directional"] = r.sensitivities->sample_directional;
+             out["adjoint"] = r.sensitivities->adjoint;
+             return out;
+           })
+      .def("sample_states", [](const SimulationResult& r) { return r.sample_states; })
+      .def("has_adjoint", [](const SimulationResult& r) { return r.adjoint != nullptr; })
+      .def("adjoint_gradient", [](const SimulationResult& r, const Matrix& final_weights,
+                                  const Matrix& sample_weights) {
+        RequireArgument(r.adjoint != nullptr,
+                        "the result keeps no adjoint sweep: run with keep_adjoint=True");
+        AdjointGradient gradient;
+        {
+          py::gil_scoped_release release;
+          gradient = r.adjoint->Gradient(final_weights, sample_weights);
+        }
+        return py::make_tuple(gradient.success, gradient.message, gradient.theta,
+                              gradient.cpu_seconds);
       });
 
   m.def("_parse_grid", [](const std::string& text) {
@@ -475,4 +501,5 @@ PYBIND11_MODULE(_moreau, m) {
 
   m.def("_simulate", &RunSimulation, py::arg("scene"), py::arg("integrator"), py::arg("options"),
         py::arg("progress"));
+  BindView(m);
 }

@@ -28,3 +28,17 @@ def test_example_runs(script, expected, tmp_path):
     assert expected in completed.stdout
     if len(arguments) == 3:
         assert (tmp_path / "plot.png").stat().st_size > 0
+
+
+# The demonstrations of docs/sensitivities.md in shortened form (their full versions are
+# documented there with measured iterations and times). They exit non-zero unless they
+# converge to the known answer.
+@pytest.mark.parametrize("script,arguments,expected", [
+    ("wave_rider_shooting.py", ["--intervals", "10"], "`moreau ocp wave_rider`: 0.336357343835"),
+    ("crowd_estimation.py", ["--agents", "100", "--tf", "1"], "estimate s = "),
+])
+def test_demonstration_converges(script, arguments, expected):
+    completed = subprocess.run([sys.executable, os.path.join(EXAMPLES, script), *arguments],
+                               capture_output=True, text=True, check=False, timeout=600)
+    assert completed.returncode == 0, completed.stdout + completed.stderr
+    assert expected in completed.stdout

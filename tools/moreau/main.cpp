@@ -8,64 +8,31 @@
 // Exit codes: 0 success; 1 the simulation ended with a non-success status; 2 bad usage or
 // input (unknown scene, option or parameter, bad value).
 
-#include <unistd.h>
-
 #include <CLI/CLI.hpp>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <map>
 #include <sstream>
 
+#include "animate_command.hpp"
 #include "check_command.hpp"
 #include "integrator_flags.hpp"
 #include "moreau/core/error.hpp"
 #include "moreau/integrators/simulate.hpp"
 #include "moreau/scenes/catalog.hpp"
 #include "moreau/scenes/crowd.hpp"
+#include "moreau/version.hpp"
 #include "ocp_command.hpp"
 #include "output.hpp"
+#include "progress.hpp"
 #include "sweep_command.hpp"
 
 namespace {
 
 using moreau::Scene;
 namespace tool = moreau::tool;
-
-// Prints the simulation time on stderr during long runs: in place on a terminal (every
-// 0.2 s), one line every 5 s otherwise; nothing during the first second.
-class ProgressPrinter {
- public:
-  ProgressPrinter(double t0, double tf, bool enabled)
-      : t0_(t0),
-        tf_(tf),
-        enabled_(enabled),
-        tty_(isatty(STDERR_FILENO) != 0),
-        start_(Clock::now()),
-        last_(start_) {}
-  void Update(double t) {
-    if (!enabled_) return;
-    const auto now = Clock::now();
-    const double since_start = std::chrono::duration<double>(now - start_).count();
-    const double since_last = std::chrono::duration<double>(now - last_).count();
-    if (since_start < 1.0 || since_last < (tty_ ? 0.2 : 5.0)) return;
-    last_ = now;
-    const double percent = 100.0 * (t - t0_) / (tf_ - t0_);
-    std::fprintf(stderr, "%s[moreau] t = %.6g of %.6g (%5.1f%%), %.1f s%s", tty_ ? "\r" : "", t,
-                 tf_, percent, since_start, tty_ ? "   " : "\n");
-    printed_ = true;
-  }
-  void Finish() {
-    if (printed_ && tty_) std::fprintf(stderr, "\n");
-  }
-
- private:
-  using Clock = std::chrono::steady_clock;
-  double t0_, tf_;
-  bool enabled_, tty_, printed_ = false;
-  Clock::time_point start_, last_;
-};
 
 double ParseNumber(const std::string& text, const std::string& what) {
   std::size_t used = 0;
@@ -172,14 +139,27 @@ void Show(const Scene& scene) {
   }
 }
 
-int Run(Scene scene, const moreau::SimulationSettings& settings, bool numerical_time,
-        const std::string& out_directory, bool plot, bool quiet) {
-  ProgressPrinter progress(scene.initial_time, scene.final_time, !quiet);
-  const moreau::SimulationResult report =
-      moreau::Simulate(scene, settings, [&progress](double t) { progress.Update(t); });
-  progress.Finish();
-  for (const std::string& warning : report.warnings) {
-    std::fprintf(stderr, "moreau: warning: %s\n", warning.c_str());
+// `implicit`: options the command line sets itself (shown only where they differ from that).
+int Run(Scene scene, const moreau::SimulationSettings& settings,
+        const std::map<std::string, moreau::SettingValue>& implicit, bool numerical_time,
+        const std::string& out_directory, bool plot, bool plot_internal, bool quiet,
+        const tool::AnimateSettings* animate) {
+  tool::ProgressBar progress("run", !quiet);
+  const double t0 = scene.initial_time, tf = scene.final_time;
+  auto time_text = [tf](double t) {
+    char text[64];
+    std::snprintf(text, sizeof text, "t = %.6g of %.6g", t, tf);
+    return std::string(text);
+  };
+  const moreau::SimulationResult report = moreau::Simulate(
+      scene, settings, [&](double t) { progress.Update((t - t0) / (tf - t0), time_text(t)); });
+  progress.Finish((report.final_time - t0) / (tf - t0), time_text(report.final_time));
+  // What the user should know although the run may have succeeded (also in summary.json;
+  // --quiet leaves errors only).
+  if (!quiet) {
+    for (const std::string& warning : report.warnings) {
+      std::fprintf(stderr, "moreau: warning: %s\n", warning.c_str());
+    }
   }
   const moreau::Trajectory& trajectory =
       numerical_time ? report.numerical_trajectory : report.trajectory;
@@ -204,8 +184,22 @@ int Run(Scene scene, const moreau::SimulationSettings& settings, bool numerical_
     extra_files += ", " + out_directory + "/numerical.csv";
   }
   tool::WriteSummaryJson(report, out_directory + "/summary.json");
-  const std::string image =
-      plot ? tool::WritePlot(report, trajectory, out_directory, numerical_time) : "";
+  tool::WriteViewJson(scene, out_directory + "/view.json");
+  const std::string image = plot ? tool::WritePlot(scene, report, trajectory, out_directory,
+                                                   numerical_time, plot_internal)
+                                 : "";
+  if (quiet) {  // errors only: a run that did not succeed says why, on stderr
+    if (animate != nullptr) {
+      tool::AnimateSettings silent = *animate;
+      silent.quiet = true;
+      tool::AnimateResult(scene, report, out_directory, silent);
+    }
+    if (!report.success) {
+      std::fprintf(stderr, "moreau: %s: %s: %s\n", report.scene.c_str(), report.status.c_str(),
+                   report.message.c_str());
+    }
+    return report.success ? 0 : 1;
+  }
 
   const auto& names = report.state_names;
   std::ostringstream state;
@@ -215,8 +209,7 @@ int Run(Scene scene, const moreau::SimulationSettings& settings, bool numerical_
   }
   if (names.size() > 8) state << ", ... (" << names.size() << " states, all in summary.json)";
   std::printf("scene       %s\n", report.scene.c_str());
-  std::printf("integrator  %s %s\n", report.integrator.c_str(),
-              tool::OptionsJson(report).dump().c_str());
+  std::printf("integrator  %s\n", tool::IntegratorLine(report, implicit).c_str());
   std::printf("status      %s%s%s\n", report.status.c_str(), report.message.empty() ? "" : ": ",
               report.message.c_str());
   std::printf("t_final     %.17g\n", report.final_time);
@@ -250,6 +243,7 @@ int Run(Scene scene, const moreau::SimulationSettings& settings, bool numerical_
   if (plot && image.empty()) {
     std::fprintf(stderr, "moreau: warning: no plot written (is gnuplot installed?)\n");
   }
+  if (animate != nullptr) tool::AnimateResult(scene, report, out_directory, *animate);
   return report.success ? 0 : 1;
 }
 
@@ -259,6 +253,8 @@ int main(int argc, char** argv) {
   CLI::App app{"moreau: simulate nonsmooth dynamical systems with measured accuracy"};
   app.require_subcommand(1);
   app.set_help_all_flag("--help-all", "help for all subcommands");
+  app.set_version_flag("--version", std::string("moreau ") + MOREAU_VERSION,
+                       "print the version (moreau/version.hpp) and exit");
 
   app.add_subcommand("list", "list the scenes and integrators");
 
@@ -294,11 +290,31 @@ int main(int argc, char** argv) {
                 "hysteresis scenes (fesd): trajectory.csv in numerical time tau, with the relay "
                 "memories and the clock (default: physical time)");
   run->add_flag("--no-plot", no_plot, "do not write trajectory.png");
-  run->add_flag("--quiet", quiet, "no progress output");
+  run->add_flag("--quiet", quiet, "print nothing but errors (the files are written as usual)");
+  bool plot_internal = false;
+  run->add_flag("--plot-internal", plot_internal,
+                "trajectory.png also shows the lowering's internal variables (Filippov theta, "
+                "lambda, mu; time-freezing variables)");
+  bool run_animate = false;
+  tool::AnimateSettings run_animate_settings;
+  run->add_flag("--animate", run_animate,
+                "also animate the run (scenes with a view: animation.mp4, animation.gif, "
+                "snapshots/; see `moreau animate --help` for the animation options)");
+  tool::AddAnimateOptions(run, &run_animate_settings);
   // Every integrator option, declared once in the library (moreau::Integrators()), becomes a
   // flag --name (dashes for underscores); its value goes to moreau::Simulate() as text, which
   // parses and validates it for the chosen integrator.
   tool::IntegratorFlags integrator_flags(run);
+  auto* animate = app.add_subcommand(
+      "animate",
+      "animate a run of a planar scene: RUN_DIR/animation.mp4, animation.gif and snapshots at "
+      "event times (needs ffmpeg)");
+  std::string animate_directory;
+  tool::AnimateSettings animate_settings;
+  animate->add_option("run_dir", animate_directory, "a directory written by `moreau run`")
+      ->required();
+  animate->add_flag("--quiet", animate_settings.quiet, "print nothing");
+  tool::AddAnimateOptions(animate, &animate_settings);
   auto* sweep = app.add_subcommand(
       "sweep", "run a scene over grids and samples of its named values on all cores");
   std::string sweep_scene;
@@ -322,7 +338,7 @@ int main(int argc, char** argv) {
   sweep->add_option("--out", sweep_settings.out_directory,
                     "output directory (default: out/sweep/<scene>)");
   sweep->add_flag("--no-plot", no_plot, "do not write the summary plots");
-  sweep->add_flag("--quiet", quiet, "no progress bar");
+  sweep->add_flag("--quiet", quiet, "print nothing but errors (the files are written as usual)");
   tool::IntegratorFlags sweep_flags(sweep);
 
   auto* ocp = app.add_subcommand("ocp", "solve an optimal control problem (see `moreau list`)");
@@ -396,7 +412,7 @@ int main(int argc, char** argv) {
   ocp->add_option("--out", ocp_settings.out_directory,
                   "output directory (default: out/ocp/<problem>)");
   ocp->add_flag("--no-plot", no_plot, "do not write solution.png");
-  ocp->add_flag("--quiet", quiet, "no progress output");
+  ocp->add_flag("--quiet", quiet, "print nothing but errors (the files are written as usual)");
 
   auto* crowd_file = app.add_subcommand(
       "crowd-file",
@@ -432,6 +448,9 @@ int main(int argc, char** argv) {
       ApplySettings(&scene, check_assignments, 0.0, false);
       tool::CheckScene(scene, check_stages);
       return 0;
+    }
+    if (app.got_subcommand("animate")) {
+      return tool::RunAnimateCommand(animate_directory, animate_settings);
     }
     if (app.got_subcommand("sweep")) {
       Scene scene = tool::ResolveScene(sweep_scene);
@@ -512,12 +531,22 @@ int main(int argc, char** argv) {
     if (out_directory.empty()) out_directory = "out/" + scene.name;
     // The command line records FESD's stage points (stages.csv) unless told otherwise.
     if (settings.integrator == "auto") settings.integrator = moreau::AutomaticIntegrator(scene);
-    if (settings.integrator == "fesd") settings.options.try_emplace("record_stages", true);
+    std::map<std::string, moreau::SettingValue> implicit;
+    if (settings.integrator == "fesd") {
+      settings.options.try_emplace("record_stages", true);
+      implicit["record_stages"] = true;
+    }
     moreau::RequireArgument(
         !numerical_time || (settings.integrator == "fesd" && scene.Has<moreau::HysteresisRelay>()),
         "--numerical-time applies to scenes with hysteresis relays simulated by the fesd "
         "integrator (elsewhere numerical and physical time coincide)");
-    return Run(std::move(scene), settings, numerical_time, out_directory, !no_plot, quiet);
+    if (run_animate) {
+      // Checked before simulating: a scene without bodies, or bad animation options.
+      const moreau::render::CompiledView view(scene);
+      run_animate_settings.options.Validate();
+    }
+    return Run(std::move(scene), settings, implicit, numerical_time, out_directory, !no_plot,
+               plot_internal, quiet, run_animate ? &run_animate_settings : nullptr);
   } catch (const std::invalid_argument& error) {
     std::fprintf(stderr, "moreau: error: %s\n", error.what());
     return 2;

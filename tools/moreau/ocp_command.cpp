@@ -371,7 +371,16 @@ int RunOcpCommand(const OcpCommandSettings& settings) {
     RequireArgument(out.good(), "cannot write '", directory, "/summary.json'");
     out << std::setw(2) << SummaryJson(problem, options, result) << "\n";
   }
+  WriteViewJson(problem.scene, directory + "/view.json");  // `moreau animate DIR`
   const std::string image = settings.plot ? WriteSolutionPlot(problem, result, directory) : "";
+  if (settings.quiet) {  // errors only
+    if (result.status != OcpStatus::kSolved && result.status != OcpStatus::kSolvedToAcceptable) {
+      std::fprintf(stderr, "moreau: ocp %s: %s: %s\n", problem.name.c_str(),
+                   ToString(result.status).c_str(), result.message.c_str());
+      return 1;
+    }
+    return 0;
+  }
 
   const auto& states = problem.scene.state_names;
   const std::string refinement =

@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include "moreau/core/error.hpp"
+#include "render/view_geometry.hpp"
 
 namespace moreau::tool {
 
@@ -108,6 +109,38 @@ nlohmann::json OptionsJson(const SimulationResult& result) {
   return options;
 }
 
+std::vector<std::string> ChangedOptions(const SimulationResult& result,
+                                        const std::map<std::string, SettingValue>& implicit) {
+  const IntegratorSpec& spec = FindIntegrator(result.integrator);
+  std::vector<std::string> changed;
+  for (const auto& [name, value] : result.options) {
+    const auto set = implicit.find(name);
+    const OptionSpec* option = spec.FindOption(name);
+    const SettingValue& reference = set != implicit.end() ? set->second
+                                    : option != nullptr   ? option->default_value
+                                                          : value;
+    if (value == reference) continue;
+    // Reals with 10 significant digits (FormatSetting's 17 show 0.1 as 0.10000000000000001).
+    char text[64];
+    if (const double* real = std::get_if<double>(&value)) {
+      std::snprintf(text, sizeof text, "%.10g", *real);
+      changed.push_back(name + " = " + text);
+    } else {
+      changed.push_back(name + " = " + FormatSetting(value));
+    }
+  }
+  return changed;
+}
+
+std::string IntegratorLine(const SimulationResult& result,
+                           const std::map<std::string, SettingValue>& implicit) {
+  const std::vector<std::string> changed = ChangedOptions(result, implicit);
+  if (changed.empty()) return result.integrator + " (all options at their defaults)";
+  std::string line = result.integrator + " (";
+  for (std::size_t i = 0; i < changed.size(); ++i) line += (i ? ", " : "") + changed[i];
+  return line + "; other options at their defaults)";
+}
+
 nlohmann::json SummaryJson(const SimulationResult& report) {
   nlohmann::json summary;
   summary["scene"] = report.scene;
@@ -155,6 +188,37 @@ nlohmann::json SummaryJson(const SimulationResult& report) {
   if (report.error_estimate) summary["error_estimate"] = NumberJson(*report.error_estimate);
   summary["warnings"] = report.warnings;
   if (!report.step_sequence.empty()) summary["step_sequence"] = report.step_sequence;
+  // Sensitivities (options sensitivities, directions, adjoint_weights), matrices as rows over
+  // theta = (x0, p, u per segment); the states at sample_times.
+  auto rows = [](const Matrix& m) {
+    nlohmann::json out = nlohmann::json::array();
+    for (Eigen::Index i = 0; i < m.rows(); ++i) {
+      nlohmann::json row = nlohmann::json::array();
+      for (Eigen::Index j = 0; j < m.cols(); ++j) row.push_back(NumberJson(m(i, j)));
+      out.push_back(row);
+    }
+    return out;
+  };
+  if (report.sensitivities) {
+    const SimulationSensitivities& s = *report.sensitivities;
+    nlohmann::json sensitivities = nlohmann::json::object();
+    if (s.initial_state.size() > 0) {
+      sensitivities["dx_dx0"] = rows(s.initial_state);
+      sensitivities["dx_dp"] = rows(s.parameters);
+      sensitivities["dx_du"] = rows(s.inputs);
+    }
+    if (s.directional.size() > 0) sensitivities["directional"] = rows(s.directional);
+    if (s.adjoint.size() > 0) sensitivities["adjoint"] = rows(s.adjoint);
+    summary["sensitivities"] = sensitivities;
+  }
+  if (!report.sample_states.empty()) {
+    Matrix states(static_cast<Eigen::Index>(report.sample_states.size()),
+                  report.final_state.size());
+    for (std::size_t j = 0; j < report.sample_states.size(); ++j) {
+      states.row(static_cast<Eigen::Index>(j)) = report.sample_states[j].transpose();
+    }
+    summary["sample_states"] = rows(states);
+  }
   return summary;
 }
 
@@ -164,49 +228,10 @@ void WriteSummaryJson(const SimulationResult& report, const std::string& path) {
   out << std::setw(2) << SummaryJson(report) << "\n";
 }
 
-std::string WritePlot(const SimulationResult& report, const Trajectory& trajectory,
-                      const std::string& directory, bool numerical_time_axis) {
-  const std::string csv = directory + "/trajectory.csv";
-  const std::string image = directory + "/trajectory.png";
-  const std::string script_path = directory + "/plot.gp";
-  std::ofstream script(script_path);
-  RequireArgument(script.good(), "cannot write '", script_path, "'");
-  const auto& names = trajectory.state_names;
-  const std::size_t shown = std::min<std::size_t>(names.size(), kMaxPlottedStates);
-  script << "set terminal pngcairo size 1000,600 noenhanced\n"
-         << "set output '" << image << "'\n"
-         << "set datafile separator ','\n"
-         << "set key outside right top\n"
-         << "set grid\n"
-         << "set xlabel '" << (numerical_time_axis ? "numerical time tau" : "t") << "'\n"
-         << "set title '" << report.scene << " (" << report.integrator << ", " << report.status
-         << (shown < names.size() ? ", first " + std::to_string(shown) + " states" : "") << ")'\n";
-  for (const Event& event : numerical_time_axis ? std::vector<Event>() : report.events) {
-    script << "set arrow from " << std::setprecision(17) << event.t << ", graph 0 to " << event.t
-           << ", graph 1 nohead dashtype 2 lc rgb '#999999'\n";
-  }
-  // Relay memories (physical time) in a lower panel.
-  const bool relays =
-      !report.relays.empty() && !numerical_time_axis && fs::exists(directory + "/relays.csv");
-  if (relays) {
-    script << "set multiplot layout 2,1\nset lmargin at screen 0.08\nset rmargin at screen 0.8\n";
-  }
-  script << "plot ";
-  for (std::size_t i = 0; i < shown; ++i) {
-    script << (i ? ", " : "") << "'" << csv << "' using 1:" << i + 2 << " with lines lw 2 title '"
-           << names[i] << "'";
-  }
-  script << "\n";
-  if (relays) {
-    script << "unset title\nset ylabel 'w'\nset yrange [-0.1:1.1]\nplot ";
-    for (std::size_t i = 0; i < report.relays.size(); ++i) {
-      script << (i ? ", " : "") << "'" << directory << "/relays.csv' using 1:" << i + 2
-             << " with steps lw 2 title '" << report.relays[i].relay << ".w'";
-    }
-    script << "\nunset multiplot\n";
-  }
-  script.close();
-  return RunGnuplot(script_path, image) ? image : "";
+void WriteViewJson(const Scene& scene, const std::string& path) {
+  std::ofstream out(path);
+  RequireArgument(out.good(), "cannot write '", path, "'");
+  out << render::ViewJson(scene) << "\n";
 }
 
 bool RunGnuplot(const std::string& script_path, const std::string& image) {

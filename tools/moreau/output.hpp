@@ -1,8 +1,10 @@
 #pragma once
 // Files written by `moreau run`: trajectory.csv, summary.json and trajectory.png.
 
+#include <map>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
 #include "moreau/integrators/simulate.hpp"
 
@@ -23,17 +25,35 @@ void WriteElementsCsv(const SimulationResult& report, const std::string& path);
 nlohmann::json SettingJson(const SettingValue& value);
 // The options used, name -> value, in declaration order.
 nlohmann::json OptionsJson(const SimulationResult& result);
+// The options of a run that differ from the integrator's declared defaults, "name = value" in
+// declaration order. `implicit` holds the values the command line sets itself (FESD's
+// record_stages): those count as defaults.
+std::vector<std::string> ChangedOptions(const SimulationResult& result,
+                                        const std::map<std::string, SettingValue>& implicit);
+// "fesd (stages = 4, rtol = 1e-08; other options at their defaults)" or "fesd (all options at
+// their defaults)": the summary's integrator line (every option is in summary.json).
+std::string IntegratorLine(const SimulationResult& result,
+                           const std::map<std::string, SettingValue>& implicit);
 // The summary object: scene, integrator, options, status, message, t_final, x_final
 // (state name -> value), events (t, kind, what, detail), stats, and for scenes with
 // hysteresis relays "relays" (name, initial, jumps [{t, w}], final).
 nlohmann::json SummaryJson(const SimulationResult& report);
 void WriteSummaryJson(const SimulationResult& report, const std::string& path);
-// Draws trajectory.png with gnuplot from DIR/trajectory.csv (events as dashed lines), with
-// the relay memories from DIR/relays.csv in a second panel when the scene has relays.
-// Returns the image path, or "" if gnuplot is unavailable or failed.
-// With numerical_time_axis the trajectory is the numerical-time one (no event lines).
-std::string WritePlot(const SimulationResult& report, const Trajectory& trajectory,
-                      const std::string& directory, bool numerical_time_axis);
+// view.json: what `moreau animate` needs to draw the run (render/view_geometry.hpp).
+void WriteViewJson(const Scene& scene, const std::string& path);
+// The algebraic columns a figure shows: multipliers of moving sets and complementarity pairs
+// ("<effect>.lambda_<name>"), and with `internal` also the lowering's own variables (Filippov
+// theta, lambda, mu; time-freezing variables).
+std::vector<std::string> ShownAlgebraicNames(const Scene& scene, const Trajectory& trajectory,
+                                             bool internal);
+// Draws DIR/trajectory.png with gnuplot from what the scene contains (run_figure.cpp): states
+// with labels and units, multipliers, active sets/modes/relay memories as bands, events in
+// rows by constraint and kind, and the phase portrait of two-state scenes; figure.json holds
+// the phase panel's pixel geometry. Returns the image path, or "" if gnuplot is unavailable or
+// failed. With numerical_time_axis the trajectory is the numerical-time one (no events).
+std::string WritePlot(const Scene& scene, const SimulationResult& report,
+                      const Trajectory& trajectory, const std::string& directory,
+                      bool numerical_time_axis, bool internal = false);
 // Runs gnuplot on a script that writes `image`; true if the image exists afterwards.
 bool RunGnuplot(const std::string& script_path, const std::string& image);
 

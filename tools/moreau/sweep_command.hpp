@@ -23,9 +23,8 @@ struct SweepCommandSettings {
 };
 
 // Runs the sweep and writes DIR/sweep.csv (a row per run), DIR/summary.json (the spec, runs
-// by status, wall time, runs per second) and, with gnuplot, DIR/*.png: for one varied value
-// the final states and the event times against it, for two a heat map per final state and
-// of the event count. Returns 0 if every run succeeded, 1 otherwise (the rows say which).
+// by status, wall time, runs per second) and, with gnuplot, the figures of sweep_figures.hpp.
+// Returns 0 if every run succeeded, 1 otherwise (the rows say which).
 int RunSweepCommand(const Scene& scene, const SweepCommandSettings& settings);
 
 }  // namespace moreau::tool

@@ -35,6 +35,10 @@
 /// dx(T)/dx(0), dx(T)/dp and dx(T)/du for the piecewise-constant inputs of every control
 /// segment. These are the derivatives of the discrete solution map; they converge to those of
 /// the exact flow, whereas the time-stepping baseline misses the dependence of switch times.
+/// The same derivative applied to a block of directions (FesdOptions::sensitivity_directions)
+/// and transposed onto adjoint weights by a reverse sweep over checkpoints of the run's groups
+/// (adjoint_weights, sample_times, keep_adjoint; FesdAdjoint) serves systems too large for
+/// the full matrices (docs/sensitivities.md).
 ///
 /// Effects: moving sets, switching surfaces and hysteresis relays; path constraints belong
 /// to the alpha-method stepper.
@@ -77,6 +81,7 @@
 
 namespace moreau {
 
+/// Options of FESD Radau IIA (docs/fesd-formulation.md); defaults are the values below.
 struct FesdOptions {
   /// Radau IIA stages s in [1, kMaxRadauStages]; order 2s - 1 (1, 3, 5, 7 for s = 1..4).
   int stages = 3;
@@ -120,6 +125,40 @@ struct FesdOptions {
   double filter_safety = 4.0;
   /// Compute dx(T)/dx(0), dx(T)/dp, dx(T)/du (FesdResult::sensitivities).
   bool sensitivities = false;
+  /// Directional (forward) sensitivities (docs/sensitivities.md): a block V of k directions
+  /// over theta = (x0, p, u_1, ..., u_S) (n_x + n_p + n_u S rows, u_k the inputs of control
+  /// segment k) or over the lowered theta_L = (y0, p, u_1, ..., u_S) (n_y + n_p + n_u S rows,
+  /// y0 = (x0, relay memories, clock)); a single column of n k entries is read column by
+  /// column (front ends pass lists). Gives FesdSensitivities::directional = dx(T)/dtheta V
+  /// (and the same at sample_times) without forming dx(T)/dtheta: per group one solve per
+  /// direction with the run's own factorization at the solution. Empty: none.
+  Matrix sensitivity_directions;
+  /// Adjoint (reverse) sensitivities: weights W of the final state (n_x x q, or n_y x q over
+  /// the lowered y(T); a single column of n q entries is read column by column). Gives
+  /// FesdSensitivities::adjoint = W^T dx(T)/dtheta (+ the sample terms below), q x n_theta,
+  /// by a reverse sweep over the run's groups that transposes exactly the derivative of the
+  /// directional sensitivities (switch-determined element lengths, saltation at switches on
+  /// step boundaries, relay jumps). Memory: the run keeps every group's converged unknowns
+  /// and re-evaluates and refactorizes its Jacobian in the sweep (docs/sensitivities.md).
+  /// Empty (and no adjoint_sample_weights): none.
+  Matrix adjoint_weights;
+  /// Sample times in (t0, tf] (physical time, increasing): FesdResult::sample_states holds the
+  /// state there, the directional and adjoint sensitivities their terms. Each must be an
+  /// element end of the run (fixed steps: a multiple of h from a control breakpoint); the run
+  /// throws std::invalid_argument naming a sample time that is not.
+  std::vector<double> sample_times;
+  /// Adjoint weights of the states at sample_times: n_x x (q * samples) (or n_y rows), sample
+  /// j in columns j q, ..., (j + 1) q - 1; a single column is read column by column.
+  Matrix adjoint_sample_weights;
+  /// Keep the run's reverse-sweep data (FesdResult::adjoint) so that adjoints for weights
+  /// chosen after the run (the gradient of a function of x(T) and of sample_states) cost one
+  /// reverse sweep each.
+  bool keep_adjoint = false;
+  /// Memory bound of the adjoint's checkpoints, in megabytes (0: none). Checkpoints beyond it
+  /// (every further group's converged unknowns and start state) are written to a temporary
+  /// file and read back by the sweep, so that the resident memory of the tape stays below the
+  /// bound at the cost of file I/O (docs/sensitivities.md). >= 0.
+  double adjoint_memory_limit_mb = 0.0;
   /// Smooth elements: in an element whose statuses leave a smooth vector field (Stewart's form
   /// of one SwitchingSurfaces effect with exactly one active mode, no other effects or
   /// dynamics; moving sets only, with no active constraint; or hysteresis relays only, each in
@@ -187,6 +226,10 @@ struct FesdOptions {
   /// comparison element solve per step; shooting codes that integrate the same intervals many
   /// times may switch it off.
   bool estimate_error = true;
+  /// An initial state x0 outside the moving sets is projected onto them (the sweeping
+  /// process's jump at t0, with its derivative in the sensitivities) instead of refused, as
+  /// initial_state is: shooting codes whose node states leave the sets between iterations.
+  bool project_initial_state = false;
   /// Record the stage trajectory (FesdResult::stage_trajectory).
   bool record_stages = false;
   /// Record element ends in the trajectory (false: initial and final points only).
@@ -196,6 +239,8 @@ struct FesdOptions {
   /// fixed step (step_size == 0).
   bool ErrorControlled() const { return step_sequence.empty() && (adaptive || step_size == 0.0); }
 
+  /// The Newton settings of the element solves when none are given (tolerances and iteration limits
+  /// tuned for the element systems).
   static SemismoothNewtonOptions DefaultNewtonOptions();
   /// Throws std::invalid_argument naming the first out-of-range option.
   void Validate() const;
@@ -214,7 +259,11 @@ enum class FesdStatus {
                            ///< message names the function, its output, t and the state); with
                            ///< error control after the step was shortened to its minimum
   kMaxStepsReached,        ///< error control: max_steps steps before the final time
+  /// the adjoint sweep found the Jacobian of a converged group singular at its checkpoint
+  /// (reciprocal condition below kSingularRcond): no adjoint sensitivities
+  kSensitivityFailure,
 };
+/// The status as text (snake case, as in summary.json).
 std::string ToString(FesdStatus status);
 
 /// One finite element of the solution.
@@ -246,25 +295,52 @@ struct FesdSensitivities {
   /// n_y rows; columns y0 (n_y), then p (n_p), then u per segment (n_u each). The blocks above
   /// are its scene-state parts.
   Matrix lowered;
+  /// With FesdOptions::sensitivity_directions (k directions): dx(T)/dtheta V (n_x x k).
+  Matrix directional;
+  /// The same for the lowered y(T) (n_y x k).
+  Matrix directional_lowered;
+  /// dx(t_j)/dtheta V (n_x x k) at every FesdOptions::sample_times entry.
+  std::vector<Matrix> sample_directional;
+  /// With adjoint weights (q functionals): q x (n_x + n_p + n_u S), the gradient of every
+  /// functional with respect to theta = (x0, p, u_1..u_S), and q x (n_y + n_p + n_u S) with
+  /// respect to the lowered theta_L = (y0, p, u) (adjoint_lowered).
+  Matrix adjoint;
+  /// q x (n_y + n_p + n_u S): the gradients with respect to theta_L = (y0, p, u_1..u_S).
+  Matrix adjoint_lowered;
 };
 
+class FesdAdjoint;
+namespace internal {
+class FesdRun;
+}
+
+/// Counters and certificates of a FESD run.
 struct FesdStats {
+  /// Integration steps taken (accepted steps when adaptive).
   long num_steps = 0;
+  /// Finite elements of the accepted solution.
   long num_elements = 0;
   long num_groups = 0;    ///< group solves with the event equation
   long num_switches = 0;  ///< element boundaries with a switch
+  /// Newton iterations of all element and group solves.
   long num_newton_iterations = 0;
+  /// LU factorizations of the Newton matrices.
   long num_factorizations = 0;
+  /// Group solves repeated from another guess while locating a switch.
   long num_event_retries = 0;
   long num_rejected_steps = 0;  ///< adaptive: steps rejected by the error test
   long num_failed_steps = 0;    ///< adaptive: steps whose solves failed, retried smaller
+  /// Largest cross-complementarity certificate over the elements (FesdElement).
   double max_cross_complementarity = 0.0;
+  /// Largest stage complementarity residual |min(a, b)| over the elements.
   double max_complementarity = 0.0;
+  /// Shortest element length.
   double min_element_length = 0.0;
   double frozen_time = 0.0;  ///< numerical time spent with physical time frozen (relays)
   /// Near-active filter: steps solved again because a left-out constraint was not positive
   /// at a stage, and the largest number of pairs in an element system.
   long num_filter_rechecks = 0;
+  /// Largest number of complementarity pairs in one element system.
   long max_working_pairs = 0;
   /// Elements solved as a Radau IIA step of a smooth field (FesdOptions::reduce_smooth_elements)
   /// whose full element system then held without a Newton iteration of its own.
@@ -278,14 +354,27 @@ struct FesdStats {
   /// Steps whose error could not be estimated (a comparison solve failed); not in
   /// error_estimate.
   long num_unestimated_steps = 0;
+  /// Adjoint sensitivities: bytes the run kept in memory for the reverse sweep (converged
+  /// unknowns and group data).
+  double adjoint_memory_bytes = 0.0;
+  double adjoint_file_bytes = 0.0;  ///< checkpoints beyond adjoint_memory_limit_mb (file)
+  /// Thread CPU time of the adjoint reverse sweep(s) in this result.
+  double adjoint_cpu_seconds = 0.0;
+  /// CPU time of the run.
   double cpu_seconds = 0.0;
 
+  /// Sums counters and times; takes the max/min of the extreme values.
   FesdStats& operator+=(const FesdStats& other);
+  /// One line for the command line's summary.
   std::string Summary() const;
 };
 
+/// Result of SimulateFesd: status, final values, trajectories, events, elements with their
+/// certificates, sensitivities and statistics.
 struct FesdResult {
+  /// kSuccess, or why the run stopped.
   FesdStatus status = FesdStatus::kSuccess;
+  /// The time and reason when status != kSuccess.
   std::string message;
   double final_time = 0.0;      ///< physical time reached (the clock)
   Vector final_state;           ///< scene states
@@ -298,17 +387,52 @@ struct FesdResult {
   Trajectory numerical_trajectory;
   /// With hysteresis relays: each relay's memory w(t) in physical time.
   std::vector<RelaySignal> relays;
+  /// Switch events in physical time (enter, leave, switch, ...).
   std::vector<Event> events;
+  /// Every finite element with its certificates (in integration time).
   std::vector<FesdElement> elements;
   /// The accepted steps of an adaptive run (or of a replay) in the form FesdOptions::
   /// step_sequence takes them: the attempted length of every step, 0 for a step to the end
   /// of its control segment.
   std::vector<double> step_sequence;
   FesdSensitivities sensitivities;  ///< with FesdOptions::sensitivities
+  /// The lowered state y = (x, relay memories, clock) at every FesdOptions::sample_times.
+  std::vector<Vector> sample_states;
+  /// With FesdOptions::keep_adjoint: the reverse sweep of this run (shared by copies).
+  std::shared_ptr<FesdAdjoint> adjoint;
+  /// Counters and certificates.
   FesdStats stats;
   /// What the caller should know although the run succeeded (an estimated error far above
   /// the tolerance, ...), one sentence each.
   std::vector<std::string> warnings;
+};
+
+/// Gradients of q functionals of one run (FesdAdjoint::Sweep).
+struct FesdGradient {
+  Matrix theta;    ///< q x (n_x + n_p + n_u S): with respect to (x0, p, u_1..u_S)
+  Matrix lowered;  ///< q x (n_y + n_p + n_u S): with respect to (y0, p, u_1..u_S)
+  double cpu_seconds = 0.0;  ///< thread CPU time of the sweep
+  /// False if the Jacobian of a group was singular at its checkpoint (message says where).
+  bool success = true;
+  std::string message;  ///< why the sweep failed (empty on success)
+};
+
+/// The reverse sweep of a finished run (FesdOptions::keep_adjoint): the transpose of the
+/// run's directional sensitivities, for weights chosen after the run, e.g. the gradient of a
+/// scalar function f(x(T), x(t_1), ..., x(t_K)) from its partial derivatives at the run's
+/// final and sample states. Holds the run's group data (FesdStats::adjoint_memory_bytes)
+/// and its lowered system. Not thread-safe; with FesdIntegrator, not concurrently with it.
+class FesdAdjoint {
+ public:
+  /// Made by the run (FesdOptions::keep_adjoint), which passes itself; not for applications.
+  explicit FesdAdjoint(std::shared_ptr<internal::FesdRun> run);
+  /// final_weights: n_x x q or n_y x q (empty: zero); sample_weights: n_x x (q K) or n_y x
+  /// (q K) for the K sample times (empty: zero). Throws std::invalid_argument for other
+  /// shapes.
+  FesdGradient Sweep(const Matrix& final_weights, const Matrix& sample_weights = Matrix()) const;
+
+ private:
+  std::shared_ptr<internal::FesdRun> run_;  // the finished run, kept alive
 };
 
 /// Simulates `scene` over [t0, tf]. Throws std::invalid_argument for invalid options, an
@@ -323,6 +447,8 @@ FesdResult SimulateFesd(const Scene& scene, const FesdOptions& options,
 /// Not thread-safe (one object per thread).
 class FesdIntegrator {
  public:
+  /// Validates the options and lowers the scene once; throws std::invalid_argument as SimulateFesd
+  /// does.
   FesdIntegrator(const Scene& scene, const FesdOptions& options);
   ~FesdIntegrator();
   FesdIntegrator(const FesdIntegrator&) = delete;
@@ -332,7 +458,7 @@ class FesdIntegrator {
 
  private:
   FesdOptions options_;
-  std::unique_ptr<LoweredSystem> system_;
+  std::shared_ptr<LoweredSystem> system_;  // shared with kept adjoint sweeps
 };
 
 }  // namespace moreau

@@ -46,9 +46,11 @@
 
 namespace moreau {
 
+/// Options of the SUNDIALS IDA reference integrator (docs/ida.md); defaults are the values below.
 struct IdaOptions {
   /// Relative and absolute tolerances of IDA's local error test, > 0.
   double relative_tolerance = 1e-8;
+  /// Absolute tolerance of IDA's local error test, > 0.
   double absolute_tolerance = 1e-10;
   /// IDA's Newton iteration stops when its error estimate is below this fraction (in (0, 1])
   /// of the local error tolerance (IDA's default 0.33). With old Jacobians the remaining
@@ -70,6 +72,7 @@ struct IdaOptions {
   double event_tolerance = 1e-9;
   /// Internal steps allowed over the whole run (> 0), and events (Zeno guard, > 0).
   long max_steps = 10000000;
+  /// Events allowed over the whole run (Zeno guard), > 0.
   long max_events = 100000;
   /// Largest internal step (0: no limit).
   double max_step = 0.0;
@@ -114,15 +117,23 @@ inline constexpr double kMinIdaStepUlps = 10.0;
 inline constexpr int kMaxCollapsedIdaSteps = 20;
 /// Consecutive internal IDA steps that leave t unchanged before IdaStatus::kNoProgress.
 inline constexpr int kMaxStalledIdaSteps = 100;
+/// The status as text (snake case, as in summary.json).
 std::string ToString(IdaStatus status);
 
+/// Counters and certificates of an IDA run (summed over its phases).
 struct IdaStats {
+  /// Internal IDA steps.
   long num_steps = 0;
+  /// Residual evaluations (IDA's, without Jacobian).
   long num_residual_evaluations = 0;
+  /// Jacobian evaluations.
   long num_jacobian_evaluations = 0;
+  /// Newton iterations of IDA's nonlinear solver.
   long num_nonlinear_iterations = 0;
+  /// Steps rejected by IDA's local error test.
   long num_error_test_failures = 0;
   long num_phases = 0;  ///< (re)starts of IDA: events and breakpoints
+  /// Events located (switches, contacts, relay jumps).
   long num_events = 0;
   /// KLU symbolic analyses: Jacobian evaluations whose sparsity pattern differed from the
   /// previous one (at most one per phase; 0 with the dense LU).
@@ -130,19 +141,27 @@ struct IdaStats {
   /// Largest |P| (position-level conditions of the phase) at the end of a phase, before the
   /// projection: the drift certificate.
   double max_drift = 0.0;
+  /// CPU time of the run.
   double cpu_seconds = 0.0;
 
+  /// One line for the command line's summary.
   std::string Summary() const;
 };
 
+/// Result of SimulateIda: status, final values, trajectory, events, relay memories and statistics.
 struct IdaResult {
+  /// kSuccess, or why the run stopped.
   IdaStatus status = IdaStatus::kSuccess;
+  /// The time and reason when status != kSuccess.
   std::string message;
+  /// Time reached.
   double final_time = 0.0;
   Vector final_state;     ///< scene states
   Trajectory trajectory;  ///< scene states and algebraic values (z layout) at recorded times
+  /// Located events in time order.
   std::vector<Event> events;
   std::vector<RelaySignal> relays;  ///< each relay's memory w(t)
+  /// Counters and certificates.
   IdaStats stats;
 };
 
@@ -156,13 +175,20 @@ IdaResult SimulateIda(const Scene& scene, const IdaOptions& options,
 /// std::runtime_error with IDA's message if the run does not succeed, so that a test or
 /// benchmark never compares against a failed reference.
 struct ReferenceSolution {
+  /// Scene states at the final time.
   Vector final_state;
+  /// The final time reached (the scene's tf).
   double final_time = 0.0;
+  /// The events located on the way.
   std::vector<Event> events;
+  /// The times asked for (ascending).
   std::vector<double> sample_times;
   std::vector<Vector> samples;  ///< scene states at sample_times
+  /// Each relay's memory w(t).
   std::vector<RelaySignal> relays;
 };
+/// The reference solution of `scene` (see ReferenceSolution); throws std::runtime_error if IDA does
+/// not succeed.
 ReferenceSolution ComputeReference(const Scene& scene, const std::vector<double>& sample_times = {},
                                    const IdaOptions& options = IdaOptions::Reference());
 

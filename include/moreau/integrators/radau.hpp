@@ -27,6 +27,8 @@
 
 namespace moreau {
 
+/// Options of the smooth Radau IIA integrator (scenes without effects); defaults are the values
+/// below.
 struct RadauOptions {
   /// Number of stages s in [1, kMaxRadauStages]; the method has order 2s - 1.
   int stages = 3;
@@ -61,6 +63,7 @@ struct RadauOptions {
   /// I - h gamma0 J per step), accumulated into RadauStats::error_estimate, with a warning
   /// above kErrorWarningFactor times relative_tolerance.
   bool estimate_error = true;
+  /// Dense or sparse LU for the Newton matrices (automatic: by size).
   LinearSolverKind linear_solver = LinearSolverKind::kAutomatic;
   /// Record every accepted step in the trajectory (false: only the initial and final point).
   bool record_trajectory = true;
@@ -82,11 +85,14 @@ enum class RadauStatus {
   kNonFinite,         ///< NaN or infinity in the state or the dynamics (the message names
                       ///< the model function, its output, t and the state)
 };
+/// The status as text (snake case, as in summary.json).
 std::string ToString(RadauStatus status);
 
+/// Counters of a Radau run.
 struct RadauStats {
   long num_steps = 0;           ///< accepted steps
   long num_rejected_steps = 0;  ///< error-test and Newton rejections (adaptive)
+  /// Newton iterations of all steps.
   long num_newton_iterations = 0;
   long num_factorizations = 0;        ///< LU factorizations (Newton and error filter)
   long num_function_evaluations = 0;  ///< evaluations of F (with or without Jacobian)
@@ -96,18 +102,25 @@ struct RadauStats {
   /// s + 1 accumulated without propagation: an upper estimate, docs/accuracy.md). -1 for
   /// error-controlled runs (the tolerance is their statement) and without estimate_error.
   double error_estimate = -1.0;
+  /// CPU time of the run.
   double cpu_seconds = 0.0;
 
+  /// Sums the counters and times.
   RadauStats& operator+=(const RadauStats& other);
+  /// One line for the command line's summary.
   std::string Summary() const;
 };
 
+/// Result of SimulateRadau: status, final values, trajectory and statistics.
 struct RadauResult {
+  /// kSuccess, or why the run stopped.
   RadauStatus status = RadauStatus::kSuccess;
   std::string message;      ///< time and reason when status != kSuccess
   double final_time = 0.0;  ///< time reached
   Vector final_state;       ///< scene states at final_time
+  /// Accepted steps (or the initial and final points without record_trajectory).
   Trajectory trajectory;
+  /// Counters of the run.
   RadauStats stats;
   /// What the caller should know although the run succeeded, one sentence each.
   std::vector<std::string> warnings;

@@ -17,11 +17,13 @@ namespace moreau {
 struct Trajectory {
   std::vector<std::string> state_names;      ///< the scene's states
   std::vector<std::string> algebraic_names;  ///< multipliers etc. (may be empty)
+  /// The recorded times, ascending.
   std::vector<double> t;
   std::vector<Vector> x;          ///< scene states at t
   std::vector<Vector> algebraic;  ///< algebraic values at t (empty vectors if none)
   std::vector<double> step;       ///< length of the step/element ending at t (0 at t0)
 
+  /// Number of recorded points.
   std::size_t size() const { return t.size(); }
   /// Appends one point (the vectors moved in: pass temporaries or std::move to avoid copies).
   void Append(double time, Vector state, Vector algebraic_values, double length);
@@ -31,8 +33,11 @@ struct Trajectory {
 /// initial_value on [t0, jump_times[0]), values[k] on [jump_times[k], jump_times[k + 1]).
 /// A relay whose initial memory is inconsistent with its input jumps at t0.
 struct RelaySignal {
+  /// The relay's name.
   std::string relay;
+  /// The memory at t0 (0 or 1).
   int initial_value = 0;
+  /// The times of the memory's jumps, ascending.
   std::vector<double> jump_times;
   std::vector<int> values;  ///< the value after each jump
 

@@ -29,6 +29,8 @@
 
 namespace moreau {
 
+/// Options of the fixed-step Radau IIA time-stepping baseline with stage complementarity; defaults
+/// are the values below.
 struct TimeSteppingOptions {
   /// Radau IIA stages s in [1, kMaxRadauStages].
   int stages = 1;
@@ -52,6 +54,17 @@ struct TimeSteppingOptions {
   /// map is only piecewise smooth: a pair changing status inside a step is not a switch time,
   /// so these derivatives carry no switch-time terms; see docs/ocp.md).
   bool sensitivities = false;
+  /// Directional sensitivities dx(T)/dtheta V without the full matrix, and adjoint
+  /// sensitivities W^T dx(T)/dtheta by a reverse sweep over the kept step transfers, as
+  /// FesdOptions::sensitivity_directions and adjoint_weights (the same shapes; theta =
+  /// (x0, p, u per segment), or the lowered (y0, p, u)). They chain the same dense step
+  /// transfers as `sensitivities` (for the small systems time-stepping serves): the adjoint
+  /// keeps one n_y x (n_y + n_p + n_u) transfer per step. Sample times and kept sweeps are
+  /// FESD's only.
+  Matrix sensitivity_directions;
+  /// Adjoint weights W (n_x x q, or n_y x q over the lowered state), as
+  /// FesdOptions::adjoint_weights: the gradients W^T dx(T)/dtheta (TimeSteppingResult::adjoint).
+  Matrix adjoint_weights;
   /// Near-active constraint filter (docs/sparse-systems.md), as FesdOptions::constraint_filter:
   /// moving-set constraints far from contact are left out of the step systems and checked at
   /// every stage afterwards (the step is solved again with those that are not positive there).
@@ -62,6 +75,7 @@ struct TimeSteppingOptions {
   /// empty: the scene's). Need not lie in the moving sets: the first step catches up.
   Vector initial_state;
 
+  /// The Newton settings when none are given.
   static SemismoothNewtonOptions DefaultNewtonOptions();
   /// Throws std::invalid_argument naming the first out-of-range option.
   void Validate() const;
@@ -73,41 +87,66 @@ enum class TimeSteppingStatus {
   kNewtonFailure,  ///< the semismooth Newton method did not converge in some step
                    ///< (its status and the time are in the message)
 };
+/// The status as text (snake case, as in summary.json).
 std::string ToString(TimeSteppingStatus status);
 
+/// Counters and certificates of a time-stepping run.
 struct TimeSteppingStats {
+  /// Steps taken.
   long num_steps = 0;
+  /// Newton iterations of all steps.
   long num_newton_iterations = 0;
+  /// LU factorizations of the Newton matrices.
   long num_factorizations = 0;
+  /// Line-search backtracks of the Newton iterations.
   long num_backtracks = 0;
   double max_complementarity_residual = 0.0;  ///< max over steps of max |min(a, b)|
   double max_newton_residual = 0.0;           ///< max over steps of ||S Phi||_inf
   /// Near-active filter: steps solved again (a left-out constraint not positive at a
   /// stage), and the most pairs in a step system.
   long num_filter_rechecks = 0;
+  /// Largest number of complementarity pairs in one step system.
   long max_working_pairs = 0;
+  /// CPU time of the run.
   double cpu_seconds = 0.0;
 
+  /// Sums counters and times; takes the max of the extreme values.
   TimeSteppingStats& operator+=(const TimeSteppingStats& other);
+  /// One line for the command line's summary.
   std::string Summary() const;
 };
 
+/// Result of SimulateTimeStepping: status, final values, trajectory, events, per-step certificates,
+/// sensitivities and statistics.
 struct TimeSteppingResult {
+  /// kSuccess, or why the run stopped.
   TimeSteppingStatus status = TimeSteppingStatus::kSuccess;
+  /// The time and reason when status != kSuccess.
   std::string message;
+  /// Time reached.
   double final_time = 0.0;
   Vector final_state;      ///< scene states
   Vector final_algebraic;  ///< algebraic unknowns at the last stage of the last step
   Trajectory trajectory;   ///< states and algebraic values at step ends
+  /// Switch and contact events (to the resolution of the step).
   std::vector<Event> events;
   /// Certificate per step: max_{stages, pairs} |min(a, b)| at the accepted solution.
   std::vector<double> step_complementarity_residual;
+  /// Counters and certificates.
   TimeSteppingStats stats;
   Vector final_lowered_state;  ///< y(T) = (x, clock)
   /// With options.sensitivities: d y(T) / d(y0, p, u per control segment), n_y rows; columns
   /// y0 (n_y), p (n_p), then u per segment (n_u each), as FesdSensitivities::lowered.
   Matrix sensitivities;
   std::vector<double> segment_starts;  ///< start time of every control segment
+  /// With sensitivity_directions (k): dx(T)/dtheta V (n_x x k).
+  Matrix directional;
+  /// With sensitivity_directions (k): the lowered dy(T)/dtheta V (n_y x k).
+  Matrix directional_lowered;
+  /// With adjoint_weights (q): the gradients, q x (n_x + n_p + n_u S).
+  Matrix adjoint;
+  /// With adjoint_weights (q): the gradients over the lowered (y0, p, u), q x (n_y + n_p + n_u S).
+  Matrix adjoint_lowered;
 };
 
 /// Simulates `scene` over [t0, tf]. Throws std::invalid_argument for invalid options, an
