@@ -486,7 +486,7 @@ TEST(SceneFileTextTest, NonAsciiTextInStringsAndCommentsOnly) {
   EXPECT_EQ(described.description, "a \"\xce\xb1\" and \xce\xb2\"");
 
   ExpectError(std::string(kHeader) + "dynamics = [\"1\", \"0\"] \xce\xb8\n",
-              "bad.toml:5:25: character U+03B8 outside a string or comment");
+              "bad.toml:5:23: character U+03B8 outside a string or comment");
   ExpectError("\xcc\xaa", "bad.toml:1:1: character U+032A outside a string or comment");
   ExpectError(std::string(kHeader) + "description = \"a \xff\"\n", "bad.toml:5:18: invalid UTF-8");
   ExpectError(std::string(kHeader) + "description = \"\xe0\x80\xaf\"\n", "invalid UTF-8");
