@@ -29,6 +29,7 @@ void TimeSteppingOptions::Validate() const {
                   "step size h must be positive and finite, got ", step_size);
   RequireArgument(std::isfinite(filter_safety) && filter_safety >= 1.0,
                   "filter safety must be >= 1, got ", filter_safety);
+  RequireArgument(max_steps >= 1, "max_steps must be >= 1, got ", max_steps);
   RequireArgument(sensitivity_directions.allFinite() && adjoint_weights.allFinite(),
                   "sensitivity directions and adjoint weights must be finite");
   newton.Validate();
@@ -196,6 +197,10 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
                                         const ProgressCallback& progress) {
   options.Validate();
   RequireSupportedEffects(scene, "timestepping");
+  // A grid longer than max_steps is refused before any work.
+  RequireFixedStepsWithin(
+      SegmentEnds(scene.initial_time, scene.final_time, scene.ControlBreakpoints()),
+      options.step_size, options.max_steps);
   const auto start = std::chrono::steady_clock::now();
   LoweringOptions lowering;
   lowering.switching_form = options.switching_form;

@@ -20,6 +20,7 @@ IntegratorEntry TimeSteppingEntry() {
       BindInteger("stages", &O::stages, "Radau IIA stages s in 1..7"),
       BindReal("h", &O::step_size, "fixed step > 0"),
       BindSwitching(&O::switching_form),
+      BindInteger("max_steps", &O::max_steps, "most steps (a longer grid is refused), >= 1"),
       BindBool("record_trajectory", &O::record_trajectory,
                "record every step (false: initial and final points only)"),
       BindBool("sensitivities", &O::sensitivities,

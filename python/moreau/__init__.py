@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import functools
 import math
+import warnings
 from typing import Any, Callable, Dict, List, NamedTuple, Optional, Sequence
 
 import numpy as np
@@ -42,6 +43,7 @@ __all__ = [
     "Result",
     "Scene",
     "Sensitivities",
+    "SimulationWarning",
     "integrators",
     "scene",
     "scenes",
@@ -271,7 +273,8 @@ def integrators() -> List[Dict[str, Any]]:
 class Result:
     """The result of a simulation (the same for every integrator).
 
-    Attributes: ``status``, ``success``, ``message``, ``integrator``, ``final_time``,
+    Attributes: ``status``, ``success``, ``message``, ``warnings``, ``error_estimate``,
+    ``integrator``, ``final_time``,
     ``final_state``; arrays ``t`` (N,), ``x`` (N, n_x), ``algebraic`` (N, n_a; NaN where an
     integrator has no value, e.g. at t0) and ``step`` (N,); ``events``, ``relays``, ``stats``
     (dict), ``options`` (the options used, with defaults), ``records`` (per-element or per-step
@@ -286,6 +289,12 @@ class Result:
         self.status: str = native.status
         self.message: str = native.message
         self.final_time: float = native.final_time
+        #: What to know although the run may have succeeded (an estimated error far above the
+        #: tolerance, ...); simulate() also issues each with warnings.warn.
+        self.warnings: List[str] = list(native.warnings)
+        #: The run's estimated error relative to the solution's scale (FESD, Radau; None
+        #: where the integrator has none; docs/accuracy.md).
+        self.error_estimate: Optional[float] = native.error_estimate
 
     @functools.cached_property
     def final_state(self) -> np.ndarray:
@@ -490,6 +499,18 @@ def simulate(scene: Scene, integrator: str = "auto",
         raise ValueError(f"integrator must be a string, got {type(integrator).__name__}")
     result = Result(_moreau._simulate(scene._native, integrator, options, _progress_arg(progress)))
     result._scene = scene.copy()  # as simulated: figures and animations read its view
+    return _warned(result)
+
+
+class SimulationWarning(UserWarning):
+    """A run's warning (``Result.warnings``): an estimated error far above the tolerance, a
+    suspected unresolved crossing, ..."""
+
+
+def _warned(result: Result) -> Result:
+    for message in result.warnings:
+        warnings.warn(f"{result.scene} ({result.integrator}): {message}", SimulationWarning,
+                      stacklevel=3)
     return result
 
 
@@ -533,7 +554,7 @@ class Integrator:
         result._scene = self.scene.copy()
         for name, value in values:
             result._scene._native.set_value(name, value)
-        return result
+        return _warned(result)
 
 
 from ._ensemble import sweep  # noqa: E402  (needs Scene and simulate above)

@@ -46,6 +46,9 @@ class _Result:
     num_steps: int
     num_iterations: int
     cpu_seconds: float
+    warnings: List[str]
+    @property
+    def error_estimate(self) -> Optional[float]: ...
     @property
     def final_state(self) -> np.ndarray: ...
     @property

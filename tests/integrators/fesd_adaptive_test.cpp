@@ -413,7 +413,8 @@ TEST(FesdAdaptiveTest, RtolSwitchesAdaptiveStepsOnThroughSimulate) {
       EXPECT_NE(std::string(error.what()).find(part), std::string::npos) << error.what();
     }
   };
-  expect_refusal({{"h_min", 1e-6}}, "'h_min' applies to the fesd integrator with adaptive");
+  expect_refusal({{"h", 0.1}, {"h_min", 1e-6}}, "'h_min' applies to error-controlled steps only");
+  expect_refusal({{"adaptive", false}}, "adaptive = false needs a fixed step h");
   expect_refusal({{"rtol", -1.0}}, "relative tolerance rtol must be positive");
   expect_refusal({{"rtol", 1e-6}, {"step_sequence", std::vector<double>{0.1}}},
                  "cannot be combined with adaptive");

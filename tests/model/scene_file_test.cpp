@@ -32,20 +32,12 @@ std::string ExampleFile(const std::string& name) {
 // and 1e-12 on O(1)-O(20) states leaves room for a different but equivalent association.
 constexpr double kTrajectoryTolerance = 1e-12;
 
-// The reference scenes as files, with the integrator that runs them (FESD s = 3, default h;
-// the DAI scene with the alpha-method stepper).
+// The reference scenes as files, with the integrator that runs them (FESD s = 3 with its
+// default error control and the scene's own [defaults]; the DAI scene with the alpha-method
+// stepper).
 const char* const kFileScenes[] = {"S1",  "S2",         "S3",        "S4",           "F1",  "F2a",
                                    "F2b", "F2c",        "F3",        "F4",           "H1",  "H2",
                                    "H3",  "dai_index2", "rectifier", "diode_bridge", "buck"};
-
-// The circuits are in seconds (docs/complementarity.md): FESD's default step (0.1) would span
-// their whole horizon, so they run with a step of their own time scale.
-double StepFor(const std::string& name) {
-  if (name == "rectifier") return 1e-5;
-  if (name == "diode_bridge") return 2e-4;
-  if (name == "buck") return 5e-6;
-  return FesdOptions{}.step_size;
-}
 
 class ExampleFileTest : public ::testing::TestWithParam<const char*> {};
 
@@ -57,11 +49,17 @@ TEST_P(ExampleFileTest, ReproducesTheCompiledScene) {
   EXPECT_EQ(file.initial_state, compiled.initial_state);
   EXPECT_EQ(file.final_time, compiled.final_time);
   ASSERT_EQ(file.effects.size(), compiled.effects.size());
+  // The scale the author declared ([defaults]) is part of the scene.
+  EXPECT_EQ(file.defaults.relative_tolerance, compiled.defaults.relative_tolerance);
+  EXPECT_EQ(file.defaults.absolute_tolerance, compiled.defaults.absolute_tolerance);
+  EXPECT_EQ(file.defaults.initial_step, compiled.defaults.initial_step);
+  EXPECT_EQ(file.defaults.max_step, compiled.defaults.max_step);
+  EXPECT_EQ(file.defaults.output_times, compiled.defaults.output_times);
+  EXPECT_EQ(file.defaults.output_step, compiled.defaults.output_step);
   const std::string integrator = name == "dai_index2" ? "alpha" : "fesd";
   const SimulationSettings settings{
-      integrator, integrator == "fesd"
-                      ? std::map<std::string, SettingValue>{{"stages", 3L}, {"h", StepFor(name)}}
-                      : std::map<std::string, SettingValue>{}};
+      integrator, integrator == "fesd" ? std::map<std::string, SettingValue>{{"stages", 3L}}
+                                       : std::map<std::string, SettingValue>{}};
   const SimulationResult a = Simulate(file, settings);
   const SimulationResult b = Simulate(compiled, settings);
   ASSERT_TRUE(a.success) << a.message;
@@ -342,6 +340,55 @@ TEST(SceneFileErrorTest, MissingAndUnknownKeys) {
                   "[[effects]]\nkind = \"moving_set\"\nname = \"m\"\n"
                   "constraints = [\"x\"]\nbasis = [[1.0], [0.0]]\n",
               "unknown key 'basis'");
+}
+
+// [defaults]: the scene's scale, applied by Simulate where the user gives no setting.
+TEST(SceneFileTest, DefaultsCarryTheScenesScale) {
+  const std::string text = std::string(kHeader) +
+                           "dynamics = [\"-x\", \"-y\"]\n[[parameters]]\nname = \"tau\"\n"
+                           "value = 1e-3\n[defaults]\nrtol = 1e-8\nh0 = \"tau/100\"\n"
+                           "h_max = \"tau\"\noutput_times = [0.25, 0.5]\n";
+  const Scene scene = ParseScene(text, "ok.toml");
+  EXPECT_EQ(scene.defaults.relative_tolerance, 1e-8);
+  EXPECT_EQ(scene.defaults.initial_step, 1e-5);
+  EXPECT_EQ(scene.defaults.max_step, 1e-3);
+  EXPECT_EQ(scene.defaults.output_times, (std::vector<double>{0.25, 0.5}));
+
+  // Applied where the user gives nothing; a given option wins; a fixed h keeps its steps.
+  auto with = [&](const std::map<std::string, SettingValue>& given) {
+    return WithSceneDefaults(scene, "fesd", given);
+  };
+  auto real = [](const std::map<std::string, SettingValue>& options, const std::string& name) {
+    return std::get<double>(options.at(name));
+  };
+  std::map<std::string, SettingValue> options = with({});
+  EXPECT_EQ(real(options, "rtol"), 1e-8);
+  EXPECT_EQ(real(options, "h0"), 1e-5);
+  EXPECT_EQ(real(options, "h_max"), 1e-3);
+  EXPECT_EQ(std::get<std::vector<double>>(options.at("output_times")),
+            (std::vector<double>{0.25, 0.5}));
+  EXPECT_EQ(real(with({{"rtol", 1e-4}}), "rtol"), 1e-4);
+  options = with({{"h", 0.01}});
+  EXPECT_EQ(options.count("rtol") + options.count("h0") + options.count("h_max"), 0u);
+  EXPECT_EQ(options.count("output_times"), 1u);
+  // IDA calls its largest step max_step and has no h0.
+  options = WithSceneDefaults(scene, "ida", {});
+  EXPECT_EQ(real(options, "max_step"), 1e-3);
+  EXPECT_EQ(options.count("h0"), 0u);
+
+  // A run uses them: the trajectory is exactly t0, the output times and tf.
+  const SimulationResult result = Simulate(scene, SimulationSettings{"fesd", {}});
+  ASSERT_TRUE(result.success) << result.message;
+  EXPECT_EQ(result.trajectory.t, (std::vector<double>{0.0, 0.25, 0.5, 1.0}));
+
+  ExpectError(std::string(kHeader) + "[defaults]\nrtoll = 1e-6\n",
+              "unknown key 'rtoll'; did you mean 'rtol'?");
+  ExpectError(std::string(kHeader) + "[defaults]\nh0 = -1.0\n",
+              "(defaults.h0): expected a positive value, got -1");
+  ExpectError(std::string(kHeader) + "[defaults]\nrtol = 2.0\n",
+              "expected a relative tolerance below 1");
+  ExpectError(std::string(kHeader) + "[defaults]\noutput_times = [0.5, 3.0]\n",
+              "output time 3 is outside [t0, tf] = [0, 1]");
 }
 
 TEST(SceneFileErrorTest, LoadSceneNamesAMissingFile) {

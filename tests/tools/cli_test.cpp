@@ -31,8 +31,8 @@ TEST(CliTest, BadInputGivesClearErrorsAndExitCode2) {
   ExpectUsageError("run hopf --tf -1", "horizon must be positive");
   ExpectUsageError("run hopf --set x0.x=nan", "must be finite");
   ExpectUsageError("run hopf --integrator nope", "unknown integrator 'nope'");
-  ExpectUsageError("run hopf --integrator radau --rtol 1e-3",
-                   "option 'rtol' applies to the radau integrator with adaptive steps only");
+  ExpectUsageError("run hopf --integrator radau --h 0.01 --h-max 0.1",
+                   "'h_max' applies to error-controlled steps only");
   ExpectUsageError("run S3 --integrator radau", "does not support the moving set 'floor'");
   ExpectUsageError("run hopf --h 0", "step size h must be positive");
   ExpectUsageError("run hopf --stages 0", "stages must be in [1, 7]");
@@ -193,8 +193,8 @@ TEST(CliTest, FesdRtolSwitchesAdaptiveStepsOn) {
   while (std::getline(trajectory, line)) times.push_back(std::stod(line.substr(0, line.find(','))));
   ASSERT_EQ(times.size(), 8u) << outcome.output;
   for (int k = 0; k < 7; ++k) EXPECT_DOUBLE_EQ(times[static_cast<std::size_t>(k)], 0.25 * k);
-  ExpectUsageError("run F1 --integrator fesd --h-min 1e-6",
-                   "'h_min' applies to the fesd integrator with adaptive steps only");
+  ExpectUsageError("run F1 --integrator fesd --h 0.1 --h-min 1e-6",
+                   "'h_min' applies to error-controlled steps only");
   ExpectUsageError("run F1 --integrator fesd --rtol 1e-8 --output-times 0.5,9",
                    "output time 9 is outside [t0, tf]");
 }

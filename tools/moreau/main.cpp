@@ -154,6 +154,13 @@ int Run(Scene scene, const moreau::SimulationSettings& settings,
   const moreau::SimulationResult report = moreau::Simulate(
       scene, settings, [&](double t) { progress.Update((t - t0) / (tf - t0), time_text(t)); });
   progress.Finish((report.final_time - t0) / (tf - t0), time_text(report.final_time));
+  // What the user should know although the run may have succeeded (also in summary.json;
+  // --quiet leaves errors only).
+  if (!quiet) {
+    for (const std::string& warning : report.warnings) {
+      std::fprintf(stderr, "moreau: warning: %s\n", warning.c_str());
+    }
+  }
   const moreau::Trajectory& trajectory =
       numerical_time ? report.numerical_trajectory : report.trajectory;
 
@@ -227,6 +234,10 @@ int Run(Scene scene, const moreau::SimulationSettings& settings,
   std::printf("iterations  %ld (%s)\n", report.num_iterations, spec.iteration_unit.c_str());
   std::printf("cpu time    %.3g s\n", report.cpu_seconds);
   std::printf("stats       %s\n", report.stats_summary.c_str());
+  if (report.error_estimate) {
+    std::printf("error       %.3g estimated, relative to the solution's scale\n",
+                *report.error_estimate);
+  }
   std::printf("output      %s/trajectory.csv, %s/summary.json%s%s%s\n", out_directory.c_str(),
               out_directory.c_str(), extra_files.c_str(), image.empty() ? "" : ", ", image.c_str());
   if (plot && image.empty()) {

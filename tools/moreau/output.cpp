@@ -185,6 +185,8 @@ nlohmann::json SummaryJson(const SimulationResult& report) {
     stats[name] = count ? nlohmann::json(static_cast<long>(value)) : NumberJson(value);
   }
   summary["stats"] = stats;
+  if (report.error_estimate) summary["error_estimate"] = NumberJson(*report.error_estimate);
+  summary["warnings"] = report.warnings;
   if (!report.step_sequence.empty()) summary["step_sequence"] = report.step_sequence;
   // Sensitivities (options sensitivities, directions, adjoint_weights), matrices as rows over
   // theta = (x0, p, u per segment); the states at sample_times.

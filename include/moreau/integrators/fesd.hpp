@@ -85,10 +85,13 @@ namespace moreau {
 struct FesdOptions {
   /// Radau IIA stages s in [1, kMaxRadauStages]; order 2s - 1 (1, 3, 5, 7 for s = 1..4).
   int stages = 3;
-  /// Integration step H > 0 (control interval; steps never cross control breakpoints). With
-  /// hysteresis relays H is measured in numerical time (see the file comment). Adaptive: the
-  /// initial step, 0 = automatic (Hairer-Wanner's starting step for order 2s - 1, times N_fe).
-  double step_size = 0.1;
+  /// Fixed integration step H > 0 (control interval; steps never cross control breakpoints;
+  /// with hysteresis relays H is measured in numerical time, see the file comment). 0 (the
+  /// default): no fixed step, the steps are error-controlled (ErrorControlled(): a default-
+  /// constructed FesdOptions runs to the tolerances below, so that a step that knows nothing
+  /// of the model's time scale is never the default). With `adaptive` a positive H is the
+  /// initial step of the error-controlled run.
+  double step_size = 0.0;
   /// Nominal finite elements per step N_fe >= 1.
   int finite_elements = 2;
   /// Lowering of switching surfaces.
@@ -169,14 +172,22 @@ struct FesdOptions {
   /// error estimate use the field too.
   bool reduce_smooth_elements = true;
   /// Step-size control by the local error estimate (see the file comment and
-  /// docs/fesd-formulation.md, section 10) instead of fixed steps H.
+  /// docs/fesd-formulation.md, section 10) even with a fixed step H given (H is then the
+  /// initial step). Error control is on whenever step_size is 0, whatever this says.
   bool adaptive = false;
-  /// Tolerances of the adaptive steps, > 0: the local error of a step of length H, weighted
-  /// per state by atol + rtol max(|y_start|, |y_end|), is kept below H / (tf - t0) (error per
-  /// unit step), so that the error at tf is about rtol relative to the solution scale.
-  double relative_tolerance = 1e-6;
-  /// Absolute tolerance of the adaptive steps (see relative_tolerance), > 0.
-  double absolute_tolerance = 1e-8;
+  /// Initial step of an error-controlled run, > 0; 0 (the default): step_size if positive,
+  /// else automatic (Hairer-Norsett-Wanner's starting step for order 2s - 1 from the field at
+  /// t0 and at an Euler step, times N_fe; see StartingStep in fesd_adaptive.cpp).
+  double initial_step_size = 0.0;
+  /// Tolerances of the error-controlled steps: the local error of a step of length H, weighted
+  /// per state by atol_i + rtol max(|y_start|, |y_end|), is kept below H / (tf - t0) (error per
+  /// unit step), so that the error at tf is about rtol relative to the solution's scale
+  /// (docs/accuracy.md). rtol > 0. atol > 0 is one absolute tolerance for every state; 0 (the
+  /// default) makes it per state and proportional to rtol: atol_i = rtol times the largest
+  /// |y_i| of the run so far (initial value included), i.e. every state is controlled
+  /// relative to its own scale, whatever its unit.
+  double relative_tolerance = kDefaultRelativeTolerance;
+  double absolute_tolerance = 0.0;
   /// Smallest step of the adaptive controller and of the failure retries, > 0 (never below
   /// 64 ulps of the time); below it the run stops with kStepSizeTooSmall or the status of the
   /// failed solve.
@@ -202,6 +213,19 @@ struct FesdOptions {
   /// (empty: the scene's x0, initial memories and t0). A shooting code passes node states this
   /// way: with time-freezing a node may lie inside a frozen interval (0 < w < 1).
   Vector initial_state;
+  /// Most integration steps of a run, >= 1. A fixed grid (step_size without error control)
+  /// with more steps than this is refused before any work (std::invalid_argument); an
+  /// error-controlled run that reaches it stops with FesdStatus::kMaxStepsReached. A FESD
+  /// step costs tens of microseconds or more, so the default bounds a run to seconds (a 10^6
+  /// step fixed grid used to run for minutes without a word).
+  long max_steps = 100'000;
+  /// Fixed steps: estimate the local error of every step as error control does (Richardson
+  /// extrapolation against a comparison solve of the same interval, EstimateError) and
+  /// accumulate it into FesdStats::error_estimate, with a warning in FesdResult::warnings when
+  /// it exceeds kErrorWarningFactor times relative_tolerance (docs/accuracy.md). Costs one
+  /// comparison element solve per step; shooting codes that integrate the same intervals many
+  /// times may switch it off.
+  bool estimate_error = true;
   /// An initial state x0 outside the moving sets is projected onto them (the sweeping
   /// process's jump at t0, with its derivative in the sensitivities) instead of refused, as
   /// initial_state is: shooting codes whose node states leave the sets between iterations.
@@ -210,6 +234,10 @@ struct FesdOptions {
   bool record_stages = false;
   /// Record element ends in the trajectory (false: initial and final points only).
   bool record_trajectory = true;
+
+  /// Whether the steps are error-controlled: no replayed step_sequence, and adaptive or no
+  /// fixed step (step_size == 0).
+  bool ErrorControlled() const { return step_sequence.empty() && (adaptive || step_size == 0.0); }
 
   /// The Newton settings of the element solves when none are given (tolerances and iteration limits
   /// tuned for the element systems).
@@ -225,7 +253,12 @@ enum class FesdStatus {
   kEventLocationFailure,   ///< a switch was detected but no group solve ended on it within
                            ///< max_event_retries (Newton failure or inconsistent signs)
   kStatusDecisionFailure,  ///< no consistent continuation at a switch point
-  kStepSizeTooSmall,       ///< adaptive: the error test failed with the step at min_step_size
+  kStepSizeTooSmall,       ///< error control: the error test failed with the step at its
+                           ///< minimum max(min_step_size, 64 eps max(1, |t|))
+  kNonFinite,              ///< a model function is not finite at a point the step needs (the
+                           ///< message names the function, its output, t and the state); with
+                           ///< error control after the step was shortened to its minimum
+  kMaxStepsReached,        ///< error control: max_steps steps before the final time
   /// the adjoint sweep found the Jacobian of a converged group singular at its checkpoint
   /// (reciprocal condition below kSingularRcond): no adjoint sensitivities
   kSensitivityFailure,
@@ -312,6 +345,15 @@ struct FesdStats {
   /// Elements solved as a Radau IIA step of a smooth field (FesdOptions::reduce_smooth_elements)
   /// whose full element system then held without a Newton iteration of its own.
   long num_reduced_elements = 0;
+  /// Estimated error of the run relative to the solution's scale: the local error estimates
+  /// of the accepted steps accumulated, rtol sum_k (H_k / (tf - t0)) err_k with err_k the
+  /// estimate per unit step in the tolerance weights (docs/accuracy.md). Error-controlled runs
+  /// keep it near rtol by construction; fixed steps with estimate_error report theirs. -1
+  /// where not estimated (fixed steps without estimate_error, replays).
+  double error_estimate = -1.0;
+  /// Steps whose error could not be estimated (a comparison solve failed); not in
+  /// error_estimate.
+  long num_unestimated_steps = 0;
   /// Adjoint sensitivities: bytes the run kept in memory for the reverse sweep (converged
   /// unknowns and group data).
   double adjoint_memory_bytes = 0.0;
@@ -360,6 +402,9 @@ struct FesdResult {
   std::shared_ptr<FesdAdjoint> adjoint;
   /// Counters and certificates.
   FesdStats stats;
+  /// What the caller should know although the run succeeded (an estimated error far above
+  /// the tolerance, ...), one sentence each.
+  std::vector<std::string> warnings;
 };
 
 /// Gradients of q functionals of one run (FesdAdjoint::Sweep).

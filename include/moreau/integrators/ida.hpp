@@ -76,11 +76,12 @@ struct IdaOptions {
   long max_events = 100000;
   /// Largest internal step (0: no limit).
   double max_step = 0.0;
-  /// Record every internal step in the trajectory (false: events, breakpoints and the
-  /// output times only).
+  /// Record every internal step in the trajectory (false: events and breakpoints only).
+  /// Ignored with output_times.
   bool record_steps = true;
-  /// Extra trajectory points at these times in (t0, tf] (interpolated by IDA to the
-  /// integration accuracy). Need not be sorted.
+  /// Output times in [t0, tf] (need not be sorted): the trajectory is then exactly t0, these
+  /// times (interpolated by IDA to the integration accuracy) and tf, nothing else (events
+  /// are in IdaResult::events).
   std::vector<double> output_times;
 
   /// The reference-solution settings: rtol = 1e-12, atol = 1e-14, Newton convergence
@@ -101,7 +102,19 @@ enum class IdaStatus {
   kNoProgress,             ///< kMaxStalledIdaSteps consecutive internal steps did not advance t
                            ///< (steps below the resolution of t, e.g. at a point beyond which
                            ///< the model is singular or not finite)
+  kStepSizeTooSmall,       ///< kMaxCollapsedIdaSteps accepted internal steps in a row shorter
+                           ///< than 10 eps |t|: the step collapsed (the message names a
+                           ///< non-finite model value if IDA met one)
+  kNonFinite,              ///< IDA failed on non-finite residuals (repeated recoverable
+                           ///< residual errors); the message names the model function, its
+                           ///< output, t and the state
 };
+/// IDA steps shorter than this many units in the last place of t (10 eps |t|) count as
+/// collapsed; kMaxCollapsedIdaSteps of them in a row end the run with
+/// IdaStatus::kStepSizeTooSmall (IDA's first steps after a restart can be that short, but
+/// they double every step).
+inline constexpr double kMinIdaStepUlps = 10.0;
+inline constexpr int kMaxCollapsedIdaSteps = 20;
 /// Consecutive internal IDA steps that leave t unchanged before IdaStatus::kNoProgress.
 inline constexpr int kMaxStalledIdaSteps = 100;
 /// The status as text (snake case, as in summary.json).

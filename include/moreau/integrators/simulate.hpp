@@ -187,6 +187,13 @@ struct SimulationResult {
   std::optional<SimulationSensitivities> sensitivities;
   /// Adaptive FESD: the accepted steps, in the form its option `step_sequence` replays them.
   std::vector<double> step_sequence;
+  /// The run's estimated error relative to the solution's scale (docs/accuracy.md): local
+  /// error estimates accumulated over the steps (FESD, smooth Radau IIA), else empty.
+  std::optional<double> error_estimate;
+  /// What the user should know although the run may have succeeded (an estimated error far
+  /// above the tolerance, a suspected unresolved crossing, ...), one sentence each. Front ends
+  /// show them: the command line on stderr and in summary.json, Python by warnings.warn.
+  std::vector<std::string> warnings;
   /// Option `sample_times`: the scene states at those times.
   std::vector<Vector> sample_states;
   /// Option `keep_adjoint`: the run's reverse sweep (shared by copies of the result).
@@ -195,6 +202,15 @@ struct SimulationResult {
   /// The statistic with this name (std::invalid_argument if the integrator has none).
   double Stat(const std::string& name) const;
 };
+
+/// The options `given` for `integrator` with the scene's defaults (Scene::defaults) added
+/// where the user gave none: rtol, atol, h0 and h_max (IDA: max_step) only where the steps are
+/// error-controlled (no h given, or h with adaptive, rtol, atol or h0), output times (those
+/// inside [t0, tf]) and output_dt unless either is given; each only where the integrator
+/// declares the option. Simulate, Simulator and ValidateSimulationSettings apply it.
+std::map<std::string, SettingValue> WithSceneDefaults(
+    const Scene& scene, const std::string& integrator,
+    const std::map<std::string, SettingValue>& given);
 
 /// Checks the settings for `scene` without simulating: the integrator exists ("auto" is
 /// resolved for the scene) and supports the scene's effects, every option is declared, of the

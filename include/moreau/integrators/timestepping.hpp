@@ -44,6 +44,8 @@ struct TimeSteppingOptions {
   /// a b = mu^2 (a, b > 0; Fischer-Burmeister only): the step map is smooth and the
   /// sensitivities are its classical derivatives (homotopies of the OCP layer).
   SemismoothNewtonOptions newton = DefaultNewtonOptions();
+  /// Most steps of a run, >= 1: a grid with more is refused before any work.
+  long max_steps = 1'000'000;
   /// Record every step in the trajectory (false: only the initial and final points).
   bool record_trajectory = true;
   /// Compute TimeSteppingResult::sensitivities: the implicit function theorem on every

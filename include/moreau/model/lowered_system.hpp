@@ -312,6 +312,7 @@ class LoweredSystem {
   void Evaluate(const ConstVectorRef& y, const ConstVectorRef& z, Derivatives derivatives,
                 PointEvaluation* out) const {
     EvaluatePoint(y, z, derivatives, nullptr, out);
+    NoteNonFinite(y, *out, false);
   }
   /// F and its derivatives (F_y, F_z; F_u, F_p with Derivatives::kAll) as Evaluate gives them;
   /// G, A, B and their derivatives are sized but unspecified (blocks may skip them). For
@@ -325,7 +326,20 @@ class LoweredSystem {
   void EvaluateField(const ConstVectorRef& y, const ConstVectorRef& z, Derivatives derivatives,
                      PointEvaluation* out, int switching_mode = -1) const {
     EvaluatePoint(y, z, derivatives, nullptr, out, /*field_only=*/true, switching_mode);
+    NoteNonFinite(y, *out, true);
   }
+
+  /// Non-finite witness: the first point y since ClearNonFinite() at which Evaluate or
+  /// EvaluateField produced a non-finite F (or G, A, B), kept so that an integrator whose
+  /// solve failed can say which model function was not finite where (DescribeNonFinite)
+  /// instead of reporting the solver's failure alone. Not thread-safe (as Evaluate).
+  void ClearNonFinite() const { non_finite_seen_ = false; }
+  bool non_finite_seen() const { return non_finite_seen_; }
+  const Vector& non_finite_state() const { return non_finite_state_; }
+  /// NonFiniteModelValue of the scene at the lowered state y (scene states, time from the
+  /// clock) with the current inputs and parameters; empty if every model function is finite
+  /// there.
+  std::string DescribeNonFinite(const Vector& y) const;
 
   /// Velocity-level structure: continuous algebraic unknowns (rates at velocity level) and
   /// differentiated equations (see EvaluateVelocityLevel).
@@ -475,6 +489,16 @@ class LoweredSystem {
                      bool field_only = false, int switching_mode = -1) const;
   // Completes sparse accumulation (DerivativeMatrix::Finalize) of the requested blocks.
   void FinalizeEvaluation(Derivatives derivatives, PointEvaluation* out) const;
+  // Records y as the non-finite witness if none is kept and the evaluation is not finite.
+  void NoteNonFinite(const ConstVectorRef& y, const PointEvaluation& out, bool field_only) const {
+    if (non_finite_seen_ ||
+        (out.F.allFinite() &&
+         (field_only || (out.G.allFinite() && out.A.allFinite() && out.B.allFinite())))) {
+      return;
+    }
+    non_finite_seen_ = true;
+    non_finite_state_ = y;
+  }
 
   Scene scene_;
   LoweringOptions options_;
@@ -504,6 +528,8 @@ class LoweredSystem {
   mutable Vector f_scratch_;
   mutable Eigen::RowVectorXd rate_gradient_;
   mutable PointEvaluation velocity_point_;  // EvaluateVelocityLevel's workspace
+  mutable bool non_finite_seen_ = false;    // the non-finite witness (NoteNonFinite)
+  mutable Vector non_finite_state_;
   mutable CurvatureTerms curvature_;
   mutable std::unique_ptr<internal::ArgumentMatrix> dynamics_jacobian_holder_;
   // SolveVelocityLevel's solver and its last solutions (velocity_level.cpp); not copied.

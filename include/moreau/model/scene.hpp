@@ -170,6 +170,25 @@ std::string EffectKind(const Effect& effect);
 /// The effect's name.
 const std::string& EffectName(const Effect& effect);
 
+/// What a scene's author knows of its scales (scene files: the [defaults] table,
+/// docs/scene-files.md): integrator settings that moreau::Simulate uses where the user gives
+/// none (docs/accuracy.md). Zero or empty: the integrator's own default.
+struct SceneDefaults {
+  double relative_tolerance = 0.0;  ///< rtol of error-controlled runs, >= 0
+  double absolute_tolerance = 0.0;  ///< atol of error-controlled runs (one for every state), >= 0
+  double initial_step = 0.0;        ///< initial step of error-controlled runs (h0), >= 0
+  double max_step = 0.0;            ///< largest step of error-controlled runs (h_max), >= 0
+  /// Output times: the trajectory at these times (dense output), in [t0, tf]; times beyond a
+  /// horizon the user shortened are left out.
+  std::vector<double> output_times;
+  double output_step = 0.0;  ///< output every output_step from t0 (output_dt), >= 0
+
+  bool empty() const {
+    return relative_tolerance == 0.0 && absolute_tolerance == 0.0 && initial_step == 0.0 &&
+           max_step == 0.0 && output_times.empty() && output_step == 0.0;
+  }
+};
+
 /// A complete problem description (see file comment).
 struct Scene {
   /// The scene's name (messages, output directories).
@@ -198,6 +217,8 @@ struct Scene {
   /// (smooth dynamics, switching modes, relay fields; moving-set multipliers adapt). Supported
   /// by the FESD integrator.
   int time_scale_input = -1;
+  /// Integrator settings the scene's author chose for its scales (see SceneDefaults).
+  SceneDefaults defaults;
   /// How figures and animations show the scene (names, units, planar geometry); never
   /// changes the dynamics (moreau/model/view.hpp).
   SceneView view;
@@ -255,6 +276,14 @@ inline constexpr int kMaxEnumeratedPMatrixSize = 16;
 /// every q (Cottle, Pang, Stone, The Linear Complementarity Problem, Thm. 3.3.7). Throws
 /// std::invalid_argument for a non-square D or an m too large to enumerate.
 std::string PMatrixViolation(const Matrix& d);
+
+/// Empty if every model function of the scene (dynamics and every effect's functions) is
+/// finite at the state x, inputs u, time t and parameters p; otherwise names the first that is
+/// not: which function, which output, its value, and the point, e.g. "the dynamics f, output
+/// 'y' (the rate of state y), is nan at t = 0.1276, x = (x = -1e-17, y = 0.03)". Integrators put
+/// it into their non-finite statuses (a runaway named, never an unexplained solver failure).
+std::string NonFiniteModelValue(const Scene& scene, const Vector& x, const Vector& u, double t,
+                                const Vector& p);
 
 /// Names accepted by SetSceneValue: "tf", "x0.<state>" and every parameter name.
 std::vector<std::string> OverridableNames(const Scene& scene);

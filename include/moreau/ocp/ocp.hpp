@@ -35,7 +35,9 @@
 /// terminal equalities |g| <= eps (docs/ocp.md, "Homotopy").
 ///
 /// Verification: the optimal controls (in physical time) are re-simulated by IDA at
-/// rtol = 1e-12 and the terminal-constraint error of that simulation is reported.
+/// rtol = 1e-12 and by FESD on a fine grid, and the terminal-constraint error of those
+/// simulations is reported; a solve whose re-simulations both end farther from its x(T) than
+/// kOcpVerificationTolerance is OcpStatus::kNotVerified, not solved.
 
 #include <functional>
 #include <memory>
@@ -302,14 +304,27 @@ struct OcpOptions {
   void Validate() const;
 };
 
-/// Outcome of an OCP solve; the criterion is IPOPT's (tol on the scaled KKT error).
+/// Largest gap between the optimum's x(T) and a verification re-simulation of its controls
+/// for which the result counts as solved: |x_sim(T) - x(T)|_inf <= this times
+/// max(1, |x(T)|_inf), for the closer of the two re-simulations (IDA at its reference
+/// settings, FESD on a grid ten times finer than the controls'). The default accuracy of a
+/// simulation (docs/accuracy.md): an optimum whose own trajectory is not reproduced to it
+/// is an optimum of the discretization, not of the problem.
+inline constexpr double kOcpVerificationTolerance = 1e-5;
+
+/// Outcome of an OCP solve; the criterion is IPOPT's (tol on the scaled KKT error), and with
+/// OcpOptions::verify the re-simulation of the controls (kOcpVerificationTolerance).
 enum class OcpStatus {
-  kSolved,              ///< IPOPT: optimal solution found
-  kSolvedToAcceptable,  ///< IPOPT: solved to its acceptable tolerances
+  kSolved,              ///< IPOPT: optimal solution found (and verified, with verify)
+  kSolvedToAcceptable,  ///< IPOPT: solved to its acceptable tolerances (and verified)
   kInfeasible,          ///< IPOPT: locally infeasible
   kMaxIterations,       ///< IPOPT: iteration limit
   kSimulationFailure,   ///< an interval integration failed at the initial point
   kSolverFailure,       ///< any other IPOPT failure (the message names it)
+  kNotVerified,         ///< IPOPT solved the NLP (solved or acceptable), but no re-simulation
+                        ///< of its controls ends within kOcpVerificationTolerance of its x(T)
+                        ///< (OcpResult::verification_gap; infinite if none succeeded): the
+                        ///< discretization is too coarse for the trajectory it claims
 };
 /// The status as text (snake case, as in summary.json).
 std::string ToString(OcpStatus status);
@@ -413,6 +428,10 @@ struct OcpResult {
   double fesd_resimulated_terminal_error = 0.0;
   /// |x_fesd(T) - x(T)| (infinity norm).
   double fesd_resimulated_state_difference = 0.0;
+  /// With verify: the smaller of the two re-simulations' |x_sim(T) - x(T)|_inf (infinity if
+  /// neither succeeded); above kOcpVerificationTolerance max(1, |x(T)|_inf) a solved status
+  /// becomes kNotVerified. -1 without verification.
+  double verification_gap = -1.0;
   /// Counters and sizes.
   OcpStats stats;
 };
