@@ -187,7 +187,7 @@ struct FesdOptions {
   /// |y_i| of the run so far (initial value included), i.e. every state is controlled
   /// relative to its own scale, whatever its unit.
   double relative_tolerance = kDefaultRelativeTolerance;
-  double absolute_tolerance = 0.0;
+  double absolute_tolerance = 0.0;  ///< atol: > 0 for every state, 0 per state (see above)
   /// Smallest step of the adaptive controller and of the failure retries, > 0 (never below
   /// 64 ulps of the time); below it the run stops with kStepSizeTooSmall or the status of the
   /// failed solve.

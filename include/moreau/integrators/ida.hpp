@@ -114,7 +114,7 @@ enum class IdaStatus {
 /// IdaStatus::kStepSizeTooSmall (IDA's first steps after a restart can be that short, but
 /// they double every step).
 inline constexpr double kMinIdaStepUlps = 10.0;
-inline constexpr int kMaxCollapsedIdaSteps = 20;
+inline constexpr int kMaxCollapsedIdaSteps = 20;  ///< collapsed steps in a row that end a run
 /// Consecutive internal IDA steps that leave t unchanged before IdaStatus::kNoProgress.
 inline constexpr int kMaxStalledIdaSteps = 100;
 /// The status as text (snake case, as in summary.json).

@@ -45,7 +45,7 @@ struct RadauOptions {
   /// state, or 0 (the default): atol_i = rtol times the largest |y_i| of the run so far, each
   /// state controlled relative to its own scale (docs/accuracy.md).
   double relative_tolerance = kDefaultRelativeTolerance;
-  double absolute_tolerance = 0.0;
+  double absolute_tolerance = 0.0;  ///< atol: > 0 for every state, 0 per state (see above)
   /// Smallest step the controller may take, > 0 (never below 10 eps |t|); below it the run
   /// stops with RadauStatus::kStepSizeTooSmall.
   double min_step_size = 1e-14;

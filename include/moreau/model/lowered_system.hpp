@@ -334,8 +334,8 @@ class LoweredSystem {
   /// solve failed can say which model function was not finite where (DescribeNonFinite)
   /// instead of reporting the solver's failure alone. Not thread-safe (as Evaluate).
   void ClearNonFinite() const { non_finite_seen_ = false; }
-  bool non_finite_seen() const { return non_finite_seen_; }
-  const Vector& non_finite_state() const { return non_finite_state_; }
+  bool non_finite_seen() const { return non_finite_seen_; }  ///< a non-finite value since Clear
+  const Vector& non_finite_state() const { return non_finite_state_; }  ///< y where it first was
   /// NonFiniteModelValue of the scene at the lowered state y (scene states, time from the
   /// clock) with the current inputs and parameters; empty if every model function is finite
   /// there.

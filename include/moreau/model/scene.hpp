@@ -183,7 +183,7 @@ struct SceneDefaults {
   std::vector<double> output_times;
   double output_step = 0.0;  ///< output every output_step from t0 (output_dt), >= 0
 
-  bool empty() const {
+  bool empty() const {  ///< whether the scene declares nothing (every field zero or empty)
     return relative_tolerance == 0.0 && absolute_tolerance == 0.0 && initial_step == 0.0 &&
            max_step == 0.0 && output_times.empty() && output_step == 0.0;
   }
