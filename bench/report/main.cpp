@@ -1,7 +1,8 @@
-// work_precision: the accuracy-vs-time report (see report.hpp and docs/benchmarks.md, "Work-precision
-// report"). Usually run through scripts/report.
+// work_precision: the accuracy-vs-time report (see report.hpp and docs/benchmarks.md,
+// "Work-precision report"). Usually run through scripts/report.
 //
-//   work_precision [--out DIR] [--page docs/benchmarks.md] [--scenes F1,S2] [--integrators fesd,ida]
+//   work_precision [--out DIR] [--page docs/benchmarks.md] [--scenes F1,S2]
+//                  [--integrators fesd,ida]
 //                  [--min-repeats N] [--max-repeats N] [--min-seconds S] [--revision TEXT]
 //
 // Exit codes: 0 success; 1 a failure while measuring or writing (reference, gnuplot, files);

@@ -1,5 +1,4 @@
 #include "moreau/integrators/alpha_dai.hpp"
-#include "moreau/integrators/simulate.hpp"
 
 #include <Eigen/Dense>
 #include <algorithm>
@@ -8,6 +7,7 @@
 #include <sstream>
 
 #include "moreau/core/error.hpp"
+#include "moreau/integrators/simulate.hpp"
 #include "sqp.hpp"
 
 namespace moreau {

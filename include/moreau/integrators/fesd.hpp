@@ -409,8 +409,8 @@ struct FesdResult {
 
 /// Gradients of q functionals of one run (FesdAdjoint::Sweep).
 struct FesdGradient {
-  Matrix theta;    ///< q x (n_x + n_p + n_u S): with respect to (x0, p, u_1..u_S)
-  Matrix lowered;  ///< q x (n_y + n_p + n_u S): with respect to (y0, p, u_1..u_S)
+  Matrix theta;              ///< q x (n_x + n_p + n_u S): with respect to (x0, p, u_1..u_S)
+  Matrix lowered;            ///< q x (n_y + n_p + n_u S): with respect to (y0, p, u_1..u_S)
   double cpu_seconds = 0.0;  ///< thread CPU time of the sweep
   /// False if the Jacobian of a group was singular at its checkpoint (message says where).
   bool success = true;

@@ -124,9 +124,9 @@ struct SimulationSensitivities {
 
 /// Gradients from a reverse sweep (AdjointSweep::Gradient).
 struct AdjointGradient {
-  bool success = true;  ///< false: a Jacobian was singular at its checkpoint (message)
-  std::string message;  ///< why the sweep failed (empty on success)
-  Matrix theta;         ///< q x n_theta: with respect to (x0, p, u_1..u_S)
+  bool success = true;       ///< false: a Jacobian was singular at its checkpoint (message)
+  std::string message;       ///< why the sweep failed (empty on success)
+  Matrix theta;              ///< q x n_theta: with respect to (x0, p, u_1..u_S)
   double cpu_seconds = 0.0;  ///< thread CPU time of the sweep
 };
 
