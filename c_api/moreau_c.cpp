@@ -19,6 +19,7 @@
 #include "moreau/model/scene_file.hpp"
 #include "moreau/moreau.h"
 #include "moreau/scenes/catalog.hpp"
+#include "moreau/version.hpp"
 
 struct moreau_scene {
   moreau::Scene scene;
@@ -139,7 +140,7 @@ extern "C" {
 
 const char* moreau_last_error(void) { return last_error.c_str(); }
 
-const char* moreau_version(void) { return MOREAU_VERSION_STRING; }
+const char* moreau_version(void) { return MOREAU_VERSION; }
 
 const char* moreau_status_name(moreau_status status) {
   switch (status) {

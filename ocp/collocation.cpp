@@ -408,6 +408,7 @@ auto CollocationNlp::Impl::InitialGuess() -> Vector {
   fesd.stages = stages_;
   fesd.finite_elements = elements_;
   fesd.step_size = interval_length_;
+  fesd.estimate_error = false;  // a guess for the NLP, not a result
   fesd.output_times = times;
   FesdResult run;
   bool ok = false;

@@ -43,6 +43,8 @@ std::string ToString(OcpStatus status) {
       return "simulation_failure";
     case OcpStatus::kSolverFailure:
       return "solver_failure";
+    case OcpStatus::kNotVerified:
+      return "not_verified";
   }
   return "?";
 }

@@ -276,6 +276,9 @@ class ShootingNlp::Impl {
     fesd.stages = options_.stages;
     fesd.finite_elements = options_.finite_elements;
     fesd.step_size = scene.final_time - scene.initial_time;
+    // One fixed step per interval, integrated many times: the NLP's own discretization,
+    // whose accuracy the verification re-simulation checks (no error estimate per step).
+    fesd.estimate_error = false;
     fesd.sensitivities = derivatives;
     fesd.initial_state = y_start;
     fesd.record_trajectory = record;

@@ -375,6 +375,7 @@ void Verify(const OcpProblem& problem, OcpResult* result) {
     fesd.step_size = (result->grid.back() - result->grid.front()) /
                      (static_cast<double>(result->grid.size() - 1) * kFesdVerificationRefinement);
     fesd.keep_elements_after_early_switch = true;
+    fesd.estimate_error = false;  // compared with IDA's reference instead
     const FesdResult run = SimulateFesd(scene, fesd);
     if (run.status == FesdStatus::kSuccess) {
       result->fesd_verified = true;
@@ -684,7 +685,39 @@ OcpResult SolveOcp(const OcpProblem& problem, const OcpOptions& options) {
   OcpResult result = options.transcription == OcpTranscription::kCollocation
                          ? SolveByCollocation(problem, options)
                          : SolveByShooting(problem, options);
-  if (options.verify && result.status != OcpStatus::kSimulationFailure) Verify(problem, &result);
+  if (options.verify && result.status != OcpStatus::kSimulationFailure) {
+    Verify(problem, &result);
+    // Solved only if a re-simulation reproduces the optimum's trajectory.
+    const double infinity = std::numeric_limits<double>::infinity();
+    result.verification_gap =
+        std::min(result.verified ? result.resimulated_state_difference : infinity,
+                 result.fesd_verified ? result.fesd_resimulated_state_difference : infinity);
+    const double allowed =
+        kOcpVerificationTolerance * std::max(1.0, result.final_state.lpNorm<Eigen::Infinity>());
+    const bool solved =
+        result.status == OcpStatus::kSolved || result.status == OcpStatus::kSolvedToAcceptable;
+    if (solved && !(result.verification_gap <= allowed)) {
+      std::ostringstream message;
+      message.precision(3);
+      message << "the NLP is " << ToString(result.status)
+              << (result.message.empty() ? "" : " (" + result.message + ")")
+              << ", but its controls re-simulated end ";
+      if (std::isfinite(result.verification_gap)) {
+        message << result.verification_gap << " from its x(T) (IDA "
+                << (result.verified ? result.resimulated_state_difference : infinity) << ", FESD "
+                << (result.fesd_verified ? result.fesd_resimulated_state_difference : infinity)
+                << "), above the verification tolerance " << allowed << " = "
+                << kOcpVerificationTolerance
+                << " max(1, |x(T)|): refine the discretization (more intervals N, elements or "
+                   "stages)";
+      } else {
+        message << "nowhere: no re-simulation succeeded (" << result.verification_message << "; "
+                << result.fesd_verification_message << ")";
+      }
+      result.status = OcpStatus::kNotVerified;
+      result.message = message.str();
+    }
+  }
   return result;
 }
 

@@ -1,7 +1,8 @@
-// work_precision: the accuracy-vs-time report (see report.hpp and README.md, "Work-precision
-// report"). Usually run through scripts/report.
+// work_precision: the accuracy-vs-time report (see report.hpp and docs/benchmarks.md,
+// "Work-precision report"). Usually run through scripts/report.
 //
-//   work_precision [--out DIR] [--readme README.md] [--scenes F1,S2] [--integrators fesd,ida]
+//   work_precision [--out DIR] [--page docs/benchmarks.md] [--scenes F1,S2]
+//                  [--integrators fesd,ida]
 //                  [--min-repeats N] [--max-repeats N] [--min-seconds S] [--revision TEXT]
 //
 // Exit codes: 0 success; 1 a failure while measuring or writing (reference, gnuplot, files);
@@ -155,8 +156,9 @@ int main(int argc, char** argv) {
   CLI::App app{"Accuracy-vs-time report: every scene with every integrator over a grid"};
   Settings settings;
   app.add_option("--out", settings.out, "output directory (CSV, images, report.md)");
-  app.add_option("--readme", settings.readme,
-                 "rewrite the report section of this README (between its marker lines)");
+  app.add_option("--page,--readme", settings.readme,
+                 "rewrite the report section of this Markdown page, docs/benchmarks.md (between "
+                 "its marker lines)");
   app.add_option("--scenes", settings.scenes, "scenes to run (default: all)")->delimiter(',');
   app.add_option("--integrators", settings.integrators,
                  "integrators to run: fesd, timestepping, radau, ida, alpha (default: all)")

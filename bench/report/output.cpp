@@ -1,4 +1,4 @@
-// CSV, gnuplot images, the markdown table and the README section of the report.
+// CSV, gnuplot images, the markdown table and the report section of docs/benchmarks.md.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>

@@ -49,7 +49,8 @@ typedef struct moreau_run moreau_run;
 /// on this thread.
 const char* moreau_last_error(void);
 
-/// The library version ("0.1.0").
+/// The library version, "major.minor.patch" (MOREAU_VERSION of moreau/version.hpp, as
+/// `moreau --version` shows it).
 const char* moreau_version(void);
 
 /// The name of a status ("ok", "invalid_argument", ...); never NULL.

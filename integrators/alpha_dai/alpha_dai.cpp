@@ -1,5 +1,4 @@
 #include "moreau/integrators/alpha_dai.hpp"
-#include "moreau/integrators/simulate.hpp"
 
 #include <Eigen/Dense>
 #include <algorithm>
@@ -8,6 +7,7 @@
 #include <sstream>
 
 #include "moreau/core/error.hpp"
+#include "moreau/integrators/simulate.hpp"
 #include "sqp.hpp"
 
 namespace moreau {
@@ -309,6 +309,9 @@ class AlphaDaiRun {
     }
     const std::vector<double> ends =
         SegmentEnds(scene_.initial_time, scene_.final_time, scene_.ControlBreakpoints());
+    // Steps are at most h_max: fewer than FixedStepCount is impossible, so a horizon that
+    // needs more than max_steps is refused before any work.
+    RequireFixedStepsWithin(ends, options_.max_step_size, options_.max_steps);
     t_ = scene_.initial_time;
     x_ = scene_.initial_state;
     inputs_ = scene_.InputValues(t_);

@@ -5,6 +5,7 @@
 // declares its entry once (<name>/<name>_entry.cpp); simulate.cpp collects them.
 
 #include <functional>
+#include <map>
 #include <string>
 #include <type_traits>
 #include <utility>
@@ -17,6 +18,37 @@
 #include "moreau/newton/semismooth_newton.hpp"
 
 namespace moreau::internal {
+
+// Throws std::invalid_argument for an option `name` that `spec` does not declare: "option
+// 'h' does not apply to integrator 'ida' (an option of fesd, radau, timestepping)" if another
+// integrator declares it, else "unknown option 'stage'; did you mean 'stages'?".
+[[noreturn]] void ThrowUnknownOption(const IntegratorSpec& spec, const std::string& name);
+
+// The step options of the error-controlled integrators (FESD, smooth Radau IIA), as their
+// entries' adjust step: without h the steps are error-controlled; with h they are fixed unless
+// an error-control option (adaptive, rtol, atol, h0) is given too, which makes h the initial
+// step. A given h = 0 (the structs' "no fixed step") is refused like any non-positive step,
+// never read as "choose for me"; adaptive = false without h and the controller's bounds
+// (h_min, h_max) with fixed steps are refused (they would be silently ignored).
+template <typename Options>
+void AdjustStepControl(const std::map<std::string, SettingValue>& given, Options* built) {
+  RequireArgument(given.count("h") == 0 || built->step_size > 0.0,
+                  "step size h must be positive and finite (leave h out for error-controlled "
+                  "steps), got ",
+                  built->step_size);
+  for (const char* control : {"rtol", "atol", "h0"}) {
+    if (given.count(control) > 0) built->adaptive = true;
+  }
+  RequireArgument(given.count("adaptive") == 0 || built->adaptive || given.count("h") > 0,
+                  "adaptive = false needs a fixed step h (without h the steps are "
+                  "error-controlled)");
+  for (const char* controller_option : {"h_min", "h_max"}) {
+    RequireArgument(built->ErrorControlled() || given.count(controller_option) == 0, "option '",
+                    controller_option,
+                    "' applies to error-controlled steps only (leave h out, or give adaptive, "
+                    "rtol or atol with it)");
+  }
+}
 
 // Converts a front end's value to the option's type; throws std::invalid_argument naming the
 // option, what it expects and what it got.
@@ -229,8 +261,7 @@ IntegratorEntry MakeEntry(
       for (const auto& binding : options) {
         if (binding.spec.name == name) found = &binding;
       }
-      RequireArgument(found != nullptr, "option '", name, "' does not apply to integrator '",
-                      spec.name, "'");
+      if (found == nullptr) ThrowUnknownOption(spec, name);
       found->set(&built, value);
     }
     if (adjust) adjust(given, &built);
@@ -256,6 +287,9 @@ IntegratorEntry MakeEntry(
     out.trajectory = result.trajectory;
     if constexpr (requires { result.events; }) out.events = result.events;
     if constexpr (requires { result.warnings; }) out.warnings = result.warnings;
+    if constexpr (requires { result.stats.error_estimate; }) {
+      if (result.stats.error_estimate >= 0.0) out.error_estimate = result.stats.error_estimate;
+    }
     for (const auto& stat : stats) out.stats.emplace_back(stat.spec.name, stat.get(result.stats));
     out.stats_summary = result.stats.Summary();
     out.cpu_seconds = result.stats.cpu_seconds;

@@ -1,12 +1,14 @@
 // Simulate(): the one entry point every front end uses (include/moreau/integrators/simulate.hpp).
 #include "moreau/integrators/simulate.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <sstream>
 
 #include "integrator_entry.hpp"
 #include "moreau/core/error.hpp"
+#include "moreau/model/expression.hpp"
 
 namespace moreau {
 namespace internal {
@@ -54,6 +56,28 @@ bool ParseReal(const std::string& text, double* value) {
 }
 
 }  // namespace
+
+void ThrowUnknownOption(const IntegratorSpec& spec, const std::string& name) {
+  std::string declaring;
+  std::vector<std::string> all;
+  for (const IntegratorSpec& other : Integrators()) {
+    for (const OptionSpec& option : other.options) {
+      if (std::find(all.begin(), all.end(), option.name) == all.end()) all.push_back(option.name);
+      if (option.name == name) declaring += (declaring.empty() ? "" : ", ") + other.name;
+    }
+  }
+  if (!declaring.empty()) {
+    ThrowInvalidArgument("option '", name, "' does not apply to integrator '", spec.name,
+                         "' (an option of ", declaring, ")");
+  }
+  std::vector<std::string> own;
+  for (const OptionSpec& option : spec.options) own.push_back(option.name);
+  // The closest of the integrator's own options, else of any integrator's.
+  std::string closest = ClosestName(name, own);
+  if (closest.empty()) closest = ClosestName(name, all);
+  ThrowInvalidArgument("unknown option '", name, "' for integrator '", spec.name, "'",
+                       closest.empty() ? std::string() : "; did you mean '" + closest + "'?");
+}
 
 bool SettingToBool(const OptionSpec& spec, const SettingValue& value) {
   if (const bool* b = std::get_if<bool>(&value)) return *b;
@@ -258,12 +282,58 @@ double SimulationResult::Stat(const std::string& name) const {
   ThrowInvalidArgument("integrator '", integrator, "' has no statistic '", name, "'");
 }
 
+std::map<std::string, SettingValue> WithSceneDefaults(
+    const Scene& scene, const std::string& integrator,
+    const std::map<std::string, SettingValue>& given) {
+  std::map<std::string, SettingValue> options = given;
+  const SceneDefaults& defaults = scene.defaults;
+  if (defaults.empty()) return options;
+  const IntegratorSpec& spec = FindIntegrator(integrator);
+  // The option of this integrator that takes a default (IDA calls its largest step max_step).
+  auto option = [&spec](std::initializer_list<const char*> names) -> const OptionSpec* {
+    for (const char* name : names) {
+      if (const OptionSpec* found = spec.FindOption(name)) return found;
+    }
+    return nullptr;
+  };
+  auto apply = [&](std::initializer_list<const char*> names, const SettingValue& value) {
+    const OptionSpec* found = option(names);
+    if (found != nullptr && options.count(found->name) == 0) options[found->name] = value;
+  };
+  // Step-control defaults only where the steps are error-controlled: a given h means fixed
+  // steps (shooting codes), unless an error-control option comes with it.
+  bool error_controlled = given.count("h") == 0;
+  for (const char* control : {"rtol", "atol", "h0"}) error_controlled |= given.count(control) > 0;
+  if (const auto it = given.find("adaptive"); it != given.end()) {
+    if (const OptionSpec* adaptive = spec.FindOption("adaptive")) {
+      error_controlled |= internal::SettingToBool(*adaptive, it->second);
+    }
+  }
+  if (error_controlled) {
+    if (defaults.relative_tolerance > 0.0) apply({"rtol"}, defaults.relative_tolerance);
+    if (defaults.absolute_tolerance > 0.0) apply({"atol"}, defaults.absolute_tolerance);
+    if (defaults.initial_step > 0.0) apply({"h0"}, defaults.initial_step);
+    if (defaults.max_step > 0.0) apply({"h_max", "max_step"}, defaults.max_step);
+  }
+  // Output times, unless the user asked for other ones; only those inside the horizon (the
+  // user may have shortened it).
+  if (given.count("output_times") == 0 && given.count("output_dt") == 0) {
+    std::vector<double> times;
+    for (double t : defaults.output_times) {
+      if (t >= scene.initial_time && t <= scene.final_time) times.push_back(t);
+    }
+    if (!times.empty()) apply({"output_times"}, times);
+    if (defaults.output_step > 0.0) apply({"output_dt"}, defaults.output_step);
+  }
+  return options;
+}
+
 void ValidateSimulationSettings(const Scene& scene, const SimulationSettings& settings) {
   const std::string name =
       settings.integrator == "auto" ? AutomaticIntegrator(scene) : settings.integrator;
   const internal::IntegratorEntry& entry = internal::FindEntry(name);
   RequireSupportedEffects(scene, name);
-  entry.check(settings.options);
+  entry.check(WithSceneDefaults(scene, name, settings.options));
 }
 
 SimulationResult Simulate(const Scene& scene, const SimulationSettings& settings,
@@ -272,7 +342,8 @@ SimulationResult Simulate(const Scene& scene, const SimulationSettings& settings
       settings.integrator == "auto" ? AutomaticIntegrator(scene) : settings.integrator;
   const internal::IntegratorEntry& entry = internal::FindEntry(name);
   RequireSupportedEffects(scene, name);
-  SimulationResult result = entry.run(scene, settings.options, progress);
+  SimulationResult result =
+      entry.run(scene, WithSceneDefaults(scene, name, settings.options), progress);
   result.scene = scene.name;
   result.state_names = scene.state_names;
   return result;
@@ -294,7 +365,7 @@ Simulator::Simulator(const Scene& scene, const SimulationSettings& settings)
   RequireSupportedEffects(scene, impl_->integrator);
   impl_->base = scene;
   impl_->working = scene;
-  impl_->run = entry.prepare(scene, settings.options);
+  impl_->run = entry.prepare(scene, WithSceneDefaults(scene, impl_->integrator, settings.options));
 }
 
 Simulator::~Simulator() = default;

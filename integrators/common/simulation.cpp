@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <sstream>
 #include <utility>
 
 #include "moreau/core/error.hpp"
@@ -20,6 +21,40 @@ int RelaySignal::ValueAt(double t) const {
   int value = initial_value;
   for (std::size_t k = 0; k < jump_times.size() && jump_times[k] <= t; ++k) value = values[k];
   return value;
+}
+
+std::string ErrorEstimateWarning(double error_estimate, double relative_tolerance) {
+  if (!(error_estimate > kErrorWarningFactor * relative_tolerance)) return "";
+  std::ostringstream s;
+  s.precision(3);
+  s << "the estimated error of this fixed-step run, " << error_estimate
+    << " relative to the solution's scale, exceeds " << kErrorWarningFactor
+    << " times the tolerance " << relative_tolerance
+    << ": shorten the step h, or leave h out for error-controlled steps (docs/accuracy.md)";
+  return s.str();
+}
+
+double FixedStepCount(const std::vector<double>& ends, double h) {
+  double count = 0.0;
+  for (std::size_t k = 0; k + 1 < ends.size(); ++k) {
+    const double ratio = (ends[k + 1] - ends[k]) / h;
+    const double rounded = std::max(1.0, std::round(ratio));
+    count += std::fabs(ratio - rounded) <= 1e-9 * rounded ? rounded : std::ceil(ratio);
+  }
+  return count;
+}
+
+void RequireFixedStepsWithin(const std::vector<double>& ends, double h, long max_steps) {
+  RequireArgument(std::isfinite(h) && h > 0.0, "step size h must be positive and finite, got ", h);
+  // A horizon that is not finite is the scene's defect, named by its validation.
+  for (double t : ends) {
+    if (!std::isfinite(t)) return;
+  }
+  const double count = FixedStepCount(ends, h);
+  RequireArgument(count <= static_cast<double>(max_steps), "fixed steps h = ", h, " over [",
+                  ends.front(), ", ", ends.back(), "] need ", count,
+                  " steps, more than max_steps = ", max_steps,
+                  ": give a larger h or max_steps, or leave h out for error-controlled steps");
 }
 
 std::vector<double> FixedStepGrid(double t0, double tf, double h) {

@@ -1,6 +1,7 @@
 #include "smooth_collocation.hpp"
 
 #include <cmath>
+#include <limits>
 
 #include "moreau/core/error.hpp"
 
@@ -126,7 +127,12 @@ double SmoothCollocationSolver::ScaledIncrement(const Eigen::Ref<const Vector>& 
   const int nx = system_->num_scene_states();
   double sum = 0.0;
   for (int i = 0; i < nx; ++i) {
-    const double w = stopping.absolute_tolerance + stopping.relative_tolerance * std::fabs(y0[i]);
+    const double atol = stopping.absolute_tolerances != nullptr ? (*stopping.absolute_tolerances)[i]
+                                                                : stopping.absolute_tolerance;
+    // A state with no scale yet (the automatic atol at zero): what floating point resolves.
+    const double w =
+        std::max(atol + stopping.relative_tolerance * std::fabs(y0[i]),
+                 10.0 * std::numeric_limits<double>::epsilon() * (1.0 + std::fabs(y0[i])));
     sum += (dz[i] / w) * (dz[i] / w);
   }
   return std::sqrt(sum / nx);

@@ -23,14 +23,16 @@ class SmoothCollocationSolver {
 
   // Newton stops when the scaled increment is <= tolerance: max_i |dZ_i| / (1 + |y0_i|)
   // (relative), or the weighted RMS over the scene states with weights
-  // atol + rtol |y0_i| (weighted_rms). Contraction failure (an increment not smaller than the
-  // previous one from the third iteration on) ends the solve: converged if the increment is
-  // within 1e3 tolerances (round-off stall), not converged otherwise.
+  // atol_i + rtol |y0_i| (weighted_rms; atol_i from absolute_tolerances if given, else
+  // absolute_tolerance), never below 10 eps (1 + |y0_i|). Contraction failure (an increment not
+  // smaller than the previous one from the third iteration on) ends the solve: converged if the
+  // increment is within 1e3 tolerances (round-off stall), not converged otherwise.
   struct Stopping {
     bool weighted_rms = false;
     double tolerance = 1e-12;
     double relative_tolerance = 0.0;
     double absolute_tolerance = 0.0;
+    const Vector* absolute_tolerances = nullptr;  // per scene state (see above)
     int max_iterations = 25;
     // Simplified Newton: the stage Jacobians F_y are evaluated at the first iterate only (or
     // not at all with reuse_jacobian), later iterations evaluate F alone; where an increment

@@ -26,9 +26,13 @@ SemismoothNewtonOptions FesdOptions::DefaultNewtonOptions() {
 void FesdOptions::Validate() const {
   RequireArgument(stages >= 1 && stages <= kMaxRadauStages, "stages must be in [1, ",
                   kMaxRadauStages, "], got ", stages);
-  RequireArgument(std::isfinite(step_size) && (step_size > 0.0 || (adaptive && step_size == 0.0)),
-                  "step size h must be positive and finite (0 = automatic when adaptive), got ",
+  RequireArgument(std::isfinite(step_size) && step_size >= 0.0,
+                  "step size h must be positive and finite (or 0: error-controlled steps), got ",
                   step_size);
+  RequireArgument(std::isfinite(initial_step_size) && initial_step_size >= 0.0,
+                  "initial step h0 must be positive and finite (or 0: automatic), got ",
+                  initial_step_size);
+  RequireArgument(max_steps >= 1, "max_steps must be >= 1, got ", max_steps);
   RequireArgument(finite_elements >= 1, "finite elements per step must be >= 1, got ",
                   finite_elements);
   RequireArgument(std::isfinite(event_tolerance) && event_tolerance > 0.0,
@@ -39,8 +43,10 @@ void FesdOptions::Validate() const {
                   max_event_retries);
   RequireArgument(std::isfinite(relative_tolerance) && relative_tolerance > 0.0,
                   "relative tolerance rtol must be positive and finite, got ", relative_tolerance);
-  RequireArgument(std::isfinite(absolute_tolerance) && absolute_tolerance > 0.0,
-                  "absolute tolerance atol must be positive and finite, got ", absolute_tolerance);
+  RequireArgument(std::isfinite(absolute_tolerance) && absolute_tolerance >= 0.0,
+                  "absolute tolerance atol must be positive and finite (or 0: rtol times each "
+                  "state's scale), got ",
+                  absolute_tolerance);
   RequireArgument(std::isfinite(min_step_size) && min_step_size > 0.0,
                   "min step size must be positive and finite, got ", min_step_size);
   RequireArgument(std::isfinite(max_step_size) && max_step_size >= 0.0 &&
@@ -98,6 +104,10 @@ std::string ToString(FesdStatus status) {
       return "status_decision_failure";
     case FesdStatus::kStepSizeTooSmall:
       return "step_size_too_small";
+    case FesdStatus::kNonFinite:
+      return "non_finite";
+    case FesdStatus::kMaxStepsReached:
+      return "max_steps_reached";
     case FesdStatus::kSensitivityFailure:
       return "sensitivity_failure";
   }
@@ -124,6 +134,9 @@ FesdStats& FesdStats::operator+=(const FesdStats& other) {
   num_inside_crossings += other.num_inside_crossings;
   num_unresolved_crossings += other.num_unresolved_crossings;
   num_bound_evaluations += other.num_bound_evaluations;
+  if (other.error_estimate >= 0.0)
+    error_estimate = std::max(error_estimate, 0.0) + other.error_estimate;
+  num_unestimated_steps += other.num_unestimated_steps;
   adjoint_memory_bytes = std::max(adjoint_memory_bytes, other.adjoint_memory_bytes);
   adjoint_file_bytes = std::max(adjoint_file_bytes, other.adjoint_file_bytes);
   adjoint_cpu_seconds += other.adjoint_cpu_seconds;
@@ -139,7 +152,9 @@ std::string FesdStats::Summary() const {
   }
   s << ", " << num_elements << " elements, " << num_switches << " switches, "
     << num_newton_iterations << " Newton iterations, max cross complementarity "
-    << max_cross_complementarity << ", " << cpu_seconds << " s";
+    << max_cross_complementarity;
+  if (error_estimate >= 0.0) s << ", estimated error " << error_estimate;
+  s << ", " << cpu_seconds << " s";
   return s.str();
 }
 
@@ -181,14 +196,25 @@ FesdResult FesdRun::Run() {
   control_starts_.pop_back();
   segment_ends_ = StretchEnds(scene.initial_time, scene.final_time, scene.ControlBreakpoints(),
                               options_.stop_times, &segment_control_);
+  const bool error_control = options_.ErrorControlled();
+  const bool replay = !options_.step_sequence.empty();
+  // A fixed grid longer than max_steps is refused before any work (with a speed of time the
+  // horizon is numerical time as well; with time-freezing the frozen steps come on top).
+  if (!error_control && !replay) {
+    RequireFixedStepsWithin(segment_ends_, options_.step_size, options_.max_steps);
+  }
   if (options_.sensitivities) InitializeSensitivities();
   PrepareOutputTimes();
-  keep_polynomials_ = options_.adaptive || dense_output_;
-  check_jump_stages_ = options_.adaptive || !options_.step_sequence.empty();
+  estimating_ = !error_control && !replay && options_.estimate_error;
+  if (error_control || estimating_) result_.stats.error_estimate = 0.0;
+  keep_polynomials_ = error_control || dense_output_ || estimating_;
+  check_jump_stages_ = error_control || replay;
+  system_.ClearNonFinite();
   if ((options_.initial_state.size() > 0 || options_.project_initial_state) &&
       !ProjectInitialState()) {
     return Finish(start);
   }
+  scale_.Reset(y_);
 
   // The near-active filter's first working set (no statuses or multipliers yet).
   UpdateWorkingSet(options_.step_size > 0.0 ? options_.step_size
@@ -207,7 +233,7 @@ FesdResult FesdRun::Run() {
     }
     // With a speed of time the horizon is in numerical time: the fixed-grid loop.
     const bool clock_targets = system_.time_freezing() && scene.time_scale_input < 0;
-    if (options_.adaptive || !options_.step_sequence.empty()) {
+    if (error_control || replay) {
       IntegrateAdaptive(clock_targets);
     } else if (clock_targets) {
       IntegrateTimeFreezing();
@@ -259,12 +285,16 @@ void FesdRun::Integrate() {
       double step_end = grid[index];
       int remaining = options_.finite_elements;
       if (smooth_) {
+        BeginFixedAdvance();
         AdvanceSmooth(step_end, remaining);
+        EndFixedAdvance();
         ++result_.stats.num_steps;
         continue;
       }
       while (remaining > 0 && !failed()) {
+        BeginFixedAdvance();
         const bool switched = Advance(step_end, &remaining);
+        EndFixedAdvance();
         const double rest = step_end - tau_;
         // A remainder too short for an element (a switch just before the step end) joins
         // the next step, unless the step ends at a breakpoint or the final time.
@@ -308,14 +338,71 @@ void FesdRun::IntegrateTimeFreezing() {
       const double step_end = tau_ + length;
       int remaining = options_.finite_elements;
       while (remaining > 0 && !failed()) {
-        if (Advance(step_end, &remaining)) break;  // a switch: a new step from the clock
+        BeginFixedAdvance();
+        const bool switched = Advance(step_end, &remaining);
+        EndFixedAdvance();
+        if (switched) break;  // a switch: a new step from the clock
       }
       ++result_.stats.num_steps;
     }
   }
 }
 
+void FesdRun::BeginFixedAdvance() {
+  system_.ClearNonFinite();
+  if (!estimating_) return;
+  estimate_from_ = result_.elements.size();
+  estimate_tau_ = tau_;
+  piece_.clear();
+  capture_piece_ = true;
+}
+
+void FesdRun::EndFixedAdvance() {
+  if (failed() || !estimating_) return;
+  capture_piece_ = false;
+  const double length = tau_ - estimate_tau_;
+  if (piece_.empty() || !(length > 0.0)) return;
+  const double horizon = system_.scene().final_time - system_.scene().initial_time;
+  // The comparison solves must not change the run's state: they use the piece and group_
+  // only (and the Newton counters, which count their work).
+  const ErrorEstimate estimate = EstimateError(length / horizon, estimate_from_);
+  if (std::isfinite(estimate.proposal)) {
+    result_.stats.error_estimate +=
+        options_.relative_tolerance * (length / horizon) * estimate.proposal;
+  } else {
+    ++result_.stats.num_unestimated_steps;
+  }
+  scale_.Update(y_);
+}
+
 FesdResult FesdRun::Finish(std::chrono::steady_clock::time_point start) {
+  // The clock reaches tf up to round-off (collocation of t' = 1, or kClockTolerance with
+  // time-freezing); a run that reached it ends exactly there.
+  const Scene& scene = system_.scene();
+  const int clock = system_.clock_index();
+  const double tf = scene.final_time;
+  if (!failed() && scene.time_scale_input < 0 &&
+      std::fabs(y_[clock] - tf) <= kClockTolerance * std::max(1.0, std::fabs(tf))) {
+    if (!result_.trajectory.t.empty() && result_.trajectory.t.back() == y_[clock]) {
+      result_.trajectory.t.back() = tf;
+    }
+    Trajectory& numerical = result_.numerical_trajectory;  // (time-freezing: tau, clock last)
+    if (!numerical.x.empty() && numerical.x.back()[clock] == y_[clock]) {
+      numerical.x.back()[clock] = tf;
+    }
+    y_[clock] = tf;
+  }
+  if (estimating_ && result_.stats.num_unestimated_steps > 0) {
+    result_.warnings.push_back("the error of " +
+                               std::to_string(result_.stats.num_unestimated_steps) +
+                               " fixed steps could not be estimated (a comparison solve did not "
+                               "converge); error_estimate leaves them out");
+  }
+  if (estimating_) {
+    const std::string warning =
+        ErrorEstimateWarning(result_.stats.error_estimate, options_.relative_tolerance);
+    if (!warning.empty()) result_.warnings.push_back(warning);
+  }
   result_.final_time = y_[system_.clock_index()];
   result_.final_state = y_.head(nx_);
   result_.final_lowered_state = y_;
@@ -351,10 +438,23 @@ FesdResult FesdRun::Finish(std::chrono::steady_clock::time_point start) {
 }
 
 void FesdRun::Fail(FesdStatus status, double t, const std::string& reason) {
+  // A solve that met a non-finite model value failed because of it: name the function, its
+  // output and the point (a runaway, not a solver failure).
+  std::string cause = reason;
+  const bool solve_failure = status == FesdStatus::kNewtonFailure ||
+                             status == FesdStatus::kEventLocationFailure ||
+                             status == FesdStatus::kStatusDecisionFailure;
+  if (solve_failure && system_.non_finite_seen()) {
+    const std::string named = system_.DescribeNonFinite(system_.non_finite_state());
+    status = FesdStatus::kNonFinite;
+    cause = (named.empty() ? std::string("the lowered system is not finite at a point of the step")
+                           : named) +
+            " (the step's solve failed there: " + reason + ")";
+  }
   result_.status = status;
   std::ostringstream s;
   s.precision(17);
-  s << ToString(status) << " at t = " << t << ": " << reason;
+  s << ToString(status) << " at t = " << t << ": " << cause;
   result_.message = s.str();
 }
 

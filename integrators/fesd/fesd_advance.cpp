@@ -18,11 +18,13 @@ namespace moreau::internal {
 // fixed-length elements; if a free side turns negative, a group solve of equal elements that
 // ends on the switch. Returns true if a switch ended the advance.
 bool FesdRun::Advance(double step_end, int* remaining) {
-  // A crossing found between an element's nodes (InsideViolation) that the group solves then
-  // cannot locate (a graze at the event tolerance, a dip of a sliding mode's indicator) would
-  // end a run that succeeds without the search: the step is taken again without it, and the
-  // crossing counts as unresolved (a warning, FesdResult::warnings).
-  const bool fallback = np_ > 0 && !inside_search_off_;
+  // Fixed steps: a crossing found between an element's nodes (InsideViolation) that the group
+  // solves then cannot locate (a graze at the event tolerance, a dip of a sliding mode's
+  // indicator) would end a run that succeeds without the search, and a fixed step cannot be
+  // shortened: the step is taken again without it, and the crossing counts as unresolved (a
+  // warning, FesdResult::warnings). Error-controlled runs instead retry the step shorter and,
+  // at min_step_size, end with the failure's status.
+  const bool fallback = np_ > 0 && !inside_search_off_ && !options_.ErrorControlled();
   const long found = result_.stats.num_inside_crossings;
   const int remaining_before = *remaining;
   if (fallback) Save(&advance_before_);

@@ -41,16 +41,25 @@ IntegratorEntry FesdEntry() {
   std::vector<OptionBinding<O>> options = {
       BindInteger("stages", &O::stages, "Radau IIA stages s in 1..7 (order 2s - 1)"),
       BindReal("h", &O::step_size,
-               "integration step H > 0 (control interval; numerical time with relays); with "
-               "adaptive steps the initial step (automatic when not given)"),
+               "fixed integration step H > 0 (control interval; numerical time with relays); "
+               "not given: error-controlled steps; with adaptive, rtol or atol the initial step"),
       BindBool("adaptive", &O::adaptive,
-               "step-size control by the local error estimate (rtol or atol switch it on)"),
+               "error-controlled steps even with h given (on whenever h is not given)"),
       BindReal("rtol", &O::relative_tolerance,
-               "relative tolerance of the adaptive steps (sets adaptive), > 0"),
+               "relative tolerance of the error-controlled steps, > 0 (with h: sets adaptive)"),
       BindReal("atol", &O::absolute_tolerance,
-               "absolute tolerance of the adaptive steps (sets adaptive), > 0"),
-      BindReal("h_min", &O::min_step_size, "smallest adaptive step and failure retry, > 0"),
-      BindReal("h_max", &O::max_step_size, "largest adaptive step, >= 0 (0: no bound)"),
+               "absolute tolerance of the error-controlled steps, > 0; 0: rtol times each "
+               "state's largest magnitude so far (with h: sets adaptive)"),
+      BindReal("h0", &O::initial_step_size,
+               "initial step of the error-controlled steps, > 0 (0: automatic)"),
+      BindReal("h_min", &O::min_step_size, "smallest error-controlled step and failure retry, > 0"),
+      BindReal("h_max", &O::max_step_size, "largest error-controlled step, >= 0 (0: no bound)"),
+      BindInteger("max_steps", &O::max_steps,
+                  "most steps: a longer fixed grid is refused, an error-controlled run stops "
+                  "with max_steps_reached, >= 1"),
+      BindBool("estimate_error", &O::estimate_error,
+               "fixed steps: estimate the error of every step (error_estimate, a warning far "
+               "above rtol)"),
       BindStopTimes(&O::stop_times),
       BindReal("output_dt", &O::output_step,
                "dense output every output_dt from t0 (collocation polynomials), >= 0"),
@@ -134,6 +143,11 @@ IntegratorEntry FesdEntry() {
                "interval evaluations of the event indicators"),
       BindStat("max_working_pairs", &S::max_working_pairs,
                "most complementarity pairs in an element system (near-active filter)"),
+      BindStat("error_estimate", &S::error_estimate,
+               "accumulated local error estimates relative to the solution's scale (-1: not "
+               "estimated)"),
+      BindStat("num_unestimated_steps", &S::num_unestimated_steps,
+               "fixed steps whose error could not be estimated"),
       BindStat("adjoint_memory_bytes", &S::adjoint_memory_bytes,
                "bytes kept for the adjoint sweep (converged unknowns of every group)"),
       BindStat("adjoint_file_bytes", &S::adjoint_file_bytes,
@@ -178,19 +192,8 @@ IntegratorEntry FesdEntry() {
         s.adjoint = given.adjoint;
         out->sensitivities = s;
       },
-      // rtol or atol switch adaptive steps on; without an initial h the controller picks the
-      // first step. The controller's bounds without adaptive steps would be silently ignored,
-      // so they are refused.
-      [](const std::map<std::string, SettingValue>& given, O* built) {
-        if (given.count("rtol") > 0 || given.count("atol") > 0) built->adaptive = true;
-        if (built->adaptive && given.count("h") == 0) built->step_size = 0.0;
-        for (const char* controller_option : {"h_min", "h_max"}) {
-          RequireArgument(built->adaptive || given.count(controller_option) == 0, "option '",
-                          controller_option,
-                          "' applies to the fesd integrator with adaptive steps only (set "
-                          "adaptive, rtol or atol)");
-        }
-      },
+      // Without h error-controlled steps, with h fixed ones (see AdjustStepControl).
+      AdjustStepControl<O>,
       // Lowered once, run many times (Simulator, Python's moreau.Integrator).
       [](const Scene& scene, const O& built) {
         auto integrator = std::make_shared<FesdIntegrator>(scene, built);

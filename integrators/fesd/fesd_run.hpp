@@ -23,6 +23,7 @@
 #include "../common/constraint_filter.hpp"
 #include "../common/crossing_search.hpp"
 #include "../common/smooth_collocation.hpp"
+#include "../common/step_size.hpp"
 #include "group_system.hpp"
 #include "moreau/integrators/fesd.hpp"
 #include "moreau/newton/semismooth_newton.hpp"
@@ -153,6 +154,13 @@ class FesdRun {
   bool failed() const { return result_.status != FesdStatus::kSuccess; }
 
   void Integrate();
+
+  // Around every advance of the fixed-step loops: the non-finite witness cleared, and with
+  // FesdOptions::estimate_error the advance's elements captured (piece_) and their local
+  // error estimated afterwards (EstimateError, as error control does), accumulated into
+  // FesdStats::error_estimate.
+  void BeginFixedAdvance();
+  void EndFixedAdvance();
 
   // Time-freezing (hysteresis relays): the integration variable is numerical time tau and the
   // clock runs at rate 1, or 0 while a relay jumps. A step that starts while physical time
@@ -374,6 +382,12 @@ class FesdRun {
   // time in first_unresolved_time_) and gives no violation.
   Violation InsideViolation(const internal::CollocationStages& stages, const Vector& y0,
                             const ConstVectorRef& w_e, const Vector& scales, int element);
+  // Error-controlled runs: zeros of the jump free sides between the stages of a solved element
+  // (a multiplier that turns negative and back between two stages: a release shorter than
+  // the element), from consistent velocity-level solves at points of the collocation
+  // polynomial where the stage values suggest a dip (fesd_crossings.cpp). Called by
+  // InsideViolation once the continuous sides show no crossing.
+  Violation JumpDipViolation(const internal::CollocationStages& stages, int element);
 
   // Crossing fraction of pair k between the second-to-last stage and a negative end value.
   double EndCrossing(const internal::CollocationStages& stages, int k, double end_value) const;
@@ -621,6 +635,10 @@ class FesdRun {
   double first_unresolved_time_ = std::numeric_limits<double>::infinity();
   // Adaptive steps and dense output.
   bool keep_polynomials_ = false;         // record ElementPolynomial of committed elements
+  bool estimating_ = false;               // fixed steps with FesdOptions::estimate_error
+  std::size_t estimate_from_ = 0;         // first element of the advance being estimated
+  double estimate_tau_ = 0.0;             // and its start
+  StateScale scale_;                      // per lowered state: the largest |y_i| so far
   bool check_jump_stages_ = false;        // JumpStageViolation in the trial pass and groups
   bool capture_piece_ = false;            // collect them in piece_ (adaptive attempts)
   std::vector<ElementPolynomial> piece_;  // elements committed by the current attempt

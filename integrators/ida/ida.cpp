@@ -58,6 +58,10 @@ std::string ToString(IdaStatus status) {
       return "too_many_events";
     case IdaStatus::kNoProgress:
       return "no_progress";
+    case IdaStatus::kStepSizeTooSmall:
+      return "step_size_too_small";
+    case IdaStatus::kNonFinite:
+      return "non_finite";
   }
   return "?";
 }

@@ -12,6 +12,7 @@
 
 #include <chrono>
 #include <cstdlib>
+#include <limits>
 #include <sstream>
 
 #include "moreau/integrators/simulate.hpp"
@@ -332,18 +333,66 @@ void IdaRun::ReInit(double t) {
 }
 
 // Integrates from t_ to t_end (a breakpoint or tf), handling roots on the way.
+// Where IDA's step collapsed without a non-finite evaluation, the model is probed this far
+// (relative to max(1, |t|)) beyond t to name a singularity there: 1e-12 is far beyond the
+// collapsed steps (below 10 eps |t|) and close enough to be the same singular point.
+constexpr double kSingularityProbe = 1e-12;
+
 void IdaRun::Integrate(double t_end) {
   Check(IDASetStopTime(memory_, t_end), "IDASetStopTime");
   int stalled_steps = 0;
+  int collapsed_steps = 0;
   while (!failed()) {
     const double t_previous = t_;
     double t_return = t_;
+    system_.ClearNonFinite();
     const int flag = IDASolve(memory_, t_end, &t_return, Y_->vector, Yp_->vector, IDA_ONE_STEP);
     if (flag < 0) {
       char* name = IDAGetReturnFlagName(flag);
-      Fail(IdaStatus::kSolverFailure, t_,
-           std::string(name) + (last_error_.empty() ? "" : " (" + last_error_ + ")"));
+      const std::string reason =
+          std::string(name) + (last_error_.empty() ? "" : " (" + last_error_ + ")");
       std::free(name);
+      // Non-finite residuals (the residual callback's recoverable error) are named.
+      const std::string named = NonFiniteWitness();
+      if (!named.empty()) {
+        Fail(IdaStatus::kNonFinite, t_, named + "; " + reason);
+      } else {
+        Fail(IdaStatus::kSolverFailure, t_, reason);
+      }
+      return;
+    }
+    // A collapsed step (below 10 eps |t|) would otherwise creep on, recording every step, until
+    // max_steps: the run stops after kMaxCollapsedIdaSteps of them in a row (an IDA run on a
+    // model whose square root's argument turned negative took 10^7 steps of 2 ulps and wrote a
+    // 1.5 GB trajectory). IDA's first steps after a restart may be that short too, but they
+    // double every step (an event of the rectifier at rtol 1e-12: 7.6e-20 at t = 1.5e-4), so
+    // they leave the range within a few steps.
+    double last_step = 0.0;
+    IDAGetLastStep(memory_, &last_step);
+    const bool collapsed =
+        std::fabs(last_step) <
+        kMinIdaStepUlps * std::numeric_limits<double>::epsilon() * std::fabs(t_return);
+    collapsed_steps = collapsed ? collapsed_steps + 1 : 0;
+    if (collapsed_steps >= kMaxCollapsedIdaSteps) {
+      std::string named = NonFiniteWitness();
+      if (named.empty()) {
+        // IDA may never have evaluated beyond t (a square root's slope grows without bound
+        // towards its zero): the model just beyond t names the singularity if it is one.
+        Vector probe = View(Y_->vector).head(ny_);
+        const double t_probe = t_return + kSingularityProbe * std::max(1.0, std::fabs(t_return));
+        probe[system_.clock_index()] = t_probe;
+        const std::string beyond = system_.DescribeNonFinite(probe);
+        if (!beyond.empty()) named = beyond + " (just beyond t)";
+      }
+      std::ostringstream reason;
+      reason.precision(3);
+      reason << "IDA's step collapsed to " << last_step << " (" << kMaxCollapsedIdaSteps
+             << " steps in a row below 10 eps |t|)"
+             << (named.empty() ? "; the model may be singular just beyond t"
+                               : "; it met a non-finite value: " + named);
+      Fail(IdaStatus::kStepSizeTooSmall, t_return, reason.str());
+      t_ = t_return;
+      y_ = View(Y_->vector).head(ny_);
       return;
     }
     long steps = 0;
@@ -378,7 +427,7 @@ void IdaRun::Integrate(double t_end) {
     y_ = View(Y_->vector).head(ny_);
     v_ = View(Y_->vector).tail(nz_);
     if (!root) ArmRoots(/*phase_start=*/false);
-    if (options_.record_steps) {
+    if (options_.record_steps && output_times_.empty()) {
       double h = t_ - t_previous;
       if (!hidden) IDAGetLastStep(memory_, &h);
       Record(t_, h);
@@ -397,11 +446,19 @@ void IdaRun::Integrate(double t_end) {
   }
 }
 
+std::string IdaRun::NonFiniteWitness() const {
+  if (!system_.non_finite_seen()) return "";
+  const std::string named = system_.DescribeNonFinite(system_.non_finite_state());
+  return named.empty() ? "a non-finite value in the lowered system (not a scene function)" : named;
+}
+
 // Trajectory points at the output times passed by the last step (IDA's interpolant).
 void IdaRun::RecordOutputTimes(double t_return) {
   while (next_output_ < output_times_.size() && output_times_[next_output_] <= t_return) {
     const double t = output_times_[next_output_++];
-    if (t <= t_) continue;  // at or before the phase start (recorded there)
+    // t0 is the trajectory's first point; IDA's interpolant of the step [t_, t_return]
+    // covers the other times (an output time at an event is the state leaving it).
+    if (t <= system_.scene().initial_time) continue;
     if (IDAGetDky(memory_, t, 0, dky_->vector) < 0) continue;
     const auto Y = View(dky_->vector);
     result_.trajectory.Append(t, Y.head(nx_), Algebraic(Y), 0.0);
@@ -441,7 +498,7 @@ bool IdaRun::HandleRoots(const std::vector<int>* hidden) {
   SwitchRelays(t_, switching, /*initial=*/false);
   const std::vector<bool> previous = a_zero_;
   if (!Decide(t_, &previous)) return false;
-  Record(t_, 0.0);
+  if (output_times_.empty()) Record(t_, 0.0);  // with output times: those only
   return true;
 }
 
@@ -497,7 +554,7 @@ bool IdaRun::DecideAtBoundary(double t) {
   // does not change the statuses again; only real changes count as events.
   if (result_.events.size() > events_before) {
     ++result_.stats.num_events;
-    Record(t, 0.0);
+    if (output_times_.empty()) Record(t, 0.0);  // with output times: those only
   }
   return true;
 }

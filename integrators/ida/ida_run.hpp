@@ -199,6 +199,9 @@ class IdaRun {
 
   // Trajectory points at the output times passed by the last step (IDA's interpolant).
   void RecordOutputTimes(double t_return);
+  // The non-finite model value the lowered system met since the last IDASolve (named), or
+  // empty.
+  std::string NonFiniteWitness() const;
 
   // Algebraic values in the z layout from an IDA vector (continuous ones from z_c).
   Vector Algebraic(const Eigen::Ref<const Vector>& Y) const;

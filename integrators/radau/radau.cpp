@@ -6,6 +6,7 @@
 #include <sstream>
 
 #include "../common/smooth_collocation.hpp"
+#include "../common/step_size.hpp"
 #include "moreau/core/error.hpp"
 #include "moreau/integrators/radau_tableau.hpp"
 #include "moreau/integrators/simulate.hpp"
@@ -16,13 +17,17 @@ namespace moreau {
 void RadauOptions::Validate() const {
   RequireArgument(stages >= 1 && stages <= kMaxRadauStages, "Radau stages must be in [1, ",
                   kMaxRadauStages, "], got ", stages);
-  RequireArgument(std::isfinite(step_size) && (step_size > 0.0 || (adaptive && step_size == 0.0)),
-                  "step size h must be positive and finite (0 = automatic when adaptive), got ",
+  RequireArgument(std::isfinite(step_size) && step_size >= 0.0,
+                  "step size h must be positive and finite (or 0: error-controlled steps), got ",
                   step_size);
+  RequireArgument(std::isfinite(initial_step_size) && initial_step_size >= 0.0,
+                  "initial step h0 must be positive and finite (or 0: automatic), got ",
+                  initial_step_size);
   RequireArgument(std::isfinite(relative_tolerance) && relative_tolerance > 0.0,
                   "relative tolerance must be positive, got ", relative_tolerance);
-  RequireArgument(std::isfinite(absolute_tolerance) && absolute_tolerance > 0.0,
-                  "absolute tolerance must be positive, got ", absolute_tolerance);
+  RequireArgument(std::isfinite(absolute_tolerance) && absolute_tolerance >= 0.0,
+                  "absolute tolerance must be positive (or 0: rtol times each state's scale), got ",
+                  absolute_tolerance);
   RequireArgument(min_step_size > 0.0 && max_step_size >= min_step_size,
                   "step-size bounds need 0 < min_step_size <= max_step_size, got ", min_step_size,
                   " and ", max_step_size);
@@ -59,6 +64,8 @@ RadauStats& RadauStats::operator+=(const RadauStats& other) {
   num_factorizations += other.num_factorizations;
   num_function_evaluations += other.num_function_evaluations;
   num_jacobian_evaluations += other.num_jacobian_evaluations;
+  if (other.error_estimate >= 0.0)
+    error_estimate = std::max(error_estimate, 0.0) + other.error_estimate;
   cpu_seconds += other.cpu_seconds;
   return *this;
 }
@@ -67,13 +74,21 @@ std::string RadauStats::Summary() const {
   std::ostringstream s;
   s << num_steps << " steps (" << num_rejected_steps << " rejected), " << num_newton_iterations
     << " Newton iterations, " << num_factorizations << " factorizations, "
-    << num_function_evaluations << " F evaluations, " << cpu_seconds << " s";
+    << num_function_evaluations << " F evaluations";
+  if (error_estimate >= 0.0) s << ", estimated error " << error_estimate;
+  s << ", " << cpu_seconds << " s";
   return s.str();
 }
 
 namespace {
 
 using SolveOutcome = internal::SmoothCollocationSolver::Outcome;
+
+// Steps below this many units in the last place of t (10 eps |t|) no longer advance t
+// reliably: an error-controlled run stops there with kStepSizeTooSmall.
+constexpr double kMinStepUlps = 10.0;
+// Error weights are never below this many eps (1 + |y|): what floating point resolves.
+constexpr double kNoise = 10.0;
 
 class RadauRun {
  public:
@@ -95,20 +110,35 @@ class RadauRun {
     result.trajectory.state_names = scene.state_names;
     Vector y = system_.InitialState();
     const int nx = system_.num_scene_states();
-    result.trajectory.Append(scene.initial_time, y.head(nx), Vector(), 0.0);
-
     const std::vector<double> ends =
         StretchEnds(scene.initial_time, scene.final_time, scene.ControlBreakpoints(),
                     options_.stop_times, nullptr);
-    double h_next = options_.step_size;
+    const bool adaptive = options_.ErrorControlled();
+    // A fixed grid longer than max_steps is refused before any work.
+    if (!adaptive) RequireFixedStepsWithin(ends, options_.step_size, options_.max_steps);
+    // The embedded estimate has local order s + 1, below the 2s - 1 of the solution at step
+    // ends: summed over error-controlled steps it is about (number of steps) * rtol and says
+    // nothing the tolerance does not; for fixed steps it is the error statement there is.
+    estimating_ = !adaptive && options_.estimate_error;
+    if (estimating_) stats_.error_estimate = 0.0;
+    scale_.Reset(y);
+    result.trajectory.Append(scene.initial_time, y.head(nx), Vector(), 0.0);
+
+    double h_next =
+        options_.initial_step_size > 0.0 ? options_.initial_step_size : options_.step_size;
     for (std::size_t segment = 0; segment + 1 < ends.size(); ++segment) {
       const double t_begin = ends[segment];
       const double t_end = ends[segment + 1];
       system_.SetInputs(scene.InputValues(t_begin));
       have_previous_ = false;  // no extrapolation across a breakpoint
-      const bool ok = options_.adaptive ? RunAdaptive(t_begin, t_end, &y, &h_next, &result)
-                                        : RunFixed(t_begin, t_end, &y, &result);
+      const bool ok = adaptive ? RunAdaptive(t_begin, t_end, &y, &h_next, &result)
+                               : RunFixed(t_begin, t_end, &y, &result);
       if (!ok) break;
+    }
+    if (!adaptive && estimating_) {
+      const std::string warning =
+          ErrorEstimateWarning(stats_.error_estimate, options_.relative_tolerance);
+      if (!warning.empty()) result.warnings.push_back(warning);
     }
     result.final_time = y[system_.clock_index()];
     result.final_state = y.head(nx);
@@ -137,12 +167,15 @@ class RadauRun {
       }
       InitialGuess(h, &z);
       int iterations = 0;
+      system_.ClearNonFinite();
       const SolveOutcome outcome = SolveStages(h, *y, &z, &iterations);
       if (outcome != SolveOutcome::kConverged) {
-        return Fail(result,
-                    outcome == SolveOutcome::kNonFinite ? RadauStatus::kNonFinite
-                                                        : RadauStatus::kNewtonFailure,
-                    grid[k], Describe(outcome, iterations, h));
+        return FailSolve(result, grid[k], Describe(outcome, iterations, h),
+                         outcome == SolveOutcome::kNonFinite);
+      }
+      if (options_.estimate_error) {
+        const double error = ErrorNorm(h, *y, z, false);
+        if (std::isfinite(error)) stats_.error_estimate += options_.relative_tolerance * error;
       }
       Accept(h, z, grid[k + 1], y, result);
       if (progress_) progress_(grid[k + 1]);
@@ -153,6 +186,11 @@ class RadauRun {
   bool RunAdaptive(double t_begin, double t_end, Vector* y, double* h_next, RadauResult* result) {
     double h = *h_next > 0.0 ? *h_next : StartingStep(*y, t_end - t_begin);
     h = std::clamp(h, options_.min_step_size, options_.max_step_size);
+    // Steps below 10 eps |t| no longer advance t reliably: the run stops there.
+    auto minimum = [this](double t) {
+      return std::max(options_.min_step_size,
+                      kMinStepUlps * std::numeric_limits<double>::epsilon() * std::fabs(t));
+    };
     Matrix z(n_, s_);
     bool last_rejected = false;
     bool first = true;
@@ -168,24 +206,31 @@ class RadauRun {
       }
       InitialGuess(h, &z);
       int iterations = 0;
+      system_.ClearNonFinite();
       const SolveOutcome outcome = SolveStages(h, *y, &z, &iterations);
       if (outcome != SolveOutcome::kConverged) {
+        // Retried with half the step; a step that fails at its minimum ends the run, named
+        // by the non-finite model value it met if any.
         ++stats_.num_rejected_steps;
-        if (outcome == SolveOutcome::kNonFinite && h <= options_.min_step_size) {
-          return Fail(result, RadauStatus::kNonFinite, t, Describe(outcome, iterations, h));
-        }
+        const std::string reason = Describe(outcome, iterations, h);
         h *= 0.5;
         last_rejected = true;
         have_previous_ = false;
-        if (h < options_.min_step_size) {
-          return Fail(result, RadauStatus::kStepSizeTooSmall, t,
-                      "step size below min_step_size after " + Describe(outcome, iterations, h));
+        if (h < minimum(t)) {
+          std::ostringstream text;
+          text.precision(3);
+          text << reason << "; retried with the step halved below its minimum " << minimum(t);
+          return FailSolve(result, t, text.str(), outcome == SolveOutcome::kNonFinite,
+                           RadauStatus::kStepSizeTooSmall);
         }
         continue;
       }
       const double error = ErrorNorm(h, *y, z, first || last_rejected);
       if (!std::isfinite(error)) {
-        return Fail(result, RadauStatus::kNonFinite, t, "non-finite error estimate");
+        std::ostringstream text;
+        text.precision(3);
+        text << "non-finite error estimate with h = " << h;
+        return FailSolve(result, t, text.str(), true);
       }
       const double exponent = 1.0 / (s_ + 1.0);
       double factor = 0.9 * std::pow(std::max(error, 1e-10), -exponent);
@@ -204,40 +249,38 @@ class RadauRun {
         last_rejected = true;
         have_previous_ = false;
         h *= std::clamp(factor, 0.2, 0.9);
-        if (h < options_.min_step_size) {
-          return Fail(result, RadauStatus::kStepSizeTooSmall, t,
-                      "error test failed with the step size at min_step_size");
+        if (h < minimum(t)) {
+          std::ostringstream text;
+          text.precision(3);
+          text << "the error test calls for a step below max(min_step_size, 10 eps |t|) = "
+               << minimum(t);
+          return Fail(result, RadauStatus::kStepSizeTooSmall, t, text.str());
         }
       }
     }
     return true;
   }
 
-  // Hairer-Wanner I, Sec. II.4: starting step from the first derivatives at y0.
+  // Hairer, Norsett & Wanner's starting step (../common/step_size.hpp) on the scene states.
   double StartingStep(const Vector& y, double span) {
+    constexpr double kQuietStart = 1e-3;  // of the span, where nothing moves at t0
     const int nx = system_.num_scene_states();
+    const double rtol = options_.relative_tolerance;
+    Vector weights(nx);
+    for (int i = 0; i < nx; ++i) {
+      weights[i] =
+          scale_.AbsoluteTolerance(i, options_.absolute_tolerance, rtol) + rtol * std::fabs(y[i]);
+    }
     Evaluate(y, Derivatives::kNone);
     const Vector f0 = eval_.F;
-    auto norm = [&](const Vector& v, const Vector& ref) {
-      double sum = 0.0;
-      for (int i = 0; i < nx; ++i) {
-        const double w =
-            options_.absolute_tolerance + options_.relative_tolerance * std::fabs(ref[i]);
-        sum += (v[i] / w) * (v[i] / w);
-      }
-      return std::sqrt(sum / nx);
-    };
-    const double d0 = norm(y, y), d1 = norm(f0, y);
-    double h0 = (d0 < 1e-5 || d1 < 1e-5) ? 1e-6 : 0.01 * d0 / d1;
-    h0 = std::min(h0, span);
-    const Vector y1 = y + h0 * f0;
-    Evaluate(y1, Derivatives::kNone);
-    const double d2 = norm(eval_.F - f0, y) / h0;
-    const double p = 2.0 * s_ - 1.0;
-    const double h1 = std::max(d1, d2) <= 1e-15
-                          ? std::max(1e-6, h0 * 1e-3)
-                          : std::pow(0.01 / std::max(d1, d2), 1.0 / (p + 1.0));
-    return std::min({100.0 * h0, h1, span});
+    const double h =
+        internal::StartingStep(y, f0, weights, nx, 2 * s_ - 1, span, kQuietStart * span,
+                               [this](const Vector& y1, Vector* f1) {
+                                 Evaluate(y1, Derivatives::kNone);
+                                 *f1 = eval_.F;
+                               });
+    system_.ClearNonFinite();  // trial evaluations beyond t0 are not the run's
+    return h;
   }
 
   void Evaluate(const Vector& y, Derivatives derivatives) {
@@ -266,11 +309,17 @@ class RadauRun {
   // Full Newton on the collocation equations (shared kernel, see smooth_collocation.hpp).
   SolveOutcome SolveStages(double h, const Vector& y0, Matrix* z, int* iterations) {
     internal::SmoothCollocationSolver::Stopping stopping;
-    stopping.weighted_rms = options_.adaptive;
+    stopping.weighted_rms = options_.ErrorControlled();
     // Adaptive: a small fraction of the error tolerance; fixed step: newton_tolerance.
-    stopping.tolerance = options_.adaptive ? 1e-2 : options_.newton_tolerance;
+    stopping.tolerance = options_.ErrorControlled() ? 1e-2 : options_.newton_tolerance;
     stopping.relative_tolerance = options_.relative_tolerance;
-    stopping.absolute_tolerance = options_.absolute_tolerance;
+    const int nx = system_.num_scene_states();
+    newton_atol_.resize(nx);
+    for (int i = 0; i < nx; ++i) {
+      newton_atol_[i] =
+          scale_.AbsoluteTolerance(i, options_.absolute_tolerance, options_.relative_tolerance);
+    }
+    stopping.absolute_tolerances = &newton_atol_;
     stopping.max_iterations = options_.max_newton_iterations;
     return stage_solver_.Solve(h, y0, stopping, z, iterations);
   }
@@ -294,8 +343,13 @@ class RadauRun {
     auto norm = [&](const Vector& e) {
       double sum = 0.0;
       for (int i = 0; i < nx; ++i) {
-        const double w = options_.absolute_tolerance +
-                         options_.relative_tolerance * std::max(std::fabs(y0[i]), std::fabs(y1[i]));
+        const double size = std::max(std::fabs(y0[i]), std::fabs(y1[i]));
+        // A state that has been exactly zero so far has no scale: its weight is never below
+        // what floating point resolves there.
+        const double w = std::max(
+            scale_.AbsoluteTolerance(i, options_.absolute_tolerance, options_.relative_tolerance) +
+                options_.relative_tolerance * size,
+            kNoise * std::numeric_limits<double>::epsilon() * (1.0 + size));
         sum += (e[i] / w) * (e[i] / w);
       }
       return std::sqrt(sum / nx);
@@ -317,6 +371,7 @@ class RadauRun {
   void Accept(double h, const Matrix& z, double t_new, Vector* y, RadauResult* result) {
     *y += z.col(s_ - 1);
     (*y)[system_.clock_index()] = t_new;
+    scale_.Update(*y);
     ++stats_.num_steps;
     previous_z_ = z;
     previous_h_ = h;
@@ -326,6 +381,20 @@ class RadauRun {
       result->trajectory.Append((*y)[system_.clock_index()], y->head(system_.num_scene_states()),
                                 Vector(), h);
     }
+  }
+
+  // A failed solve: kNonFinite naming the model function if a non-finite value was met
+  // (`non_finite`: the solver says so, or the witness of the lowered system saw one), else
+  // `otherwise`.
+  bool FailSolve(RadauResult* result, double t, const std::string& reason, bool non_finite,
+                 RadauStatus otherwise = RadauStatus::kNewtonFailure) {
+    if (!non_finite && !system_.non_finite_seen()) return Fail(result, otherwise, t, reason);
+    const std::string named =
+        system_.non_finite_seen() ? system_.DescribeNonFinite(system_.non_finite_state()) : "";
+    return Fail(
+        result, RadauStatus::kNonFinite, t,
+        (named.empty() ? std::string("a non-finite value in the state or the dynamics") : named) +
+            " (" + reason + ")");
   }
 
   bool Fail(RadauResult* result, RadauStatus status, double t, const std::string& reason) {
@@ -373,6 +442,9 @@ class RadauRun {
   double previous_h_ = 0.0;
   bool have_previous_ = false;
   double last_step_ = 0.0;
+  bool estimating_ = false;  // error_estimate accumulated (error control or estimate_error)
+  internal::StateScale scale_;
+  Vector newton_atol_;  // per-state atol of the adaptive Newton's stopping test
   RadauStats stats_;
 };
 

@@ -33,6 +33,7 @@ void TimeSteppingOptions::Validate() const {
   for (double t : stop_times) {
     RequireArgument(std::isfinite(t), "stop times (tstops) must be finite, got ", t);
   }
+  RequireArgument(max_steps >= 1, "max_steps must be >= 1, got ", max_steps);
   RequireArgument(sensitivity_directions.allFinite() && adjoint_weights.allFinite(),
                   "sensitivity directions and adjoint weights must be finite");
   newton.Validate();
@@ -259,6 +260,10 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
                                         const ProgressCallback& progress) {
   options.Validate();
   RequireSupportedEffects(scene, "timestepping");
+  // A grid longer than max_steps is refused before any work.
+  RequireFixedStepsWithin(
+      SegmentEnds(scene.initial_time, scene.final_time, scene.ControlBreakpoints()),
+      options.step_size, options.max_steps);
   const auto start = std::chrono::steady_clock::now();
   LoweringOptions lowering;
   lowering.switching_form = options.switching_form;

@@ -21,6 +21,7 @@ IntegratorEntry TimeSteppingEntry() {
       BindReal("h", &O::step_size, "fixed step > 0"),
       BindStopTimes(&O::stop_times),
       BindSwitching(&O::switching_form),
+      BindInteger("max_steps", &O::max_steps, "most steps (a longer grid is refused), >= 1"),
       BindBool("record_trajectory", &O::record_trajectory,
                "record every step (false: initial and final points only)"),
       BindBool("sensitivities", &O::sensitivities,

@@ -489,6 +489,11 @@ void LoweredSystem::InitialAlgebraicGuess(const Vector& y, const Vector* previou
   for (const auto& block : blocks_) block->InitialGuess(context, y, previous, *z);
 }
 
+std::string LoweredSystem::DescribeNonFinite(const Vector& y) const {
+  const int nx = scene_.num_states();
+  return NonFiniteModelValue(scene_, y.head(nx), inputs_, y[clock_index()], parameters_);
+}
+
 void LoweredSystem::SetInputs(const Vector& u) {
   RequireArgument(u.size() == scene_.num_inputs(), scene_.name, ": expected ", scene_.num_inputs(),
                   " input values, got ", u.size());

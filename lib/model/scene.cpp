@@ -7,6 +7,7 @@
 #include <limits>
 #include <set>
 #include <sstream>
+#include <utility>
 
 #include "moreau/core/error.hpp"
 
@@ -361,6 +362,23 @@ void ValidateScene(const Scene& scene, bool check_initial_feasibility) {
                     scene.time_scale_input);
   }
 
+  const SceneDefaults& defaults = scene.defaults;
+  for (const auto& [value, key] : {std::pair{defaults.relative_tolerance, "rtol"},
+                                   {defaults.absolute_tolerance, "atol"},
+                                   {defaults.initial_step, "h0"},
+                                   {defaults.max_step, "h_max"},
+                                   {defaults.output_step, "output_dt"}}) {
+    RequireArgument(std::isfinite(value) && value >= 0.0, s, ": default ", key,
+                    " must be finite and >= 0 (0: the integrator's own), got ", value);
+  }
+  RequireArgument(defaults.relative_tolerance < 1.0, s, ": default rtol must be below 1, got ",
+                  defaults.relative_tolerance);
+  for (double t : defaults.output_times) {
+    RequireArgument(std::isfinite(t) && t >= scene.initial_time, s,
+                    ": default output times must be finite and >= t0 = ", scene.initial_time,
+                    ", got ", t);
+  }
+
   if (!scene.dynamics.empty()) {
     EvaluateAtStart(scene, scene.dynamics, "dynamics f", scene.num_states());
   }
@@ -384,6 +402,70 @@ void ValidateScene(const Scene& scene, bool check_initial_feasibility) {
   }
   RequireUniqueNames(names, s + ": effects");
   ValidateView(scene);
+}
+
+std::string NonFiniteModelValue(const Scene& scene, const Vector& x, const Vector& u, double t,
+                                const Vector& p) {
+  std::string found;
+  // Evaluates f and names its first non-finite output (output_name(k) says what output k is).
+  auto check = [&](const SmoothFunction& f, const std::string& what, const auto& output_name) {
+    if (!found.empty() || f.empty()) return;
+    Vector out;
+    try {
+      f.Evaluate(x, u, t, p, &out);
+    } catch (const std::exception&) {
+      return;  // out-of-range arguments are refused at validation, not here
+    }
+    for (Eigen::Index k = 0; k < out.size(); ++k) {
+      if (std::isfinite(out[k])) continue;
+      std::ostringstream text;
+      text.precision(17);
+      text << what << " ('" << f.name() << "'), output " << output_name(k) << ", is " << out[k]
+           << " at t = " << t << ", x = (";
+      for (int i = 0; i < scene.num_states(); ++i) {
+        text << (i ? ", " : "") << scene.state_names[static_cast<std::size_t>(i)] << " = " << x[i];
+      }
+      text << ")";
+      found = text.str();
+      return;
+    }
+  };
+  auto named = [](const std::vector<std::string>& names, const std::string& kind) {
+    return [&names, kind](Eigen::Index k) {
+      const auto i = static_cast<std::size_t>(k);
+      return i < names.size() ? "'" + names[i] + "' (" + kind + ")" : std::to_string(k);
+    };
+  };
+  const auto rate = named(scene.state_names, "its rate");
+  check(scene.dynamics, "the dynamics f", rate);
+  for (const Effect& effect : scene.effects) {
+    const std::string what = EffectKind(effect) + " '" + EffectName(effect) + "'";
+    std::visit(
+        [&](const auto& e) {
+          using E = std::decay_t<decltype(e)>;
+          if constexpr (std::is_same_v<E, MovingSet>) {
+            check(e.constraints, what + " constraints c", named(e.constraint_names, "c"));
+          } else if constexpr (std::is_same_v<E, SwitchingSurfaces>) {
+            check(e.surfaces, what + " surfaces c", named(e.surface_names, "c"));
+            for (std::size_t m = 0; m < e.modes.size(); ++m) {
+              check(e.modes[m], what + " mode '" + e.mode_names[m] + "'", rate);
+            }
+          } else if constexpr (std::is_same_v<E, HysteresisRelay>) {
+            check(e.input, what + " input", [](Eigen::Index) { return std::string("0"); });
+            check(e.mode_a, what + " mode A", rate);
+            check(e.mode_b, what + " mode B", rate);
+          } else if constexpr (std::is_same_v<E, PathConstraints>) {
+            check(e.constraints, what + " phi", named(e.constraint_names, "phi"));
+          } else if constexpr (std::is_same_v<E, Complementarity>) {
+            check(e.output, what + " output g", named(e.pair_names, "w"));
+            const auto entry = [](Eigen::Index k) { return "entry " + std::to_string(k); };
+            check(e.input_matrix, what + " input matrix B", entry);
+            check(e.feedthrough, what + " feedthrough D", entry);
+          }
+        },
+        effect);
+  }
+  return found;
 }
 
 std::vector<std::string> OverridableNames(const Scene& scene) {

@@ -11,6 +11,7 @@
 
 #include "moreau/core/error.hpp"
 #include "moreau/model/expression.hpp"
+#include "toml_screen.hpp"
 
 // toml++ (Debian libtomlplusplus-dev), header-only, private to this file. Its internal
 // assertions are compiled as in release builds in every build type: toml++ 3.3 asserts (and so
@@ -229,6 +230,7 @@ class SceneReader {
   }
 
   // ---- sections -------------------------------------------------------------------------
+  void ReadDefaults(const toml::node& node, Scene* scene);
   void ReadParameters(const toml::table& root, Scene* scene);
   void ReadInputs(const toml::table& root, Scene* scene);
   void ReadEffect(const toml::table& table, const std::string& path, Scene* scene);
@@ -588,9 +590,46 @@ void SceneReader::ReadEffect(const toml::table& table, const std::string& path, 
        " (kinds: moving_set, switching, hysteresis, path_constraints, complementarity)");
 }
 
+// [defaults]: the integrator settings the scene's author knows (SceneDefaults). Values are
+// numbers or constant expressions of the parameters (evaluated here, with the file's values).
+void SceneReader::ReadDefaults(const toml::node& node, Scene* scene) {
+  const toml::table& table = Table(node, "defaults");
+  CheckKeys(table, "defaults", {"rtol", "atol", "h0", "h_max", "output_times", "output_dt"});
+  SceneDefaults& defaults = scene->defaults;
+  auto positive = [&](const char* key, double* target) {
+    const toml::node* value = table.get(key);
+    if (value == nullptr) return;
+    const std::string path = Join("defaults", key);
+    *target = Value(*value, path);
+    if (!(*target > 0.0)) Fail(*value, path, "expected a positive value, got ", *target);
+  };
+  positive("rtol", &defaults.relative_tolerance);
+  positive("atol", &defaults.absolute_tolerance);
+  positive("h0", &defaults.initial_step);
+  positive("h_max", &defaults.max_step);
+  positive("output_dt", &defaults.output_step);
+  if (const toml::node* rtol = table.get("rtol"); rtol && !(defaults.relative_tolerance < 1.0)) {
+    Fail(*rtol, "defaults.rtol", "expected a relative tolerance below 1, got ",
+         defaults.relative_tolerance);
+  }
+  if (const toml::node* times = table.get("output_times")) {
+    const toml::array& list = Array(*times, "defaults.output_times", "output times in [t0, tf]");
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      const std::string path = Index("defaults.output_times", i);
+      const double t = Value(*list.get(i), path);
+      if (t < scene->initial_time || t > scene->final_time) {
+        Fail(*list.get(i), path, "output time ", t, " is outside [t0, tf] = [", scene->initial_time,
+             ", ", scene->final_time, "]");
+      }
+      defaults.output_times.push_back(t);
+    }
+  }
+}
+
 Scene SceneReader::Read(const std::string& text) {
   RequireArgument(text.size() <= kMaxFileBytes, source_, ": file larger than ", kMaxFileBytes,
                   " bytes");
+  detail::ScreenTomlText(text, source_);  // keeps toml++ 3.3 off its undefined behaviour
   toml::table root;
   try {
     root = toml::parse(text, source_);
@@ -599,7 +638,7 @@ Scene SceneReader::Read(const std::string& text) {
   }
   CheckKeys(root, "",
             {"name", "description", "t0", "tf", "states", "x0", "dynamics", "time_scale_input",
-             "parameters", "inputs", "defs", "effects", "view"});
+             "parameters", "inputs", "defs", "defaults", "effects", "view"});
   Scene scene;
   const toml::node& name_node = Require(root, "name", "", "the scene's name");
   scene.name = String(name_node, "name");
@@ -687,6 +726,7 @@ Scene SceneReader::Read(const std::string& text) {
     }
     scene.time_scale_input = index;
   }
+  if (const toml::node* defaults = root.get("defaults")) ReadDefaults(*defaults, &scene);
   if (const toml::node* effects = root.get("effects")) {
     const toml::array& list = Array(*effects, "effects", "[[effects]] tables");
     std::set<std::string> names;

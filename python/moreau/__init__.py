@@ -19,11 +19,16 @@ from __future__ import annotations
 
 import functools
 import math
+import warnings
 from typing import Any, Callable, Dict, List, NamedTuple, Optional, Sequence
 
 import numpy as np
 
 from . import _moreau
+
+#: The version of moreau (the file VERSION of the source tree; ``moreau --version`` and the C++
+#: macro ``MOREAU_VERSION`` show the same).
+__version__: str = _moreau.__version__
 
 __all__ = [
     "Event",
@@ -38,6 +43,7 @@ __all__ = [
     "Result",
     "Scene",
     "Sensitivities",
+    "SimulationWarning",
     "integrators",
     "scene",
     "scenes",
@@ -112,14 +118,17 @@ class Scene:
 
     @property
     def name(self) -> str:
+        """The scene's name (messages, output directories)."""
         return self._native.name
 
     @property
     def description(self) -> str:
+        """One line describing the scene."""
         return self._native.description
 
     @property
     def state_names(self) -> List[str]:
+        """The names of the states x, in order."""
         return self._native.state_names
 
     @property
@@ -129,10 +138,12 @@ class Scene:
 
     @property
     def t0(self) -> float:
+        """Initial time."""
         return self._native.t0
 
     @property
     def tf(self) -> float:
+        """Final time."""
         return self._native.tf
 
     @property
@@ -220,7 +231,7 @@ def load_scene(path: str) -> Scene:
 
 
 def scene_from_dict(data: Dict[str, Any] = None, **keywords: Any) -> Scene:
-    """A scene from a dict (or keywords) with the keys of a scene file and expression strings:
+    """A scene from a dict (or keywords) with the keys of a scene file and expression strings::
 
         moreau.scene_from_dict(name="S3", states=["x1", "x2"], x0=["sqrt(2)", "sqrt(2)"],
                                tf="11*pi/12 + sqrt(3)", dynamics=["x2", "-x1"],
@@ -262,7 +273,8 @@ def integrators() -> List[Dict[str, Any]]:
 class Result:
     """The result of a simulation (the same for every integrator).
 
-    Attributes: ``status``, ``success``, ``message``, ``integrator``, ``final_time``,
+    Attributes: ``status``, ``success``, ``message``, ``warnings``, ``error_estimate``,
+    ``integrator``, ``final_time``,
     ``final_state``; arrays ``t`` (N,), ``x`` (N, n_x), ``algebraic`` (N, n_a; NaN where an
     integrator has no value, e.g. at t0) and ``step`` (N,); ``events``, ``relays``, ``stats``
     (dict), ``options`` (the options used, with defaults), ``records`` (per-element or per-step
@@ -277,9 +289,16 @@ class Result:
         self.status: str = native.status
         self.message: str = native.message
         self.final_time: float = native.final_time
+        #: What to know although the run may have succeeded (an estimated error far above the
+        #: tolerance, ...); simulate() also issues each with warnings.warn.
+        self.warnings: List[str] = list(native.warnings)
+        #: The run's estimated error relative to the solution's scale (FESD, Radau; None
+        #: where the integrator has none; docs/accuracy.md).
+        self.error_estimate: Optional[float] = native.error_estimate
 
     @functools.cached_property
     def final_state(self) -> np.ndarray:
+        """The scene's states at ``final_time`` (n_x,)."""
         return self._native.final_state
 
     @functools.cached_property
@@ -293,10 +312,12 @@ class Result:
 
     @property
     def t(self) -> np.ndarray:
+        """The recorded times (N,), in physical time, ascending."""
         return self._trajectory["t"]
 
     @property
     def x(self) -> np.ndarray:
+        """The states at the recorded times (N, n_x), columns named by ``state_names``."""
         return self._trajectory["x"]
 
     @property
@@ -311,10 +332,12 @@ class Result:
 
     @property
     def state_names(self) -> List[str]:
+        """Names of the columns of ``x``."""
         return self._trajectory["state_names"]
 
     @property
     def algebraic_names(self) -> List[str]:
+        """Names of the columns of ``algebraic`` (e.g. ``floor.lambda_gap``)."""
         return self._trajectory["algebraic_names"]
 
     @functools.cached_property
@@ -329,22 +352,27 @@ class Result:
 
     @functools.cached_property
     def events(self) -> List[Event]:
+        """Switch, contact and relay events in time order."""
         return [Event(*e) for e in self._native.events()]
 
     @functools.cached_property
     def relays(self) -> List[Relay]:
+        """Hysteresis scenes: each relay's memory w(t) in physical time."""
         return [Relay(*r) for r in self._native.relays()]
 
     @functools.cached_property
     def stats(self) -> Dict[str, float]:
+        """The integrator's declared statistics by name (:func:`integrators` lists them)."""
         return self._native.stats()
 
     @functools.cached_property
     def options(self) -> Dict[str, Any]:
+        """Every option of the integrator with the value used (defaults included)."""
         return self._native.options()
 
     @functools.cached_property
     def records(self) -> Dict[str, np.ndarray]:
+        """Per-element (FESD) or per-step (alpha) certificates as arrays, by column name."""
         return self._native.records()
 
     @functools.cached_property
@@ -355,6 +383,7 @@ class Result:
 
     @functools.cached_property
     def sensitivities(self) -> Optional[Sensitivities]:
+        """With ``sensitivities=True``: exact derivatives of the final state (else None)."""
         native = self._native.sensitivities()
         if native is None:
             return None
@@ -399,14 +428,17 @@ class Result:
 
     @property
     def num_steps(self) -> int:
+        """Steps (FESD: finite elements) of the run; the unit is the integrator's."""
         return self._native.num_steps
 
     @property
     def num_iterations(self) -> int:
+        """Newton (IDA: nonlinear, alpha: SQP) iterations of the run."""
         return self._native.num_iterations
 
     @property
     def cpu_seconds(self) -> float:
+        """CPU time of the run."""
         return self._native.cpu_seconds
 
     def plot(self, states: Optional[Sequence[str]] = None, multipliers: bool = True,
@@ -467,6 +499,18 @@ def simulate(scene: Scene, integrator: str = "auto",
         raise ValueError(f"integrator must be a string, got {type(integrator).__name__}")
     result = Result(_moreau._simulate(scene._native, integrator, options, _progress_arg(progress)))
     result._scene = scene.copy()  # as simulated: figures and animations read its view
+    return _warned(result)
+
+
+class SimulationWarning(UserWarning):
+    """A run's warning (``Result.warnings``): an estimated error far above the tolerance, a
+    suspected unresolved crossing, ..."""
+
+
+def _warned(result: Result) -> Result:
+    for message in result.warnings:
+        warnings.warn(f"{result.scene} ({result.integrator}): {message}", SimulationWarning,
+                      stacklevel=3)
     return result
 
 
@@ -510,7 +554,7 @@ class Integrator:
         result._scene = self.scene.copy()
         for name, value in values:
             result._scene._native.set_value(name, value)
-        return result
+        return _warned(result)
 
 
 from ._ensemble import sweep  # noqa: E402  (needs Scene and simulate above)

@@ -31,12 +31,21 @@ def _grid_arguments(grid: Optional[Mapping[str, GridSpec]]) -> List[Tuple[str, L
     for name, spec in grid.items():
         if not isinstance(name, str):
             raise ValueError(f"grid names must be strings, got {type(name).__name__}")
-        if isinstance(spec, tuple) and len(spec) == 3 and isinstance(spec[2], (int, np.integer)) \
-                and not isinstance(spec[2], bool):
+        # A 3-tuple is always (start, stop, count); values come as a list or an array. A
+        # count that is not an integer is an error, never three values read as a list.
+        if isinstance(spec, tuple) and len(spec) == 3:
             start, stop, count = spec
+            if isinstance(count, bool) or not isinstance(count, (int, np.integer)):
+                raise ValueError(f"grid '{name}': a tuple is (start, stop, count) and count must "
+                                 f"be an integer, got {count!r}; pass several values as a list "
+                                 f"[{', '.join(repr(v) for v in spec)}]")
+            if count < 1:
+                raise ValueError(f"grid '{name}': count must be >= 1, got {count}")
             for part, value in (("start", start), ("stop", stop)):
                 if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
                     raise ValueError(f"grid '{name}': {part} must be a number, got {value!r}")
+                if not math.isfinite(float(value)):
+                    raise ValueError(f"grid '{name}': {part} must be finite, got {value!r}")
             values.append(_moreau._parse_grid(f"{name}={float(start)!r}:{float(stop)!r}:"
                                               f"{int(count)}"))
             continue
@@ -60,13 +69,22 @@ def _sample_arguments(samples: Optional[Mapping[str, SampleSpec]]) -> List[str]:
         raise ValueError("samples must be a dict name -> ('normal', mean, std) or "
                          "('uniform', a, b)")
     for name, spec in samples.items():
-        if not (isinstance(spec, tuple) and len(spec) == 3 and isinstance(spec[0], str)):
+        if not isinstance(name, str):
+            raise ValueError(f"sample names must be strings, got {type(name).__name__}")
+        if not (isinstance(spec, tuple) and len(spec) == 3 and spec[0] in ("normal", "uniform")):
             raise ValueError(f"sample '{name}': expected ('normal', mean, std) or "
                              f"('uniform', a, b), got {spec!r}")
         kind, a, b = spec
         for value in (a, b):
             if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
                 raise ValueError(f"sample '{name}': parameters must be numbers, got {value!r}")
+            if not math.isfinite(float(value)):
+                raise ValueError(f"sample '{name}': parameters must be finite, got {value!r}")
+        if kind == "normal" and b < 0:
+            raise ValueError(f"sample '{name}': the standard deviation must be >= 0, got {b!r}")
+        if kind == "uniform" and not a < b:
+            raise ValueError(f"sample '{name}': ('uniform', a, b) needs a < b, got a = {a!r}, "
+                             f"b = {b!r}")
         texts.append(f"{name}={kind}:{float(a)!r}:{float(b)!r}")
     return texts
 
@@ -138,6 +156,13 @@ def sweep(scene, grid: Optional[Mapping[str, GridSpec]] = None,
             raise ValueError(f"{name} must be a non-negative integer, got {value!r}")
     if progress is not None and not callable(progress):
         raise ValueError("progress must be callable (it is called with done, total)")
+    # The library's own checks name the command line's flags; these say it in Python.
+    if not grid and not samples:
+        raise ValueError("a sweep needs grid= or samples=")
+    if samples and n_samples < 1:
+        raise ValueError(f"samples= needs n_samples >= 1 draws per grid point, got {n_samples}")
+    if not samples and n_samples != 0:
+        raise ValueError("n_samples applies only with samples=")
     spec = {
         "grids": _grid_arguments(grid),
         "samples": _sample_arguments(samples),

@@ -4,6 +4,8 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+__version__: str
+
 class _Scene:
     def __init__(self, other: _Scene) -> None: ...
     @property
@@ -44,6 +46,9 @@ class _Result:
     num_steps: int
     num_iterations: int
     cpu_seconds: float
+    warnings: List[str]
+    @property
+    def error_estimate(self) -> Optional[float]: ...
     @property
     def final_state(self) -> np.ndarray: ...
     @property

@@ -24,6 +24,7 @@
 #include "moreau/model/scene.hpp"
 #include "moreau/model/scene_file.hpp"
 #include "moreau/scenes/catalog.hpp"
+#include "moreau/version.hpp"
 
 namespace py = pybind11;
 
@@ -68,6 +69,33 @@ SettingValue ToSetting(const std::string& name, const py::handle& value) {
   ThrowInvalidArgument("option '", name, "': expected a number, bool, string or list of numbers, ",
                        "got a value of type ",
                        py::str(value.get_type().attr("__name__")).cast<std::string>());
+}
+
+// Settings from Python keywords. Python values come typed: a string is accepted for a choice
+// option only ("stewart"), never parsed as a number or a bool as the command line's text is
+// (h="0.1" and sensitivities="no" raise ValueError, as the docs promise).
+SimulationSettings Settings(const Scene& scene, const std::string& integrator,
+                            const py::dict& options) {
+  SimulationSettings settings;
+  settings.integrator = integrator;
+  const std::string resolved = integrator == "auto" ? AutomaticIntegrator(scene) : integrator;
+  const IntegratorSpec& spec = FindIntegrator(resolved);
+  for (const auto& [key, value] : options) {
+    const std::string name = py::str(key).cast<std::string>();
+    SettingValue setting = ToSetting(name, value);
+    const OptionSpec* option = spec.FindOption(name);
+    if (option != nullptr && option->type != OptionSpec::Type::kChoice &&
+        std::holds_alternative<std::string>(setting)) {
+      const char* expected = option->type == OptionSpec::Type::kBool       ? "True or False"
+                             : option->type == OptionSpec::Type::kInteger  ? "an integer"
+                             : option->type == OptionSpec::Type::kRealList ? "a list of numbers"
+                                                                           : "a number";
+      ThrowInvalidArgument("option '", name, "' expects ", expected, ", got the string '",
+                           std::get<std::string>(setting), "'");
+    }
+    settings.options[name] = std::move(setting);
+  }
+  return settings;
 }
 
 py::object FromSetting(const SettingValue& value) {
@@ -135,12 +163,7 @@ class ProgressBridge {
 
 SimulationResult RunSimulation(const Scene& scene, const std::string& integrator,
                                const py::dict& options, const py::object& progress) {
-  SimulationSettings settings;
-  settings.integrator = integrator;
-  for (const auto& [key, value] : options) {
-    const std::string name = py::str(key).cast<std::string>();
-    settings.options[name] = ToSetting(name, value);
-  }
+  const SimulationSettings settings = Settings(scene, integrator, options);
   ProgressBridge bridge(progress);
   const ProgressCallback callback = bridge.Callback();
   std::optional<SimulationResult> result;
@@ -251,12 +274,7 @@ py::dict RunSweepColumns(const Scene& scene,
   spec.num_samples = num_samples;
   spec.seed = seed;
   spec.num_event_times = events;
-  SimulationSettings settings;
-  settings.integrator = integrator;
-  for (const auto& [key, value] : options) {
-    const std::string name = py::str(key).cast<std::string>();
-    settings.options[name] = ToSetting(name, value);
-  }
+  const SimulationSettings settings = Settings(scene, integrator, options);
   SweepProgress callback;
   std::optional<py::error_already_set> error;
   std::mutex mutex;
@@ -288,6 +306,7 @@ PYBIND11_MODULE(_moreau, m) {
   using namespace moreau;
   using namespace moreau::python;
   m.doc() = "Compiled core of the moreau package (use the `moreau` package, not this module).";
+  m.attr("__version__") = MOREAU_VERSION;  // moreau.__version__ (moreau/version.hpp)
 
   py::class_<Scene>(m, "_Scene")
       .def(py::init<const Scene&>())
@@ -418,6 +437,12 @@ PYBIND11_MODULE(_moreau, m) {
              return out;
            })
       .def("step_sequence", [](const SimulationResult& r) { return r.step_sequence; })
+      .def_readonly("warnings", &SimulationResult::warnings)
+      .def_property_readonly("error_estimate",
+                             [](const SimulationResult& r) -> py::object {
+                               if (!r.error_estimate) return py::none();
+                               return py::float_(*r.error_estimate);
+                             })
       .def("sensitivities",
            [](const SimulationResult& r) -> py::object {
              if (!r.sensitivities) return py::none();
@@ -455,13 +480,7 @@ PYBIND11_MODULE(_moreau, m) {
         py::arg("options"), py::arg("threads"), py::arg("indices"), py::arg("progress"));
   py::class_<Simulator>(m, "_Simulator")
       .def(py::init([](const Scene& scene, const std::string& integrator, const py::dict& options) {
-        SimulationSettings settings;
-        settings.integrator = integrator;
-        for (const auto& [key, value] : options) {
-          const std::string name = py::str(key).cast<std::string>();
-          settings.options[name] = ToSetting(name, value);
-        }
-        return std::make_unique<Simulator>(scene, settings);
+        return std::make_unique<Simulator>(scene, Settings(scene, integrator, options));
       }))
       .def_property_readonly("integrator", &Simulator::integrator)
       .def("run",

@@ -37,6 +37,7 @@ H1_DICT = dict(
 RECTIFIER_DICT = dict(
     name="rectifier", states=["v_C", "i_L"], x0=[10.0, 0.0], tf=2e-3,
     dynamics=["-i_L/C", "v_C/L"], parameters={"L": 1e-2, "C": 1e-6, "R": 1e3},
+    defaults={"h0": 1e-6, "output_dt": 1e-5},  # the scale the compiled rectifier declares
     effects=[{"kind": "complementarity", "name": "diode", "pair_names": ["D"],
               "output": ["-v_C"], "input_matrix": [["-1/C"], ["0"]], "feedthrough": [["R"]]}])
 

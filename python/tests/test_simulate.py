@@ -156,8 +156,11 @@ def test_listing_functions():
 
 
 def test_bad_input_unknown_keyword_is_named():
-    with pytest.raises(ValueError, match="option 'stage' does not apply to integrator 'fesd'"):
+    with pytest.raises(ValueError, match="unknown option 'stage' for integrator 'fesd'; "
+                                         "did you mean 'stages'"):
         moreau.simulate(moreau.scene("S3"), integrator="fesd", stage=3)
+    with pytest.raises(ValueError, match="option 'h' does not apply to integrator 'ida'"):
+        moreau.simulate(moreau.scene("S3"), integrator="ida", h=0.1)
     with pytest.raises(ValueError, match="unknown integrator 'fsed'"):
         moreau.simulate(moreau.scene("S3"), integrator="fsed")
     with pytest.raises(ValueError, match="unknown scene 'S33'"):
@@ -168,8 +171,13 @@ def test_bad_input_unknown_keyword_is_named():
 
 def test_bad_input_wrong_types():
     s3 = moreau.scene("S3")
-    with pytest.raises(ValueError, match="expected an integer"):
+    with pytest.raises(ValueError, match="option 'stages' expects an integer"):
         moreau.simulate(s3, integrator="fesd", stages="three")
+    # Strings are never parsed as numbers or bools (the command line's text is).
+    with pytest.raises(ValueError, match="option 'h' expects a number, got the string '0.1'"):
+        moreau.simulate(s3, integrator="fesd", h="0.1")
+    with pytest.raises(ValueError, match="option 'sensitivities' expects True or False"):
+        moreau.simulate(s3, integrator="fesd", sensitivities="no")
     with pytest.raises(ValueError, match="expected a number"):
         moreau.simulate(s3, integrator="fesd", h=[0.1])
     with pytest.raises(ValueError, match="expected one of stewart, heaviside"):
@@ -204,3 +212,29 @@ def test_bad_input_nan_and_out_of_range():
         moreau.simulate(s3, integrator="fesd", stages=9)
     with pytest.raises(ValueError, match="does not support the moving set 'floor'"):
         moreau.simulate(s3, integrator="radau")
+
+
+# --- fixed steps estimate their error; a warning far above the tolerance ------------------
+
+
+def test_fixed_step_error_estimate_and_warning():
+    hopf = moreau.scene("hopf")
+    with pytest.warns(moreau.SimulationWarning, match="estimated error of this fixed-step run"):
+        coarse = moreau.simulate(hopf, integrator="radau", h=0.5, stages=1)
+    assert coarse.success
+    # kErrorWarningFactor (10) times the default rtol (1e-6), docs/accuracy.md
+    assert coarse.error_estimate > 1e-5
+    assert len(coarse.warnings) == 1
+    fine = moreau.simulate(hopf, integrator="radau", h=0.002)
+    assert fine.error_estimate is not None and fine.error_estimate <= 1e-5
+    assert fine.warnings == []
+    # IDA has no estimate of its own.
+    assert moreau.simulate(moreau.scene("S3"), integrator="ida").error_estimate is None
+
+
+def test_cli_summary_carries_the_estimate_and_the_warning(cli, tmp_path):
+    summary = cli(["run", "hopf", "--integrator", "radau", "--h", "0.5", "--stages", "1"],
+                  tmp_path)
+    assert summary["error_estimate"] > 1e-5
+    assert len(summary["warnings"]) == 1
+    assert "estimated error of this fixed-step run" in summary["warnings"][0]

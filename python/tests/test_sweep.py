@@ -103,13 +103,17 @@ def test_bad_specifications_raise_value_error():
         moreau.sweep(s3, grid={"floor": (0.0, 1.0, 0)})
     with pytest.raises(ValueError, match="has no value named 'radius' to vary"):
         moreau.sweep(s3, grid={"radius": (0.0, 1.0, 3)})
-    with pytest.raises(ValueError, match="expected name=normal:mean:std"):
+    with pytest.raises(ValueError, match="expected \\('normal', mean, std\\) or \\('uniform'"):
         moreau.sweep(s3, samples={"floor": ("gauss", 0.0, 1.0)}, n_samples=3)
+    # A 3-tuple is (start, stop, count): a float count is an error, never three values.
+    with pytest.raises(ValueError, match="count must be an integer, got 3.0; pass several "
+                                         "values as a list"):
+        moreau.sweep(s3, grid={"floor": (-1.0, 0.0, 3.0)})
     with pytest.raises(ValueError, match="expected \\('normal', mean, std\\)"):
         moreau.sweep(s3, samples={"floor": ("normal", 0.0)}, n_samples=3)
-    with pytest.raises(ValueError, match="needs --samples N"):
+    with pytest.raises(ValueError, match="needs n_samples >= 1"):
         moreau.sweep(s3, samples={"floor": ("normal", -1.0, 0.1)})
-    with pytest.raises(ValueError, match="at least one --grid or --sample"):
+    with pytest.raises(ValueError, match="a sweep needs grid= or samples="):
         moreau.sweep(s3)
     with pytest.raises(ValueError, match="non-empty 1-D"):
         moreau.sweep(s3, grid={"floor": [[1.0, 2.0]]})

@@ -1,10 +1,17 @@
-/* The installed C API from a C11 program: the Hopf scene's radius at t = 2 (as main.cpp). */
+/* The installed C API from a C11 program: the Hopf scene's radius at t = 2 (as main.cpp), and
+   the version the library reports (the source tree's VERSION, MOREAU_EXPECTED_VERSION). */
 #include <math.h>
 #include <stdio.h>
+#include <string.h>
 
 #include "moreau/moreau.h"
 
 int main(void) {
+  if (strcmp(moreau_version(), MOREAU_EXPECTED_VERSION) != 0) {
+    fprintf(stderr, "c_consumer: moreau_version() is %s, expected %s\n", moreau_version(),
+            MOREAU_EXPECTED_VERSION);
+    return 1;
+  }
   moreau_scene* scene = NULL;
   moreau_run* run = NULL;
   if (moreau_scene_builtin("hopf", &scene) != MOREAU_OK ||

@@ -1,13 +1,21 @@
 // Simulates the Hopf scene and solves the Stewart-Anitescu OCP with the installed library, and
-// checks both known answers.
+// checks both known answers, and that the installed headers carry the expected version.
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 
 #include "moreau/integrators/radau.hpp"
 #include "moreau/ocp/catalog.hpp"
 #include "moreau/scenes/catalog.hpp"
+#include "moreau/version.hpp"
 
 int main() {
+  std::printf("consumer: moreau/version.hpp says %s\n", MOREAU_VERSION);
+  if (std::strcmp(MOREAU_VERSION, MOREAU_EXPECTED_VERSION) != 0 ||
+      std::strcmp(moreau::kVersion, MOREAU_VERSION) != 0) {
+    std::printf("consumer: expected version %s\n", MOREAU_EXPECTED_VERSION);
+    return 1;
+  }
   const moreau::Scene scene = moreau::MakeScene("hopf");
   moreau::RadauOptions options;
   options.stages = 3;

@@ -74,7 +74,7 @@ TEST(DualTest, ConstantsMixWithSeededNumbers) {
   EXPECT_DOUBLE_EQ(y.value(), 7.5);
   EXPECT_DOUBLE_EQ(y.d(0), 0.0);
   EXPECT_DOUBLE_EQ(y.d(1), 3.0 - 5.0 / 4.0);
-  EXPECT_TRUE(x > 1.0);
+  EXPECT_TRUE(ValueOf(x) > 1.0);
   EXPECT_TRUE(isfinite(x));
 }
 

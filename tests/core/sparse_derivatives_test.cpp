@@ -363,7 +363,7 @@ TEST(SparsityDetectionTest, BranchesAreFollowedOnBothSidesAndThePatternOnlyGrows
   const SmoothFunction f = MakeSmoothFunction(
       "branchy", 2, [](const auto& x, const auto&, const auto&, const auto&, auto& out) {
         using std::sin;
-        if (x[0] > 0.0) {
+        if (ValueOf(x[0]) > 0.0) {  // the explicit branch (comparisons do not compile)
           out[0] = x[0] * x[1];
         } else {
           out[0] = sin(x[2]);

@@ -591,11 +591,26 @@ TEST(AlphaDaiStatusTest, FailuresGiveTheirDocumentedStatuses) {
   EXPECT_NE(result.message.find("step_size_too_small at t = 0:"), std::string::npos)
       << result.message;
 
+  // The step rule shrinks the steps below h_max = tf: more than max_steps at run time.
   options = {};
   options.max_steps = 3;
+  options.max_step_size = 2.0;  // hopf's horizon: one step would do
+  options.error_tolerance = 1e-6;
   result = SimulateAlphaDai(MakeScene("hopf"), options);
   EXPECT_EQ(result.status, AlphaDaiStatus::kMaxStepsReached);
   EXPECT_EQ(result.stats.num_steps, 3);
+
+  // Fixed steps h_max over the horizon need 20 steps: refused before any work.
+  options = {};
+  options.max_steps = 3;
+  try {
+    SimulateAlphaDai(MakeScene("hopf"), options);
+    ADD_FAILURE() << "a fixed grid longer than max_steps was not refused";
+  } catch (const std::invalid_argument& error) {
+    EXPECT_NE(std::string(error.what()).find("need 20 steps, more than max_steps = 3"),
+              std::string::npos)
+        << error.what();
+  }
 }
 
 // Sec. 7, Step 2: h_i = sqrt(min{h_max^2, h_{i-1}^2, ERRTOL / (2.25 max_{j<=i} ||a_j||_inf)}).

@@ -284,8 +284,10 @@ TEST(FesdAdaptiveTest, FailedSolvesAreRetriedShorterDownToTheMinimumStep) {
   const FesdResult rescued = SimulateFesd(scene, options);
   ASSERT_EQ(rescued.status, FesdStatus::kSuccess) << rescued.message;
   EXPECT_GE(rescued.stats.num_failed_steps, 1);
-  // Switches every 1e-3: a minimum step of 0.04 cannot resolve them (0.1, then 0.05 fail).
-  options.min_step_size = 0.04;
+  // Switches every 1e-3: the step of 0.1 fails, and halving it would go below a minimum step
+  // of 0.06. (With 0.04 the halved step 0.05 succeeds: the switch found inside it shortens
+  // it.)
+  options.min_step_size = 0.06;
   const FesdResult failed = SimulateFesd(scene, options);
   EXPECT_EQ(failed.status, FesdStatus::kEventLocationFailure) << failed.message;
   EXPECT_NE(failed.message.find("at t = "), std::string::npos) << failed.message;
@@ -413,7 +415,8 @@ TEST(FesdAdaptiveTest, RtolSwitchesAdaptiveStepsOnThroughSimulate) {
       EXPECT_NE(std::string(error.what()).find(part), std::string::npos) << error.what();
     }
   };
-  expect_refusal({{"h_min", 1e-6}}, "'h_min' applies to the fesd integrator with adaptive");
+  expect_refusal({{"h", 0.1}, {"h_min", 1e-6}}, "'h_min' applies to error-controlled steps only");
+  expect_refusal({{"adaptive", false}}, "adaptive = false needs a fixed step h");
   expect_refusal({{"rtol", -1.0}}, "relative tolerance rtol must be positive");
   expect_refusal({{"rtol", 1e-6}, {"step_sequence", std::vector<double>{0.1}}},
                  "cannot be combined with adaptive");

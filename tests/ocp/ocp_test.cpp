@@ -180,6 +180,27 @@ TEST(Ocp, WaveRiderReachesTheClosedFormOptimum) {
   EXPECT_FALSE(result.events.empty());  // the boundary does the work
 }
 
+// An optimum of a discretization too coarse for its own trajectory is not reported as solved:
+// wave_rider on N = 2 intervals of one implicit-Euler element (s = 1) is a converged NLP whose
+// controls, re-simulated by IDA and by FESD on a fine grid, end 0.57 away from its x(T)
+// (measured), far above kOcpVerificationTolerance: status not_verified, the gap reported.
+TEST(Ocp, CoarseOptimumWhoseResimulationDisagreesIsNotVerified) {
+  OcpProblem problem = MakeOcpProblem("wave_rider");
+  problem.intervals = 2;
+  problem.initial_controls.resize(0, 0);  // as `moreau ocp wave_rider --N 2`
+  OcpOptions options = MakeOcpOptions("wave_rider");
+  options.stages = 1;
+  options.finite_elements = 1;
+  const OcpResult result = SolveOcp(problem, options);
+  EXPECT_EQ(result.status, OcpStatus::kNotVerified) << result.message;
+  EXPECT_EQ(ToString(result.status), "not_verified");
+  const double allowed =
+      kOcpVerificationTolerance * std::max(1.0, result.final_state.lpNorm<Eigen::Infinity>());
+  EXPECT_GT(result.verification_gap, allowed);
+  EXPECT_NE(result.message.find("re-simulated end"), std::string::npos) << result.message;
+  // The regular discretization verifies (WaveRiderReachesTheClosedFormOptimum: solved).
+}
+
 // The acceptance: five seeded random starts (controls uniform in [-1, 1] per interval,
 // node states from a forward simulation), each solved in at most 100 IPOPT iterations, all to
 // the same optimum (docs/ocp.md lists the counts).

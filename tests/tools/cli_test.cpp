@@ -31,8 +31,8 @@ TEST(CliTest, BadInputGivesClearErrorsAndExitCode2) {
   ExpectUsageError("run hopf --tf -1", "horizon must be positive");
   ExpectUsageError("run hopf --set x0.x=nan", "must be finite");
   ExpectUsageError("run hopf --integrator nope", "unknown integrator 'nope'");
-  ExpectUsageError("run hopf --integrator radau --rtol 1e-3",
-                   "option 'rtol' applies to the radau integrator with adaptive steps only");
+  ExpectUsageError("run hopf --integrator radau --h 0.01 --h-max 0.1",
+                   "'h_max' applies to error-controlled steps only");
   ExpectUsageError("run S3 --integrator radau", "does not support the moving set 'floor'");
   ExpectUsageError("run hopf --h 0", "step size h must be positive");
   ExpectUsageError("run hopf --stages 0", "stages must be in [1, 7]");
@@ -47,9 +47,16 @@ TEST(CliTest, RunWritesTrajectorySummaryAndPlot) {
       std::filesystem::temp_directory_path() / "moreau_cli_test_run";
   std::filesystem::remove_all(directory);
   const Outcome outcome =
-      RunCli("run hopf --stages 2 --h 0.01 --set mu=2 --quiet --out " + directory.string());
+      RunCli("run hopf --stages 2 --h 0.01 --set mu=2 --out " + directory.string());
   ASSERT_EQ(outcome.exit_code, 0) << outcome.output;
   EXPECT_NE(outcome.output.find("status      success"), std::string::npos) << outcome.output;
+  // The summary names the options that differ from the defaults, not all of them (those are in
+  // summary.json): stages = 2 is not radau's default, the linear solver is.
+  EXPECT_NE(outcome.output.find("integrator  radau (stages = 2"), std::string::npos)
+      << outcome.output;
+  EXPECT_NE(outcome.output.find("other options at their defaults)"), std::string::npos)
+      << outcome.output;
+  EXPECT_EQ(outcome.output.find("linear_solver"), std::string::npos) << outcome.output;
   std::ifstream csv(directory / "trajectory.csv");
   std::string header;
   std::getline(csv, header);
@@ -66,6 +73,43 @@ TEST(CliTest, RunWritesTrajectorySummaryAndPlot) {
   EXPECT_TRUE(summary["x_final"].contains("x"));
   EXPECT_EQ(summary["stats"]["num_steps"], 200);
   EXPECT_TRUE(std::filesystem::exists(directory / "trajectory.png"));
+  EXPECT_TRUE(summary["options"].contains("linear_solver"));  // every option is in the file
+}
+
+// --quiet prints nothing but errors; the files are written all the same.
+TEST(CliTest, QuietRunsPrintOnlyErrors) {
+  const std::filesystem::path directory =
+      std::filesystem::temp_directory_path() / "moreau_cli_test_quiet";
+  std::filesystem::remove_all(directory);
+  const Outcome quiet = RunCli("run hopf --quiet --no-plot --out " + directory.string());
+  EXPECT_EQ(quiet.exit_code, 0) << quiet.output;
+  EXPECT_EQ(quiet.output, "");
+  EXPECT_TRUE(std::filesystem::exists(directory / "summary.json"));
+  const Outcome plain = RunCli("run hopf --no-plot --out " + directory.string());
+  EXPECT_NE(plain.output.find("integrator  radau (all options at their defaults)"),
+            std::string::npos)
+      << plain.output;
+  const Outcome sweep = RunCli("sweep hopf --grid mu=1:2:2 --quiet --no-plot --out " +
+                               (directory / "sweep").string());
+  EXPECT_EQ(sweep.exit_code, 0) << sweep.output;
+  EXPECT_EQ(sweep.output, "");
+  EXPECT_TRUE(std::filesystem::exists(directory / "sweep" / "sweep.csv"));
+}
+
+// `moreau check` names the parts of the lowered system a scene has, and only those.
+TEST(CliTest, CheckNamesOnlyTheLoweredPartsThatExist) {
+  const Outcome smooth = RunCli("check hopf");
+  EXPECT_EQ(smooth.exit_code, 0) << smooth.output;
+  EXPECT_NE(smooth.output.find("lowered     3 states y (2 x, clock), no algebraic unknowns"),
+            std::string::npos)
+      << smooth.output;
+  EXPECT_NE(smooth.output.find("no effects"), std::string::npos) << smooth.output;
+  for (const char* absent : {"relay", "complementarity", "equations G", " 0 "}) {
+    EXPECT_EQ(smooth.output.find(absent), std::string::npos) << absent << "\n" << smooth.output;
+  }
+  const Outcome relay = RunCli("check H1");
+  EXPECT_EQ(relay.exit_code, 0) << relay.output;
+  EXPECT_NE(relay.output.find("(1 x, 1 relay memory, clock)"), std::string::npos) << relay.output;
 }
 
 // Acceptance (issue 3): the scenes S1, S3, F1, F2 and F3 run from `moreau run`.
@@ -149,8 +193,8 @@ TEST(CliTest, FesdRtolSwitchesAdaptiveStepsOn) {
   while (std::getline(trajectory, line)) times.push_back(std::stod(line.substr(0, line.find(','))));
   ASSERT_EQ(times.size(), 8u) << outcome.output;
   for (int k = 0; k < 7; ++k) EXPECT_DOUBLE_EQ(times[static_cast<std::size_t>(k)], 0.25 * k);
-  ExpectUsageError("run F1 --integrator fesd --h-min 1e-6",
-                   "'h_min' applies to the fesd integrator with adaptive steps only");
+  ExpectUsageError("run F1 --integrator fesd --h 0.1 --h-min 1e-6",
+                   "'h_min' applies to error-controlled steps only");
   ExpectUsageError("run F1 --integrator fesd --rtol 1e-8 --output-times 0.5,9",
                    "output time 9 is outside [t0, tf]");
 }
@@ -182,7 +226,7 @@ TEST(CliTest, HysteresisScenesReportPhysicalTimeAndRelaySignals) {
   for (const char* scene : {"H1", "H2", "H3"}) {
     std::filesystem::remove_all(directory);
     const Outcome outcome =
-        RunCli(std::string("run ") + scene + " --quiet --no-plot --out " + directory.string());
+        RunCli(std::string("run ") + scene + " --no-plot --out " + directory.string());
     EXPECT_EQ(outcome.exit_code, 0) << scene << "\n" << outcome.output;
     EXPECT_NE(outcome.output.find("integrator  fesd"), std::string::npos) << outcome.output;
     EXPECT_NE(outcome.output.find("relay_switch"), std::string::npos) << outcome.output;
@@ -334,11 +378,13 @@ TEST(CliTest, SceneFilesRunShowCheckAndSweep) {
   const Outcome check = RunCli("check " + s3 + " --stages 2");
   EXPECT_EQ(check.exit_code, 0) << check.output;
   // S3: y = (x1, x2, clock), z = (lambda): s (n_y + n_z) = 2 * 4 unknowns per element.
-  EXPECT_NE(check.output.find("3 states y"), std::string::npos) << check.output;
-  EXPECT_NE(check.output.find("1 complementarity pairs"), std::string::npos) << check.output;
+  EXPECT_NE(check.output.find("3 states y (2 x, clock), 1 algebraic unknown z, 1 "
+                              "complementarity pair\n"),
+            std::string::npos)
+      << check.output;
   EXPECT_NE(check.output.find("8 unknowns per element (s = 2"), std::string::npos) << check.output;
 
-  const Outcome sweep = RunCli("sweep " + s3 + " --grid floor=-1:-0.5:3 --no-plot --quiet --out " +
+  const Outcome sweep = RunCli("sweep " + s3 + " --grid floor=-1:-0.5:3 --no-plot --out " +
                                (directory / "sweep").string());
   EXPECT_EQ(sweep.exit_code, 0) << sweep.output;
   EXPECT_NE(sweep.output.find("runs        3"), std::string::npos) << sweep.output;

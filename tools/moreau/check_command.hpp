@@ -9,8 +9,9 @@ namespace moreau::tool {
 // A built-in scene name or a scene file (moreau::IsSceneFile) as a Scene.
 Scene ResolveScene(const std::string& argument);
 
-// Prints states, inputs, parameters, effects, the lowered DCS's sizes (states with relay
-// memories and clock, algebraic unknowns, equations, complementarity pairs), the unknowns of a
+// Prints states, inputs, parameters, effects, the lowered DCS's sizes (only the parts it has:
+// states with relay memories and clock, algebraic unknowns, equations, complementarity pairs),
+// the unknowns of a
 // FESD element for `stages` (and what a group with the event equation adds), and which
 // integrators support the scene. Throws std::invalid_argument for an invalid scene.
 void CheckScene(const Scene& scene, int stages);

@@ -8,14 +8,12 @@
 // Exit codes: 0 success; 1 the simulation ended with a non-success status; 2 bad usage or
 // input (unknown scene, option or parameter, bad value).
 
-#include <unistd.h>
-
 #include <CLI/CLI.hpp>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <map>
 #include <sstream>
 
 #include "animate_command.hpp"
@@ -25,48 +23,16 @@
 #include "moreau/integrators/simulate.hpp"
 #include "moreau/scenes/catalog.hpp"
 #include "moreau/scenes/crowd.hpp"
+#include "moreau/version.hpp"
 #include "ocp_command.hpp"
 #include "output.hpp"
+#include "progress.hpp"
 #include "sweep_command.hpp"
 
 namespace {
 
 using moreau::Scene;
 namespace tool = moreau::tool;
-
-// Prints the simulation time on stderr during long runs: in place on a terminal (every
-// 0.2 s), one line every 5 s otherwise; nothing during the first second.
-class ProgressPrinter {
- public:
-  ProgressPrinter(double t0, double tf, bool enabled)
-      : t0_(t0),
-        tf_(tf),
-        enabled_(enabled),
-        tty_(isatty(STDERR_FILENO) != 0),
-        start_(Clock::now()),
-        last_(start_) {}
-  void Update(double t) {
-    if (!enabled_) return;
-    const auto now = Clock::now();
-    const double since_start = std::chrono::duration<double>(now - start_).count();
-    const double since_last = std::chrono::duration<double>(now - last_).count();
-    if (since_start < 1.0 || since_last < (tty_ ? 0.2 : 5.0)) return;
-    last_ = now;
-    const double percent = 100.0 * (t - t0_) / (tf_ - t0_);
-    std::fprintf(stderr, "%s[moreau] t = %.6g of %.6g (%5.1f%%), %.1f s%s", tty_ ? "\r" : "", t,
-                 tf_, percent, since_start, tty_ ? "   " : "\n");
-    printed_ = true;
-  }
-  void Finish() {
-    if (printed_ && tty_) std::fprintf(stderr, "\n");
-  }
-
- private:
-  using Clock = std::chrono::steady_clock;
-  double t0_, tf_;
-  bool enabled_, tty_, printed_ = false;
-  Clock::time_point start_, last_;
-};
 
 double ParseNumber(const std::string& text, const std::string& what) {
   std::size_t used = 0;
@@ -173,13 +139,28 @@ void Show(const Scene& scene) {
   }
 }
 
-int Run(Scene scene, const moreau::SimulationSettings& settings, bool numerical_time,
+// `implicit`: options the command line sets itself (shown only where they differ from that).
+int Run(Scene scene, const moreau::SimulationSettings& settings,
+        const std::map<std::string, moreau::SettingValue>& implicit, bool numerical_time,
         const std::string& out_directory, bool plot, bool plot_internal, bool quiet,
         const tool::AnimateSettings* animate) {
-  ProgressPrinter progress(scene.initial_time, scene.final_time, !quiet);
-  const moreau::SimulationResult report =
-      moreau::Simulate(scene, settings, [&progress](double t) { progress.Update(t); });
-  progress.Finish();
+  tool::ProgressBar progress("run", !quiet);
+  const double t0 = scene.initial_time, tf = scene.final_time;
+  auto time_text = [tf](double t) {
+    char text[64];
+    std::snprintf(text, sizeof text, "t = %.6g of %.6g", t, tf);
+    return std::string(text);
+  };
+  const moreau::SimulationResult report = moreau::Simulate(
+      scene, settings, [&](double t) { progress.Update((t - t0) / (tf - t0), time_text(t)); });
+  progress.Finish((report.final_time - t0) / (tf - t0), time_text(report.final_time));
+  // What the user should know although the run may have succeeded (also in summary.json;
+  // --quiet leaves errors only).
+  if (!quiet) {
+    for (const std::string& warning : report.warnings) {
+      std::fprintf(stderr, "moreau: warning: %s\n", warning.c_str());
+    }
+  }
   const moreau::Trajectory& trajectory =
       numerical_time ? report.numerical_trajectory : report.trajectory;
 
@@ -207,6 +188,18 @@ int Run(Scene scene, const moreau::SimulationSettings& settings, bool numerical_
   const std::string image = plot ? tool::WritePlot(scene, report, trajectory, out_directory,
                                                    numerical_time, plot_internal)
                                  : "";
+  if (quiet) {  // errors only: a run that did not succeed says why, on stderr
+    if (animate != nullptr) {
+      tool::AnimateSettings silent = *animate;
+      silent.quiet = true;
+      tool::AnimateResult(scene, report, out_directory, silent);
+    }
+    if (!report.success) {
+      std::fprintf(stderr, "moreau: %s: %s: %s\n", report.scene.c_str(), report.status.c_str(),
+                   report.message.c_str());
+    }
+    return report.success ? 0 : 1;
+  }
 
   const auto& names = report.state_names;
   std::ostringstream state;
@@ -216,8 +209,7 @@ int Run(Scene scene, const moreau::SimulationSettings& settings, bool numerical_
   }
   if (names.size() > 8) state << ", ... (" << names.size() << " states, all in summary.json)";
   std::printf("scene       %s\n", report.scene.c_str());
-  std::printf("integrator  %s %s\n", report.integrator.c_str(),
-              tool::OptionsJson(report).dump().c_str());
+  std::printf("integrator  %s\n", tool::IntegratorLine(report, implicit).c_str());
   std::printf("status      %s%s%s\n", report.status.c_str(), report.message.empty() ? "" : ": ",
               report.message.c_str());
   std::printf("t_final     %.17g\n", report.final_time);
@@ -242,6 +234,10 @@ int Run(Scene scene, const moreau::SimulationSettings& settings, bool numerical_
   std::printf("iterations  %ld (%s)\n", report.num_iterations, spec.iteration_unit.c_str());
   std::printf("cpu time    %.3g s\n", report.cpu_seconds);
   std::printf("stats       %s\n", report.stats_summary.c_str());
+  if (report.error_estimate) {
+    std::printf("error       %.3g estimated, relative to the solution's scale\n",
+                *report.error_estimate);
+  }
   std::printf("output      %s/trajectory.csv, %s/summary.json%s%s%s\n", out_directory.c_str(),
               out_directory.c_str(), extra_files.c_str(), image.empty() ? "" : ", ", image.c_str());
   if (plot && image.empty()) {
@@ -257,6 +253,8 @@ int main(int argc, char** argv) {
   CLI::App app{"moreau: simulate nonsmooth dynamical systems with measured accuracy"};
   app.require_subcommand(1);
   app.set_help_all_flag("--help-all", "help for all subcommands");
+  app.set_version_flag("--version", std::string("moreau ") + MOREAU_VERSION,
+                       "print the version (moreau/version.hpp) and exit");
 
   app.add_subcommand("list", "list the scenes and integrators");
 
@@ -292,7 +290,7 @@ int main(int argc, char** argv) {
                 "hysteresis scenes (fesd): trajectory.csv in numerical time tau, with the relay "
                 "memories and the clock (default: physical time)");
   run->add_flag("--no-plot", no_plot, "do not write trajectory.png");
-  run->add_flag("--quiet", quiet, "no progress output");
+  run->add_flag("--quiet", quiet, "print nothing but errors (the files are written as usual)");
   bool plot_internal = false;
   run->add_flag("--plot-internal", plot_internal,
                 "trajectory.png also shows the lowering's internal variables (Filippov theta, "
@@ -340,7 +338,7 @@ int main(int argc, char** argv) {
   sweep->add_option("--out", sweep_settings.out_directory,
                     "output directory (default: out/sweep/<scene>)");
   sweep->add_flag("--no-plot", no_plot, "do not write the summary plots");
-  sweep->add_flag("--quiet", quiet, "no progress bar");
+  sweep->add_flag("--quiet", quiet, "print nothing but errors (the files are written as usual)");
   tool::IntegratorFlags sweep_flags(sweep);
 
   auto* ocp = app.add_subcommand("ocp", "solve an optimal control problem (see `moreau list`)");
@@ -414,7 +412,7 @@ int main(int argc, char** argv) {
   ocp->add_option("--out", ocp_settings.out_directory,
                   "output directory (default: out/ocp/<problem>)");
   ocp->add_flag("--no-plot", no_plot, "do not write solution.png");
-  ocp->add_flag("--quiet", quiet, "no progress output");
+  ocp->add_flag("--quiet", quiet, "print nothing but errors (the files are written as usual)");
 
   auto* crowd_file = app.add_subcommand(
       "crowd-file",
@@ -533,7 +531,11 @@ int main(int argc, char** argv) {
     if (out_directory.empty()) out_directory = "out/" + scene.name;
     // The command line records FESD's stage points (stages.csv) unless told otherwise.
     if (settings.integrator == "auto") settings.integrator = moreau::AutomaticIntegrator(scene);
-    if (settings.integrator == "fesd") settings.options.try_emplace("record_stages", true);
+    std::map<std::string, moreau::SettingValue> implicit;
+    if (settings.integrator == "fesd") {
+      settings.options.try_emplace("record_stages", true);
+      implicit["record_stages"] = true;
+    }
     moreau::RequireArgument(
         !numerical_time || (settings.integrator == "fesd" && scene.Has<moreau::HysteresisRelay>()),
         "--numerical-time applies to scenes with hysteresis relays simulated by the fesd "
@@ -543,8 +545,8 @@ int main(int argc, char** argv) {
       const moreau::render::CompiledView view(scene);
       run_animate_settings.options.Validate();
     }
-    return Run(std::move(scene), settings, numerical_time, out_directory, !no_plot, plot_internal,
-               quiet, run_animate ? &run_animate_settings : nullptr);
+    return Run(std::move(scene), settings, implicit, numerical_time, out_directory, !no_plot,
+               plot_internal, quiet, run_animate ? &run_animate_settings : nullptr);
   } catch (const std::invalid_argument& error) {
     std::fprintf(stderr, "moreau: error: %s\n", error.what());
     return 2;

@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -171,6 +172,12 @@ Json SummaryJson(const OcpProblem& problem, const OcpOptions& options, const Ocp
         Named(states, result.fesd_resimulated_final_state);
     summary["fesd_verification"]["terminal_error"] = result.fesd_resimulated_terminal_error;
     summary["fesd_verification"]["state_difference"] = result.fesd_resimulated_state_difference;
+  }
+  if (result.verification_gap >= 0.0) {
+    summary["verification_gap"] = std::isfinite(result.verification_gap)
+                                      ? nlohmann::json(result.verification_gap)
+                                      : nlohmann::json("inf");
+    summary["verification_tolerance"] = kOcpVerificationTolerance;
   }
   return summary;
 }
@@ -366,6 +373,14 @@ int RunOcpCommand(const OcpCommandSettings& settings) {
   }
   WriteViewJson(problem.scene, directory + "/view.json");  // `moreau animate DIR`
   const std::string image = settings.plot ? WriteSolutionPlot(problem, result, directory) : "";
+  if (settings.quiet) {  // errors only
+    if (result.status != OcpStatus::kSolved && result.status != OcpStatus::kSolvedToAcceptable) {
+      std::fprintf(stderr, "moreau: ocp %s: %s: %s\n", problem.name.c_str(),
+                   ToString(result.status).c_str(), result.message.c_str());
+      return 1;
+    }
+    return 0;
+  }
 
   const auto& states = problem.scene.state_names;
   const std::string refinement =

@@ -109,6 +109,38 @@ nlohmann::json OptionsJson(const SimulationResult& result) {
   return options;
 }
 
+std::vector<std::string> ChangedOptions(const SimulationResult& result,
+                                        const std::map<std::string, SettingValue>& implicit) {
+  const IntegratorSpec& spec = FindIntegrator(result.integrator);
+  std::vector<std::string> changed;
+  for (const auto& [name, value] : result.options) {
+    const auto set = implicit.find(name);
+    const OptionSpec* option = spec.FindOption(name);
+    const SettingValue& reference = set != implicit.end() ? set->second
+                                    : option != nullptr   ? option->default_value
+                                                          : value;
+    if (value == reference) continue;
+    // Reals with 10 significant digits (FormatSetting's 17 show 0.1 as 0.10000000000000001).
+    char text[64];
+    if (const double* real = std::get_if<double>(&value)) {
+      std::snprintf(text, sizeof text, "%.10g", *real);
+      changed.push_back(name + " = " + text);
+    } else {
+      changed.push_back(name + " = " + FormatSetting(value));
+    }
+  }
+  return changed;
+}
+
+std::string IntegratorLine(const SimulationResult& result,
+                           const std::map<std::string, SettingValue>& implicit) {
+  const std::vector<std::string> changed = ChangedOptions(result, implicit);
+  if (changed.empty()) return result.integrator + " (all options at their defaults)";
+  std::string line = result.integrator + " (";
+  for (std::size_t i = 0; i < changed.size(); ++i) line += (i ? ", " : "") + changed[i];
+  return line + "; other options at their defaults)";
+}
+
 nlohmann::json SummaryJson(const SimulationResult& report) {
   nlohmann::json summary;
   summary["scene"] = report.scene;
@@ -153,6 +185,8 @@ nlohmann::json SummaryJson(const SimulationResult& report) {
     stats[name] = count ? nlohmann::json(static_cast<long>(value)) : NumberJson(value);
   }
   summary["stats"] = stats;
+  if (report.error_estimate) summary["error_estimate"] = NumberJson(*report.error_estimate);
+  summary["warnings"] = report.warnings;
   if (!report.step_sequence.empty()) summary["step_sequence"] = report.step_sequence;
   // Sensitivities (options sensitivities, directions, adjoint_weights), matrices as rows over
   // theta = (x0, p, u per segment); the states at sample_times.

@@ -1,8 +1,10 @@
 #pragma once
 // Files written by `moreau run`: trajectory.csv, summary.json and trajectory.png.
 
+#include <map>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
 #include "moreau/integrators/simulate.hpp"
 
@@ -23,6 +25,15 @@ void WriteElementsCsv(const SimulationResult& report, const std::string& path);
 nlohmann::json SettingJson(const SettingValue& value);
 // The options used, name -> value, in declaration order.
 nlohmann::json OptionsJson(const SimulationResult& result);
+// The options of a run that differ from the integrator's declared defaults, "name = value" in
+// declaration order. `implicit` holds the values the command line sets itself (FESD's
+// record_stages): those count as defaults.
+std::vector<std::string> ChangedOptions(const SimulationResult& result,
+                                        const std::map<std::string, SettingValue>& implicit);
+// "fesd (stages = 4, rtol = 1e-08; other options at their defaults)" or "fesd (all options at
+// their defaults)": the summary's integrator line (every option is in summary.json).
+std::string IntegratorLine(const SimulationResult& result,
+                           const std::map<std::string, SettingValue>& implicit);
 // The summary object: scene, integrator, options, status, message, t_final, x_final
 // (state name -> value), events (t, kind, what, detail), stats, and for scenes with
 // hysteresis relays "relays" (name, initial, jumps [{t, w}], final).

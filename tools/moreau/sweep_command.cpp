@@ -1,7 +1,6 @@
 #include "sweep_command.hpp"
 
-#include <unistd.h>
-
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -9,51 +8,14 @@
 #include <fstream>
 #include <iomanip>
 #include <map>
-#include <mutex>
 #include <nlohmann/json.hpp>
 
 #include "moreau/core/error.hpp"
 #include "output.hpp"
+#include "progress.hpp"
 #include "sweep_figures.hpp"
 
 namespace moreau::tool {
-namespace {
-
-// "[sweep] 1234/10000 runs (12.3%), 456 runs/s, ETA 19 s" on stderr: in place on a terminal
-// (every 0.2 s), a line every 5 s otherwise; nothing during the first second.
-class SweepProgressBar {
- public:
-  explicit SweepProgressBar(bool enabled)
-      : enabled_(enabled), tty_(isatty(STDERR_FILENO) != 0), start_(Clock::now()), last_(start_) {}
-  void Update(long done, long total) {
-    if (!enabled_) return;
-    std::lock_guard<std::mutex> lock(mutex_);
-    const auto now = Clock::now();
-    const double elapsed = std::chrono::duration<double>(now - start_).count();
-    const double since = std::chrono::duration<double>(now - last_).count();
-    if (done < total && (elapsed < 1.0 || since < (tty_ ? 0.2 : 5.0))) return;
-    if (done == total && !printed_) return;  // short sweeps print nothing
-    last_ = now;
-    const double rate = done / std::max(elapsed, 1e-9);
-    const double eta = (total - done) / std::max(rate, 1e-9);
-    constexpr int kWidth = 30;
-    const int filled = static_cast<int>(kWidth * done / std::max(total, 1L));
-    std::fprintf(stderr, "%s[sweep] [%s%s] %ld/%ld runs (%5.1f%%), %.3g runs/s, ETA %.0f s%s",
-                 tty_ ? "\r" : "", std::string(static_cast<std::size_t>(filled), '#').c_str(),
-                 std::string(static_cast<std::size_t>(kWidth - filled), '.').c_str(), done, total,
-                 100.0 * done / std::max(total, 1L), rate, eta, tty_ ? "   " : "\n");
-    printed_ = true;
-    if (done == total && tty_) std::fprintf(stderr, "\n");
-  }
-
- private:
-  using Clock = std::chrono::steady_clock;
-  bool enabled_, tty_, printed_ = false;
-  Clock::time_point start_, last_;
-  std::mutex mutex_;
-};
-
-}  // namespace
 
 int RunSweepCommand(const Scene& scene, const SweepCommandSettings& settings) {
   SweepSpec spec;
@@ -67,9 +29,22 @@ int RunSweepCommand(const Scene& scene, const SweepCommandSettings& settings) {
   const std::string dir =
       settings.out_directory.empty() ? "out/sweep/" + scene.name : settings.out_directory;
 
-  SweepProgressBar bar(!settings.quiet);
-  const SweepResult result = RunSweep(scene, spec, settings.simulation, settings.jobs, {},
-                                      [&bar](long done, long total) { bar.Update(done, total); });
+  ProgressBar bar("sweep", !settings.quiet);
+  const auto start = std::chrono::steady_clock::now();
+  auto runs_text = [&start](long done, long total) {
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    char text[96];
+    std::snprintf(text, sizeof text, "%ld/%ld runs, %.3g runs/s", done, total,
+                  done / std::max(seconds, 1e-9));
+    return std::string(text);
+  };
+  const SweepResult result =
+      RunSweep(scene, spec, settings.simulation, settings.jobs, {}, [&](long done, long total) {
+        bar.Update(static_cast<double>(done) / std::max(total, 1L), runs_text(done, total));
+      });
+  const long runs = static_cast<long>(result.rows.size());
+  bar.Finish(1.0, runs_text(runs, runs));
 
   std::filesystem::create_directories(dir);
   WriteSweepCsv(result, dir + "/sweep.csv");
@@ -100,6 +75,17 @@ int RunSweepCommand(const Scene& scene, const SweepCommandSettings& settings) {
   const std::vector<std::string> images =
       settings.plot ? SweepFigures(result, spec, dir) : std::vector<std::string>{};
 
+  const bool all = by_status.size() == 1 && by_status.count("success") == 1;
+  if (settings.quiet) {  // errors only
+    if (!all) {
+      std::fprintf(stderr, "moreau: sweep of %s: %ld of %zu runs did not succeed (%s/sweep.csv)\n",
+                   result.scene.c_str(),
+                   static_cast<long>(result.rows.size()) -
+                       (by_status.count("success") != 0 ? by_status.at("success") : 0L),
+                   result.rows.size(), dir.c_str());
+    }
+    return all ? 0 : 1;
+  }
   std::printf("scene       %s\n", result.scene.c_str());
   std::printf("integrator  %s\n", result.integrator.c_str());
   std::printf("runs        %zu on %d threads in %.3g s (%.4g runs/s, %.3g s CPU)\n",
@@ -111,7 +97,6 @@ int RunSweepCommand(const Scene& scene, const SweepCommandSettings& settings) {
   std::printf("output      %s/sweep.csv, %s/summary.json", dir.c_str(), dir.c_str());
   for (const std::string& image : images) std::printf(", %s", image.c_str());
   std::printf("\n");
-  const bool all = by_status.size() == 1 && by_status.count("success") == 1;
   return all ? 0 : 1;
 }
 

@@ -10,14 +10,20 @@
 
 namespace moreau {
 
+/// Result of SolveLcp: the solution z, w = M z + q, the natural residual and Newton's statistics.
 struct LcpResult {
+  /// kConverged, or why Newton stopped.
   NewtonStatus status = NewtonStatus::kConverged;
+  /// Why the solve failed (empty on success).
   std::string message;
+  /// The solution (0 <= z ⟂ M z + q >= 0 when converged).
   Vector z;
   Vector w;                              ///< M z + q
   double residual = 0.0;                 ///< max_i |min(z_i, w_i)| (natural residual)
   std::vector<double> residual_history;  ///< Newton residual at every iterate
+  /// Iterations, evaluations and line-search statistics of the Newton solve.
   SemismoothNewtonStats stats;
+  /// True if status is NewtonStatus::kConverged.
   bool converged() const { return status == NewtonStatus::kConverged; }
 };
 

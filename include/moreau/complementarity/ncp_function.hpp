@@ -19,23 +19,31 @@
 
 namespace moreau {
 
+/// The NCP function that turns complementarity 0 <= a ⟂ b >= 0 into the equation phi(a, b) = 0.
 enum class NcpFunctionKind { kFischerBurmeister, kMin };
+/// "fischer-burmeister" or "min".
 std::string ToString(NcpFunctionKind kind);
+/// Parses "fischer-burmeister" (or "fb") or "min"; throws std::invalid_argument otherwise.
 NcpFunctionKind ParseNcpFunctionKind(const std::string& name);
 
 /// Value of an NCP function with the element of its generalized gradient used by Newton.
 struct NcpValue {
+  /// phi(a, b).
   double value = 0.0;
   double da = 0.0;  ///< d phi / d a
   double db = 0.0;  ///< d phi / d b
 };
 
+/// Fischer-Burmeister: phi(a, b) = a + b - sqrt(a^2 + b^2), zero iff a >= 0, b >= 0, a b = 0
+/// (semismooth; at (0, 0) an element of the generalized gradient).
 NcpValue FischerBurmeister(double a, double b);
 /// Smoothed Fischer-Burmeister (Kanzow): phi_mu(a, b) = a + b - sqrt(a^2 + b^2 + 2 mu^2), whose
 /// zeros are a > 0, b > 0, a b = mu^2. Continuously differentiable for mu > 0; mu = 0 gives
 /// FischerBurmeister. Used for continuation (mu -> 0) when plain semismooth Newton fails.
 NcpValue SmoothedFischerBurmeister(double a, double b, double mu);
+/// The min map: phi(a, b) = min(a, b) (piecewise linear; ties take the gradient of a).
 NcpValue MinMap(double a, double b);
+/// The NCP function `kind` at (a, b).
 inline NcpValue EvaluateNcp(NcpFunctionKind kind, double a, double b) {
   return kind == NcpFunctionKind::kFischerBurmeister ? FischerBurmeister(a, b) : MinMap(a, b);
 }

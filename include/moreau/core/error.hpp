@@ -1,6 +1,6 @@
 #pragma once
 /// @file
-/// The three error tiers of moreau (see docs/conventions in the repository README):
+/// The three error tiers of moreau:
 ///  1. broken internal invariants: MOREAU_ASSERT (always on; aborts with file and line);
 ///  2. invalid user input at the API boundary: std::invalid_argument thrown through
 ///     ThrowInvalidArgument / RequireArgument with a message "what, expected, got";

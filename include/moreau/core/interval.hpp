@@ -33,6 +33,8 @@
 #include <cmath>
 #include <limits>
 
+#include "moreau/core/dual.hpp"
+
 namespace moreau {
 
 namespace internal {
@@ -64,6 +66,7 @@ class Interval {
   Interval(double lower, double upper) : lower_(lower), upper_(upper) {
     if (!(lower <= upper)) *this = Entire();
   }
+  /// The entire real line (an unknown value).
   static Interval Entire() {
     Interval entire;
     entire.lower_ = -std::numeric_limits<double>::infinity();
@@ -75,7 +78,9 @@ class Interval {
     return Interval(internal::RoundDown(lower), internal::RoundUp(upper));
   }
 
+  /// The lower bound.
   double lower() const { return lower_; }
+  /// The upper bound.
   double upper() const { return upper_; }
   /// The midpoint (0 for the entire line).
   double mid() const {
@@ -85,13 +90,20 @@ class Interval {
     }
     return 0.5 * (lower_ + upper_);
   }
+  /// upper - lower.
   double width() const { return upper_ - lower_; }
+  /// True for a point (lower == upper).
   bool degenerate() const { return lower_ == upper_; }
+  /// True if value lies in [lower, upper].
   bool contains(double value) const { return lower_ <= value && value <= upper_; }
 
+  /// *this = *this + other.
   Interval& operator+=(const Interval& other);
+  /// *this = *this - other.
   Interval& operator-=(const Interval& other);
+  /// *this = *this * other.
   Interval& operator*=(const Interval& other);
+  /// *this = *this / other.
   Interval& operator/=(const Interval& other);
 
  private:
@@ -100,6 +112,15 @@ class Interval {
 };
 
 // ---- arithmetic (outward rounded) -----------------------------------------------------------
+inline Interval pow(const Interval& a, double b);
+
+/// @name Interval arithmetic
+/// Each result contains the operation's value at every point of its operands' intervals,
+/// rounded outward by one ulp; a division by an interval that contains zero gives the entire
+/// line.
+/// @{
+
+/// +a, -a, a + b, a - b, a * b, a / b of intervals and of an interval and a double.
 inline Interval operator+(const Interval& a) { return a; }
 inline Interval operator-(const Interval& a) { return Interval(-a.upper(), -a.lower()); }
 inline Interval operator+(const Interval& a, const Interval& b) {
@@ -112,7 +133,6 @@ namespace internal {
 // The product of two bounds, with 0 * inf = 0 (a zero bound times an unbounded one).
 inline double BoundProduct(double a, double b) { return a == 0.0 || b == 0.0 ? 0.0 : a * b; }
 }  // namespace internal
-inline Interval pow(const Interval& a, double b);
 /// a a: a square where both factors are the same object (x[0] * x[0] in a model function), a
 /// product of independent intervals otherwise.
 inline Interval operator*(const Interval& a, const Interval& b) {
@@ -136,6 +156,8 @@ inline Interval operator*(const Interval& a, double b) { return a * Interval(b);
 inline Interval operator*(double a, const Interval& b) { return Interval(a) * b; }
 inline Interval operator/(const Interval& a, double b) { return a / Interval(b); }
 inline Interval operator/(double a, const Interval& b) { return Interval(a) / b; }
+/// @}
+
 inline Interval& Interval::operator+=(const Interval& other) { return *this = *this + other; }
 inline Interval& Interval::operator-=(const Interval& other) { return *this = *this - other; }
 inline Interval& Interval::operator*=(const Interval& other) { return *this = *this * other; }
@@ -155,6 +177,12 @@ inline bool Decide(int certain, bool midpoints) {
   return midpoints;
 }
 }  // namespace internal
+/// @name Comparisons
+/// Decided where the intervals do not overlap; otherwise the midpoints are compared and the
+/// evaluation is marked undecided (see the file comment).
+/// @{
+
+/// a < b, a <= b, a > b, a >= b, a == b, a != b of intervals and of an interval and a double.
 inline bool operator<(const Interval& a, const Interval& b) {
   return internal::Decide(internal::CertainlyLess(a, b, false), a.mid() < b.mid());
 }
@@ -180,17 +208,20 @@ MOREAU_INTERVAL_MIXED_COMPARISON(>=)
 MOREAU_INTERVAL_MIXED_COMPARISON(==)
 MOREAU_INTERVAL_MIXED_COMPARISON(!=)
 #undef MOREAU_INTERVAL_MIXED_COMPARISON
+/// @}
 
 /// The midpoint, for code that inspects the value (undecided unless the interval is a point).
 inline double ValueOf(const Interval& a) {
   if (!a.degenerate()) internal::MarkIntervalUndecided();
   return a.mid();
 }
+/// True if both bounds are finite (undecided if not, unless a point).
 inline bool isfinite(const Interval& a) {  // NOLINT(readability-identifier-naming)
   const bool all = std::isfinite(a.lower()) && std::isfinite(a.upper());
   if (!all && !a.degenerate()) internal::MarkIntervalUndecided();
   return all;
 }
+/// False: an interval is never NaN (a NaN bound gives the entire line).
 inline bool isnan(const Interval& /*a*/) { return false; }  // NOLINT
 
 // ---- elementary functions -------------------------------------------------------------------
@@ -213,6 +244,13 @@ inline bool ClipToDomain(const Interval& a, double low, double high, Interval* c
   *clipped = Interval(std::max(a.lower(), low), std::min(a.upper(), high));
   return true;
 }
+// f monotone increasing on its domain [low, high]: the interval clipped to it first.
+template <class F>
+Interval IncreasingOn(const Interval& a, double low, double high, F f) {
+  Interval clipped;
+  if (!ClipToDomain(a, low, high, &clipped)) return Interval::Entire();
+  return Increasing(clipped, f);
+}
 // True if x0 + k period lies in [lower, upper] for some integer k, counting points within a
 // relative 1e-12 of the ends as inside (the reduction by the period rounds).
 inline bool ContainsPeriodic(double lower, double upper, double x0, double period) {
@@ -222,6 +260,16 @@ inline bool ContainsPeriodic(double lower, double upper, double x0, double perio
 }
 }  // namespace internal
 
+/// @name Elementary functions of intervals
+/// Each encloses the function's values at the points of its operand where it is defined
+/// (monotone pieces evaluated at their ends, rounded outward by one ulp; sin and cos also
+/// take their extrema inside the interval); an operand entirely outside the domain gives the
+/// entire line and marks the evaluation undecided.
+/// @{
+
+/// sqrt, exp, log, the trigonometric, inverse and hyperbolic functions, abs, pow, hypot,
+/// atan2, exp2, expm1, log2, log10, log1p, cbrt, erf and erfc of intervals; floor, ceil, round
+/// and trunc refuse to compile, as for dual numbers.
 inline Interval sqrt(const Interval& a) {
   Interval clipped;
   if (!internal::ClipToDomain(a, 0.0, std::numeric_limits<double>::infinity(), &clipped)) {
@@ -344,8 +392,72 @@ inline Interval atan2(const Interval& y, const Interval& x) {
 }
 inline Interval atan2(const Interval& y, double x) { return atan2(y, Interval(x)); }
 inline Interval atan2(double y, const Interval& x) { return atan2(Interval(y), x); }
+// The other elementary functions of the model language (dual.hpp).
+inline Interval exp2(const Interval& a) {
+  const Interval r = internal::Increasing(a, [](double v) { return std::exp2(v); });
+  return Interval(std::max(r.lower(), 0.0), r.upper());
+}
+inline Interval expm1(const Interval& a) {
+  const Interval r = internal::Increasing(a, [](double v) { return std::expm1(v); });
+  return Interval(std::max(r.lower(), -1.0), r.upper());
+}
+inline Interval log2(const Interval& a) {
+  return internal::IncreasingOn(a, 0.0, std::numeric_limits<double>::infinity(),
+                                [](double v) { return std::log2(v); });
+}
+inline Interval log10(const Interval& a) {
+  return internal::IncreasingOn(a, 0.0, std::numeric_limits<double>::infinity(),
+                                [](double v) { return std::log10(v); });
+}
+inline Interval log1p(const Interval& a) {
+  return internal::IncreasingOn(a, -1.0, std::numeric_limits<double>::infinity(),
+                                [](double v) { return std::log1p(v); });
+}
+inline Interval cbrt(const Interval& a) {
+  return internal::Increasing(a, [](double v) { return std::cbrt(v); });
+}
+inline Interval asinh(const Interval& a) {
+  return internal::Increasing(a, [](double v) { return std::asinh(v); });
+}
+inline Interval acosh(const Interval& a) {
+  const Interval r =
+      internal::IncreasingOn(a, 1.0, std::numeric_limits<double>::infinity(),
+                             [](double v) { return std::acosh(v); });
+  return Interval(std::max(r.lower(), 0.0), r.upper());
+}
+inline Interval atanh(const Interval& a) {
+  return internal::IncreasingOn(a, -1.0, 1.0, [](double v) { return std::atanh(v); });
+}
+inline Interval erf(const Interval& a) {
+  const Interval r = internal::Increasing(a, [](double v) { return std::erf(v); });
+  return Interval(std::max(r.lower(), -1.0), std::min(r.upper(), 1.0));
+}
+inline Interval erfc(const Interval& a) {
+  const Interval r = internal::Decreasing(a, [](double v) { return std::erfc(v); });
+  return Interval(std::max(r.lower(), 0.0), std::min(r.upper(), 2.0));
+}
+
+// Rounding is refused in model functions with dual.hpp's message (the same code is also
+// evaluated with dual numbers, where it must not compile; this makes the interval evaluation
+// fail with the same words instead of a missing overload).
+#define MOREAU_INTERVAL_REFUSED_ROUNDING(name)                                \
+  template <class Refused = void>                                             \
+  Interval name(const Interval& a) {                                          \
+    static_assert(internal::kRefusedForAd<Refused>, MOREAU_REFUSED_ROUNDING); \
+    return a;                                                                 \
+  }
+MOREAU_INTERVAL_REFUSED_ROUNDING(floor)
+MOREAU_INTERVAL_REFUSED_ROUNDING(ceil)
+MOREAU_INTERVAL_REFUSED_ROUNDING(round)
+MOREAU_INTERVAL_REFUSED_ROUNDING(trunc)
+#undef MOREAU_INTERVAL_REFUSED_ROUNDING
+/// @}
 
 }  // namespace moreau
+
+// The Interval overloads declared in namespace std as well, as dual.hpp does for dual numbers
+// (model code may call std::exp2(x)).
+MOREAU_DECLARE_MATH_IN_STD
 
 // Eigen integration so that Eigen::Matrix<moreau::Interval, ...> works in model code.
 namespace Eigen {

@@ -46,13 +46,17 @@ namespace internal {
 template <class T>
 class ArgVector {
  public:
+  /// A view of `size` values at `data`, named `argument` of function `function` in messages.
   ArgVector(const T* data, int size, const char* argument, const std::string* function)
       : data_(data), size_(size), argument_(argument), function_(function) {}
+  /// Component i; throws std::invalid_argument naming the function if i is out of range.
   const T& operator[](int i) const {
     if (i < 0 || i >= size_) internal::ThrowArgumentIndex(*function_, argument_, i, size_);
     return data_[i];
   }
+  /// Component i, as operator[].
   const T& operator()(int i) const { return (*this)[i]; }
+  /// Number of components.
   int size() const { return size_; }
   /// The block as an Eigen vector expression (unchecked; sizes are the caller's business).
   Eigen::Map<const Eigen::Matrix<T, Eigen::Dynamic, 1>> eigen() const {
@@ -70,14 +74,19 @@ class ArgVector {
 template <class T>
 class OutVector {
  public:
+  /// A view of the `size` outputs at `data` of function `function` (named in messages).
   OutVector(T* data, int size, const std::string* function)
       : data_(data), size_(size), function_(function) {}
+  /// Output i, writable; throws std::invalid_argument naming the function if i is out of range.
   T& operator[](int i) {
     if (i < 0 || i >= size_) internal::ThrowArgumentIndex(*function_, "out", i, size_);
     return data_[i];
   }
+  /// Output i, as operator[].
   T& operator()(int i) { return (*this)[i]; }
+  /// Number of outputs.
   int size() const { return size_; }
+  /// The outputs as an Eigen vector expression (unchecked).
   Eigen::Map<Eigen::Matrix<T, Eigen::Dynamic, 1>> eigen() {
     return Eigen::Map<Eigen::Matrix<T, Eigen::Dynamic, 1>>(data_, size_);
   }
@@ -92,14 +101,22 @@ class OutVector {
 /// (and rows/columns of a Hessian) are ordered x, u, t, p, each block present only if
 /// selected.
 struct Wrt {
+  /// Differentiate with respect to the states x.
   bool x = false;
+  /// Differentiate with respect to the inputs u.
   bool u = false;
+  /// Differentiate with respect to the time t.
   bool t = false;
+  /// Differentiate with respect to the parameters p.
   bool p = false;
 
+  /// x only.
   static Wrt X() { return {true, false, false, false}; }
+  /// x and t.
   static Wrt XT() { return {true, false, true, false}; }
+  /// x, u and t.
   static Wrt XUT() { return {true, true, true, false}; }
+  /// Every argument block: x, u, t and p.
   static Wrt All() { return {true, true, true, true}; }
   /// Number of columns for argument sizes (nx, nu, np).
   int Columns(int nx, int nu, int np) const {
@@ -126,10 +143,12 @@ struct SparseDerivativeStats {
   int num_pattern_growths = 0;
   /// Colours (compressed directions) and Dual1 evaluations of the last SparseJacobian.
   int jacobian_colors = 0;
+  /// Dual1 evaluations of the last SparseJacobian.
   int jacobian_passes = 0;
   /// Colours among the inputs of the nonzero-weight outputs, and Dual2 evaluations, of the last
   /// SparseWeightedHessian.
   int hessian_colors = 0;
+  /// Dual2 evaluations of the last SparseWeightedHessian.
   int hessian_passes = 0;
   /// Row subsets whose patterns and colourings are cached (Jacobian and Hessian plans).
   int num_cached_plans = 0;
@@ -142,18 +161,24 @@ struct SparseDerivativeStats {
 class SmoothFunction {
  public:
   SmoothFunction() = default;
+  /// A deep copy (each copy owns its workspaces: copies may be used from separate threads).
   SmoothFunction(const SmoothFunction& other)
       : impl_(other.impl_ ? other.impl_->Clone() : nullptr) {}
+  /// A deep copy, as the copy constructor.
   SmoothFunction& operator=(const SmoothFunction& other) {
     if (this != &other) impl_ = other.impl_ ? other.impl_->Clone() : nullptr;
     return *this;
   }
+  /// Moves (no copy of the function object).
   SmoothFunction(SmoothFunction&&) noexcept = default;
+  /// Move assignment (no copy of the function object).
   SmoothFunction& operator=(SmoothFunction&&) noexcept = default;
 
   /// True if no function was given (an effect's optional part, or zero dynamics).
   bool empty() const { return impl_ == nullptr; }
+  /// The name given at construction (appears in error messages).
   const std::string& name() const;
+  /// Number of outputs.
   int num_outputs() const;
 
   /// out = g(x, u, t, p).
@@ -221,38 +246,52 @@ class SmoothFunction {
   class Concept {
    public:
     virtual ~Concept() = default;
+    /// A deep copy of the implementation.
     virtual std::unique_ptr<Concept> Clone() const = 0;
+    /// The function's name.
     virtual const std::string& name() const = 0;
+    /// Number of outputs.
     virtual int num_outputs() const = 0;
+    /// See SmoothFunction::Evaluate.
     virtual void Evaluate(const ConstVectorRef& x, const ConstVectorRef& u, double t,
                           const ConstVectorRef& p, Vector* out) = 0;
+    /// See SmoothFunction::Jacobian.
     virtual void Jacobian(const ConstVectorRef& x, const ConstVectorRef& u, double t,
                           const ConstVectorRef& p, Wrt wrt, Vector* out, Matrix* jac) = 0;
+    /// See SmoothFunction::WeightedHessian.
     virtual void WeightedHessian(const ConstVectorRef& x, const ConstVectorRef& u, double t,
                                  const ConstVectorRef& p, Wrt wrt, const ConstVectorRef& weights,
                                  Matrix* hess) = 0;
+    /// See SmoothFunction::SparseJacobian (default: from the dense Jacobian).
     virtual void SparseJacobian(const ConstVectorRef& x, const ConstVectorRef& u, double t,
                                 const ConstVectorRef& p, Wrt wrt, Vector* out, SparseMatrix* jac,
                                 const std::vector<int>* rows);
+    /// See SmoothFunction::SparseWeightedHessian (default: from the dense Hessian).
     virtual void SparseWeightedHessian(const ConstVectorRef& x, const ConstVectorRef& u, double t,
                                        const ConstVectorRef& p, Wrt wrt,
                                        const ConstVectorRef& weights, SparseMatrix* hess,
                                        const std::vector<int>* rows);
+    /// See SmoothFunction::SparseHessianDirection.
     virtual void SparseHessianDirection(const ConstVectorRef& x, const ConstVectorRef& u, double t,
                                         const ConstVectorRef& p, Wrt wrt,
                                         const ConstVectorRef& direction, SparseMatrix* rows_matrix,
                                         const std::vector<int>* rows);
+    /// See SmoothFunction::Bounds.
     virtual bool Bounds(const ConstVectorRef& /*x_lower*/, const ConstVectorRef& /*x_upper*/,
                         const ConstVectorRef& /*u*/, double /*t_lower*/, double /*t_upper*/,
                         const ConstVectorRef& /*p*/, Vector* /*lower*/, Vector* /*upper*/) {
       return false;
     }
+    /// See SmoothFunction::has_sparse_state_jacobian.
     virtual bool has_sparse_state_jacobian() const { return false; }
+    /// See SmoothFunction::SparseStateJacobian.
     virtual void SparseStateJacobian(const ConstVectorRef& /*x*/, const ConstVectorRef& /*u*/,
                                      double /*t*/, const ConstVectorRef& /*p*/, Vector* /*out*/,
                                      SparseMatrix* /*jac_x*/) {}
+    /// See SmoothFunction::typed.
     virtual internal::TypedFunction* typed() { return nullptr; }
   };
+  /// Wraps an implementation (the factories below make them).
   explicit SmoothFunction(std::unique_ptr<Concept> impl) : impl_(std::move(impl)) {}
 
  private:

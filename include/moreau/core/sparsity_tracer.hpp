@@ -20,19 +20,22 @@
 /// operations of a traced value with a constant that keep it affine (a + c, c a, a / c, -a)
 /// reuse the operand's tape entry: an affine function has an empty second-derivative pattern.
 ///
-/// Branch safety: every comparison, isfinite/isnan and ValueOf applied to a traced value marks
+/// Branch safety: comparisons and the other nonsmooth operations do not compile on tracers,
+/// as on dual numbers (dual.hpp). isfinite/isnan and ValueOf applied to a traced value mark
 /// the tape as value-dependent, because control flow that depends on the point may change the
 /// pattern. SmoothFunction then re-detects the pattern at every sparse call (see
 /// docs/sparse-derivatives.md for the cost and for how the stored pattern is kept a superset).
 ///
-/// The overloads below are found by argument-dependent lookup, like those of Dual, so model code
-/// keeps its unqualified calls after `using std::sin;` etc.
+/// The overloads below are found by argument-dependent lookup, like those of Dual, and are
+/// declared in namespace std too, so model code may write `sin(x)` or `std::sin(x)`.
 
 #include <Eigen/Core>
 #include <cmath>
 #include <cstdint>
+#include <type_traits>
 #include <vector>
 
+#include "moreau/core/dual.hpp"
 #include "moreau/core/error.hpp"
 
 namespace moreau {
@@ -76,16 +79,22 @@ class SparsityTracer {
   SparsityTracer(double value, internal::SparsityTape* tape, int node)
       : value_(value), node_(node), tape_(tape) {}
 
+  /// The double value (the same as the double evaluation's at the same point).
   double value() const { return value_; }
   /// Tape node of this value, -1 for a constant.
   int node() const { return node_; }
+  /// The tape of the evaluation this value belongs to (nullptr for a constant).
   internal::SparsityTape* tape() const { return tape_; }
   /// True if the value depends (structurally) on an input.
   bool traced() const { return tape_ != nullptr; }
 
+  /// Compound assignments, by the binary operators below.
   SparsityTracer& operator+=(const SparsityTracer& other);
+  /// *this = *this - other.
   SparsityTracer& operator-=(const SparsityTracer& other);
+  /// *this = *this * other.
   SparsityTracer& operator*=(const SparsityTracer& other);
+  /// *this = *this / other.
   SparsityTracer& operator/=(const SparsityTracer& other);
 
  private:
@@ -138,6 +147,13 @@ inline void NoteValueUse(const SparsityTracer& a) {
 }  // namespace internal
 
 // ---- arithmetic -------------------------------------------------------------------------
+/// @name Arithmetic on tracers
+/// The value is the double arithmetic; the tape records how the operands combine (file
+/// comment). Operations with a constant operand that keep the result affine reuse the tape
+/// entry of the traced operand.
+/// @{
+
+/// Unary plus, minus and the binary operators, traced.
 inline SparsityTracer operator+(const SparsityTracer& a) { return a; }
 inline SparsityTracer operator-(const SparsityTracer& a) {
   return internal::TraceAffine(-a.value(), a);
@@ -191,6 +207,7 @@ inline SparsityTracer operator/(const SparsityTracer& a, double b) {
 inline SparsityTracer operator/(double a, const SparsityTracer& b) {
   return internal::TraceNonlinear(a / b.value(), b);
 }
+/// @}
 
 inline SparsityTracer& SparsityTracer::operator+=(const SparsityTracer& other) {
   return *this = *this + other;
@@ -205,38 +222,98 @@ inline SparsityTracer& SparsityTracer::operator/=(const SparsityTracer& other) {
   return *this = *this / other;
 }
 
-// ---- comparisons (on the value; each marks a traced operand's tape value-dependent) --------
-#define MOREAU_TRACER_COMPARISON(op)                                          \
-  inline bool operator op(const SparsityTracer& a, const SparsityTracer& b) { \
-    internal::NoteValueUse(a);                                                \
-    internal::NoteValueUse(b);                                                \
-    return a.value() op b.value();                                            \
-  }                                                                           \
-  inline bool operator op(const SparsityTracer& a, double b) {                \
-    internal::NoteValueUse(a);                                                \
-    return a.value() op b;                                                    \
-  }                                                                           \
-  inline bool operator op(double a, const SparsityTracer& b) {                \
-    internal::NoteValueUse(b);                                                \
-    return a op b.value();                                                    \
+// ---- refused nonsmooth operations (messages and reasons: dual.hpp) ------------------------
+namespace internal {
+// Enables a refused overload for a deduced SparsityTracer only: no double converts to a
+// tracer to reach one (moreau's own code calls min, floor, ... on doubles).
+template <class Tracer>
+using IfTracer = std::enable_if_t<std::is_same_v<Tracer, SparsityTracer>, int>;
+}  // namespace internal
+
+/// @name Refused nonsmooth operations on tracers
+/// Each fails to compile with the message of its dual-number twin (dual.hpp).
+/// @{
+
+/// abs and fabs: a kink (a SwitchingSurfaces effect models it).
+template <class Tracer, internal::IfTracer<Tracer> = 0>
+Tracer abs(const Tracer& a) {
+  static_assert(internal::kRefusedForAd<Tracer>, MOREAU_REFUSED_ABS);
+  return a;
+}
+template <class Tracer, internal::IfTracer<Tracer> = 0>
+Tracer fabs(const Tracer& a) {
+  static_assert(internal::kRefusedForAd<Tracer>, MOREAU_REFUSED_ABS);
+  return a;
+}
+#define MOREAU_TRACER_REFUSED_BINARY(name, message)                       \
+  template <class Refused = void> /* more specialized than std::min<T> */ \
+  SparsityTracer name(const SparsityTracer& a, const SparsityTracer&) {   \
+    static_assert(internal::kRefusedForAd<Refused>, message);             \
+    return a;                                                             \
+  }                                                                       \
+  template <class Tracer, internal::IfTracer<Tracer> = 0>                 \
+  Tracer name(const Tracer& a, double) {                                  \
+    static_assert(internal::kRefusedForAd<Tracer>, message);              \
+    return a;                                                             \
+  }                                                                       \
+  template <class Tracer, internal::IfTracer<Tracer> = 0>                 \
+  Tracer name(double, const Tracer& b) {                                  \
+    static_assert(internal::kRefusedForAd<Tracer>, message);              \
+    return b;                                                             \
   }
-MOREAU_TRACER_COMPARISON(<)
-MOREAU_TRACER_COMPARISON(<=)
-MOREAU_TRACER_COMPARISON(>)
-MOREAU_TRACER_COMPARISON(>=)
-MOREAU_TRACER_COMPARISON(==)
-MOREAU_TRACER_COMPARISON(!=)
-#undef MOREAU_TRACER_COMPARISON
+MOREAU_TRACER_REFUSED_BINARY(min, MOREAU_REFUSED_MIN_MAX)
+MOREAU_TRACER_REFUSED_BINARY(max, MOREAU_REFUSED_MIN_MAX)
+MOREAU_TRACER_REFUSED_BINARY(fmin, MOREAU_REFUSED_MIN_MAX)
+MOREAU_TRACER_REFUSED_BINARY(fmax, MOREAU_REFUSED_MIN_MAX)
+MOREAU_TRACER_REFUSED_BINARY(fmod, MOREAU_REFUSED_ROUNDING)
+#undef MOREAU_TRACER_REFUSED_BINARY
+#define MOREAU_TRACER_REFUSED_ROUNDING(name)                                 \
+  template <class Tracer, internal::IfTracer<Tracer> = 0>                    \
+  Tracer name(const Tracer& a) {                                             \
+    static_assert(internal::kRefusedForAd<Tracer>, MOREAU_REFUSED_ROUNDING); \
+    return a;                                                                \
+  }
+MOREAU_TRACER_REFUSED_ROUNDING(floor)
+MOREAU_TRACER_REFUSED_ROUNDING(ceil)
+MOREAU_TRACER_REFUSED_ROUNDING(round)
+MOREAU_TRACER_REFUSED_ROUNDING(trunc)
+#undef MOREAU_TRACER_REFUSED_ROUNDING
+#define MOREAU_TRACER_REFUSED_COMPARISON(op)                                   \
+  template <class Tracer, internal::IfTracer<Tracer> = 0>                      \
+  bool operator op(const Tracer&, const Tracer&) {                             \
+    static_assert(internal::kRefusedForAd<Tracer>, MOREAU_REFUSED_COMPARISON); \
+    return false;                                                              \
+  }                                                                            \
+  template <class Tracer, internal::IfTracer<Tracer> = 0>                      \
+  bool operator op(const Tracer&, double) {                                    \
+    static_assert(internal::kRefusedForAd<Tracer>, MOREAU_REFUSED_COMPARISON); \
+    return false;                                                              \
+  }                                                                            \
+  template <class Tracer, internal::IfTracer<Tracer> = 0>                      \
+  bool operator op(double, const Tracer&) {                                    \
+    static_assert(internal::kRefusedForAd<Tracer>, MOREAU_REFUSED_COMPARISON); \
+    return false;                                                              \
+  }
+MOREAU_TRACER_REFUSED_COMPARISON(<)
+MOREAU_TRACER_REFUSED_COMPARISON(<=)
+MOREAU_TRACER_REFUSED_COMPARISON(>)
+MOREAU_TRACER_REFUSED_COMPARISON(>=)
+MOREAU_TRACER_REFUSED_COMPARISON(==)
+MOREAU_TRACER_REFUSED_COMPARISON(!=)
+#undef MOREAU_TRACER_REFUSED_COMPARISON
+/// @}
 
 /// The value, for code that inspects it (marks the tape value-dependent, like a comparison).
 inline double ValueOf(const SparsityTracer& a) {
   internal::NoteValueUse(a);
   return a.value();
 }
+/// True if the value is finite (marks the tape value-dependent).
 inline bool isfinite(const SparsityTracer& a) {  // NOLINT(readability-identifier-naming)
   internal::NoteValueUse(a);
   return std::isfinite(a.value());
 }
+/// True if the value is NaN (marks the tape value-dependent).
 inline bool isnan(const SparsityTracer& a) {  // NOLINT(readability-identifier-naming)
   internal::NoteValueUse(a);
   return std::isnan(a.value());
@@ -247,6 +324,13 @@ inline bool isnan(const SparsityTracer& a) {  // NOLINT(readability-identifier-n
   inline SparsityTracer name(const SparsityTracer& a) {       \
     return internal::TraceNonlinear(std::name(a.value()), a); \
   }
+/// @name Smooth elementary functions of tracers
+/// Values as the double evaluation computes them; each records a nonlinear operation (an
+/// affine one for pow(a, 1)).
+/// @{
+
+/// sin, cos, tan, exp, log, sqrt, the inverse and hyperbolic functions, exp2, expm1, log2,
+/// log10, log1p, cbrt and erf/erfc of a tracer.
 MOREAU_TRACER_NONLINEAR_UNARY(sin)
 MOREAU_TRACER_NONLINEAR_UNARY(cos)
 MOREAU_TRACER_NONLINEAR_UNARY(tan)
@@ -259,9 +343,20 @@ MOREAU_TRACER_NONLINEAR_UNARY(acos)
 MOREAU_TRACER_NONLINEAR_UNARY(sinh)
 MOREAU_TRACER_NONLINEAR_UNARY(cosh)
 MOREAU_TRACER_NONLINEAR_UNARY(tanh)
+MOREAU_TRACER_NONLINEAR_UNARY(exp2)
+MOREAU_TRACER_NONLINEAR_UNARY(expm1)
+MOREAU_TRACER_NONLINEAR_UNARY(log2)
+MOREAU_TRACER_NONLINEAR_UNARY(log10)
+MOREAU_TRACER_NONLINEAR_UNARY(log1p)
+MOREAU_TRACER_NONLINEAR_UNARY(cbrt)
+MOREAU_TRACER_NONLINEAR_UNARY(asinh)
+MOREAU_TRACER_NONLINEAR_UNARY(acosh)
+MOREAU_TRACER_NONLINEAR_UNARY(atanh)
+MOREAU_TRACER_NONLINEAR_UNARY(erf)
+MOREAU_TRACER_NONLINEAR_UNARY(erfc)
 #undef MOREAU_TRACER_NONLINEAR_UNARY
 
-/// a^b for a constant exponent: linear for b == 1, nonlinear otherwise.
+/// a^b for a constant exponent b: affine for b == 1, nonlinear otherwise.
 inline SparsityTracer pow(const SparsityTracer& a, double b) {
   const double value = std::pow(a.value(), b);
   return b == 1.0 ? internal::TraceAffine(value, a) : internal::TraceNonlinear(value, a);
@@ -272,13 +367,6 @@ inline SparsityTracer pow(const SparsityTracer& a, const SparsityTracer& b) {
 inline SparsityTracer pow(double a, const SparsityTracer& b) {
   return internal::TraceNonlinear(std::pow(a, b.value()), b);
 }
-/// |a|: piecewise linear. Its derivative changes sign with a but no entry appears or vanishes
-/// (Dual's abs takes the derivative 0 at a == 0: a structural entry stored as zero), and its
-/// second derivative is zero wherever it exists, as in Dual's abs; no comparison is recorded.
-inline SparsityTracer abs(const SparsityTracer& a) {
-  return internal::TraceAffine(std::fabs(a.value()), a);
-}
-inline SparsityTracer fabs(const SparsityTracer& a) { return abs(a); }
 inline SparsityTracer atan2(const SparsityTracer& y, const SparsityTracer& x) {
   return internal::TraceNonlinear(std::atan2(y.value(), x.value()), y, x);
 }
@@ -297,6 +385,7 @@ inline SparsityTracer hypot(const SparsityTracer& a, double b) {
 inline SparsityTracer hypot(double a, const SparsityTracer& b) {
   return internal::TraceNonlinear(std::hypot(a, b.value()), b);
 }
+/// @}
 
 }  // namespace moreau
 
@@ -332,3 +421,7 @@ struct ScalarBinaryOpTraits<double, moreau::SparsityTracer, BinaryOp> {
   using ReturnType = moreau::SparsityTracer;
 };
 }  // namespace Eigen
+
+// `std::sin(tracer)` as for dual numbers (see the end of dual.hpp): the same using-declarations,
+// now naming the tracer's overloads too.
+MOREAU_DECLARE_MATH_IN_STD

@@ -61,6 +61,7 @@ namespace moreau {
 
 /// The method's coefficients for a given rho (paper eqs. 3a-3b).
 struct AlphaCoefficients {
+  /// The regularization parameter in [0, 1).
   double rho = 0.0;
   double gamma = 1.5;  ///< 2/(rho+1) - 1/2
   double beta = 1.0;   ///< 1/(rho+1)^2
@@ -103,10 +104,12 @@ enum class AlphaDaiObjective {
                  ///< paper's user input functions w(t), Sec. 2): u_j = w_j(t) unless an active
                  ///< constraint needs u_j
 };
+/// "feasibility", "least-change" or "reference".
 std::string ToString(AlphaDaiObjective objective);
 /// Parses "feasibility", "least-change" or "reference"; throws std::invalid_argument otherwise.
 AlphaDaiObjective ParseAlphaDaiObjective(const std::string& name);
 
+/// Options of the alpha-method DAI stepper (docs/alpha-method.md); defaults are the values below.
 struct AlphaDaiOptions {
   /// Regularization parameter rho in [0, 1) (paper eq. 3): spectral radius at infinity;
   /// lowered by 0.1 per retry when the basis matrix is rank deficient.
@@ -169,6 +172,7 @@ enum class AlphaDaiStatus {
   kMaxStepsReached,        ///< max_steps accepted steps before the final time
   kNonFinite,              ///< NaN or infinity in f or a at an accepted point
 };
+/// The status as text (snake case, as in summary.json).
 std::string ToString(AlphaDaiStatus status);
 
 /// Certificates of one accepted step.
@@ -192,6 +196,7 @@ struct AlphaDaiStep {
   std::vector<int> active;            ///< indices into AlphaDaiResult::constraint_names
 };
 
+/// Counters and extreme certificates of an alpha-method run.
 struct AlphaDaiStats {
   long num_steps = 0;           ///< accepted steps
   long num_tries = 0;           ///< SQP solves (first tries and retries)
@@ -199,6 +204,7 @@ struct AlphaDaiStats {
   long num_guess_retries = 0;   ///< retries from new initial guesses (Step 2c)
   long num_rank_deficient = 0;  ///< tries stopped by a rank-deficient basis matrix
   long num_infeasible = 0;      ///< tries that ended locally infeasible
+  /// SQP iterations of the accepted tries.
   long num_sqp_iterations = 0;
   long num_qp_iterations = 0;             ///< active-set changes in all QPs
   long num_elastic_qps = 0;               ///< QPs re-solved in elastic mode
@@ -211,14 +217,19 @@ struct AlphaDaiStats {
   double min_basis_sigma = std::numeric_limits<double>::infinity();  ///< over accepted steps
   double min_rho = std::numeric_limits<double>::infinity();          ///< smallest rho used
   double min_step = std::numeric_limits<double>::infinity();         ///< smallest step taken
+  /// CPU time of the run.
   double cpu_seconds = 0.0;
 
   /// Sums counters and times; takes the max/min of the extreme values.
   AlphaDaiStats& operator+=(const AlphaDaiStats& other);
+  /// One line for the command line's summary.
   std::string Summary() const;
 };
 
+/// Result of SimulateAlphaDai: status, final values, trajectory, per-step certificates, events and
+/// statistics.
 struct AlphaDaiResult {
+  /// kSuccess, or why the run stopped.
   AlphaDaiStatus status = AlphaDaiStatus::kSuccess;
   std::string message;      ///< time and reason when status != kSuccess
   double final_time = 0.0;  ///< time reached
@@ -232,6 +243,7 @@ struct AlphaDaiResult {
   std::vector<std::string> constraint_names;
   std::vector<AlphaDaiStep> steps;  ///< one per accepted step (with record_trajectory)
   std::vector<Event> events;        ///< kEnter/kLeave when constraints join/leave the working set
+  /// Counters and extreme certificates.
   AlphaDaiStats stats;
 };
 

@@ -81,13 +81,17 @@
 
 namespace moreau {
 
+/// Options of FESD Radau IIA (docs/fesd-formulation.md); defaults are the values below.
 struct FesdOptions {
   /// Radau IIA stages s in [1, kMaxRadauStages]; order 2s - 1 (1, 3, 5, 7 for s = 1..4).
   int stages = 3;
-  /// Integration step H > 0 (control interval; steps never cross control breakpoints). With
-  /// hysteresis relays H is measured in numerical time (see the file comment). Adaptive: the
-  /// initial step, 0 = automatic (Hairer-Wanner's starting step for order 2s - 1, times N_fe).
-  double step_size = 0.1;
+  /// Fixed integration step H > 0 (control interval; steps never cross control breakpoints;
+  /// with hysteresis relays H is measured in numerical time, see the file comment). 0 (the
+  /// default): no fixed step, the steps are error-controlled (ErrorControlled(): a default-
+  /// constructed FesdOptions runs to the tolerances below, so that a step that knows nothing
+  /// of the model's time scale is never the default). With `adaptive` a positive H is the
+  /// initial step of the error-controlled run.
+  double step_size = 0.0;
   /// Nominal finite elements per step N_fe >= 1.
   int finite_elements = 2;
   /// Lowering of switching surfaces.
@@ -168,13 +172,22 @@ struct FesdOptions {
   /// error estimate use the field too.
   bool reduce_smooth_elements = true;
   /// Step-size control by the local error estimate (see the file comment and
-  /// docs/fesd-formulation.md, section 10) instead of fixed steps H.
+  /// docs/fesd-formulation.md, section 10) even with a fixed step H given (H is then the
+  /// initial step). Error control is on whenever step_size is 0, whatever this says.
   bool adaptive = false;
-  /// Tolerances of the adaptive steps, > 0: the local error of a step of length H, weighted
-  /// per state by atol + rtol max(|y_start|, |y_end|), is kept below H / (tf - t0) (error per
-  /// unit step), so that the error at tf is about rtol relative to the solution scale.
-  double relative_tolerance = 1e-6;
-  double absolute_tolerance = 1e-8;
+  /// Initial step of an error-controlled run, > 0; 0 (the default): step_size if positive,
+  /// else automatic (Hairer-Norsett-Wanner's starting step for order 2s - 1 from the field at
+  /// t0 and at an Euler step, times N_fe; see StartingStep in fesd_adaptive.cpp).
+  double initial_step_size = 0.0;
+  /// Tolerances of the error-controlled steps: the local error of a step of length H, weighted
+  /// per state by atol_i + rtol max(|y_start|, |y_end|), is kept below H / (tf - t0) (error per
+  /// unit step), so that the error at tf is about rtol relative to the solution's scale
+  /// (docs/accuracy.md). rtol > 0. atol > 0 is one absolute tolerance for every state; 0 (the
+  /// default) makes it per state and proportional to rtol: atol_i = rtol times the largest
+  /// |y_i| of the run so far (initial value included), i.e. every state is controlled
+  /// relative to its own scale, whatever its unit.
+  double relative_tolerance = kDefaultRelativeTolerance;
+  double absolute_tolerance = 0.0;  ///< atol: > 0 for every state, 0 per state (see above)
   /// Smallest step of the adaptive controller and of the failure retries, > 0 (never below
   /// 64 ulps of the time); below it the run stops with kStepSizeTooSmall or the status of the
   /// failed solve.
@@ -205,6 +218,19 @@ struct FesdOptions {
   /// (empty: the scene's x0, initial memories and t0). A shooting code passes node states this
   /// way: with time-freezing a node may lie inside a frozen interval (0 < w < 1).
   Vector initial_state;
+  /// Most integration steps of a run, >= 1. A fixed grid (step_size without error control)
+  /// with more steps than this is refused before any work (std::invalid_argument); an
+  /// error-controlled run that reaches it stops with FesdStatus::kMaxStepsReached. A FESD
+  /// step costs tens of microseconds or more, so the default bounds a run to seconds (a 10^6
+  /// step fixed grid used to run for minutes without a word).
+  long max_steps = 100'000;
+  /// Fixed steps: estimate the local error of every step as error control does (Richardson
+  /// extrapolation against a comparison solve of the same interval, EstimateError) and
+  /// accumulate it into FesdStats::error_estimate, with a warning in FesdResult::warnings when
+  /// it exceeds kErrorWarningFactor times relative_tolerance (docs/accuracy.md). Costs one
+  /// comparison element solve per step; shooting codes that integrate the same intervals many
+  /// times may switch it off.
+  bool estimate_error = true;
   /// An initial state x0 outside the moving sets is projected onto them (the sweeping
   /// process's jump at t0, with its derivative in the sensitivities) instead of refused, as
   /// initial_state is: shooting codes whose node states leave the sets between iterations.
@@ -214,6 +240,12 @@ struct FesdOptions {
   /// Record element ends in the trajectory (false: initial and final points only).
   bool record_trajectory = true;
 
+  /// Whether the steps are error-controlled: no replayed step_sequence, and adaptive or no
+  /// fixed step (step_size == 0).
+  bool ErrorControlled() const { return step_sequence.empty() && (adaptive || step_size == 0.0); }
+
+  /// The Newton settings of the element solves when none are given (tolerances and iteration limits
+  /// tuned for the element systems).
   static SemismoothNewtonOptions DefaultNewtonOptions();
   /// Throws std::invalid_argument naming the first out-of-range option.
   void Validate() const;
@@ -226,11 +258,17 @@ enum class FesdStatus {
   kEventLocationFailure,   ///< a switch was detected but no group solve ended on it within
                            ///< max_event_retries (Newton failure or inconsistent signs)
   kStatusDecisionFailure,  ///< no consistent continuation at a switch point
-  kStepSizeTooSmall,       ///< adaptive: the error test failed with the step at min_step_size
+  kStepSizeTooSmall,       ///< error control: the error test failed with the step at its
+                           ///< minimum max(min_step_size, 64 eps max(1, |t|))
+  kNonFinite,              ///< a model function is not finite at a point the step needs (the
+                           ///< message names the function, its output, t and the state); with
+                           ///< error control after the step was shortened to its minimum
+  kMaxStepsReached,        ///< error control: max_steps steps before the final time
   /// the adjoint sweep found the Jacobian of a converged group singular at its checkpoint
   /// (reciprocal condition below kSingularRcond): no adjoint sensitivities
   kSensitivityFailure,
 };
+/// The status as text (snake case, as in summary.json).
 std::string ToString(FesdStatus status);
 
 /// One finite element of the solution.
@@ -262,15 +300,17 @@ struct FesdSensitivities {
   /// n_y rows; columns y0 (n_y), then p (n_p), then u per segment (n_u each). The blocks above
   /// are its scene-state parts.
   Matrix lowered;
-  /// With FesdOptions::sensitivity_directions (k directions): dx(T)/dtheta V (n_x x k), the
-  /// same for the lowered y(T) (n_y x k), and dx(t_j)/dtheta V at every sample time.
+  /// With FesdOptions::sensitivity_directions (k directions): dx(T)/dtheta V (n_x x k).
   Matrix directional;
+  /// The same for the lowered y(T) (n_y x k).
   Matrix directional_lowered;
+  /// dx(t_j)/dtheta V (n_x x k) at every FesdOptions::sample_times entry.
   std::vector<Matrix> sample_directional;
   /// With adjoint weights (q functionals): q x (n_x + n_p + n_u S), the gradient of every
   /// functional with respect to theta = (x0, p, u_1..u_S), and q x (n_y + n_p + n_u S) with
-  /// respect to the lowered theta_L = (y0, p, u).
+  /// respect to the lowered theta_L = (y0, p, u) (adjoint_lowered).
   Matrix adjoint;
+  /// q x (n_y + n_p + n_u S): the gradients with respect to theta_L = (y0, p, u_1..u_S).
   Matrix adjoint_lowered;
 };
 
@@ -279,23 +319,33 @@ namespace internal {
 class FesdRun;
 }
 
+/// Counters and certificates of a FESD run.
 struct FesdStats {
+  /// Integration steps taken (accepted steps when adaptive).
   long num_steps = 0;
+  /// Finite elements of the accepted solution.
   long num_elements = 0;
   long num_groups = 0;    ///< group solves with the event equation
   long num_switches = 0;  ///< element boundaries with a switch
+  /// Newton iterations of all element and group solves.
   long num_newton_iterations = 0;
+  /// LU factorizations of the Newton matrices.
   long num_factorizations = 0;
+  /// Group solves repeated from another guess while locating a switch.
   long num_event_retries = 0;
   long num_rejected_steps = 0;  ///< adaptive: steps rejected by the error test
   long num_failed_steps = 0;    ///< adaptive: steps whose solves failed, retried smaller
+  /// Largest cross-complementarity certificate over the elements (FesdElement).
   double max_cross_complementarity = 0.0;
+  /// Largest stage complementarity residual |min(a, b)| over the elements.
   double max_complementarity = 0.0;
+  /// Shortest element length.
   double min_element_length = 0.0;
   double frozen_time = 0.0;  ///< numerical time spent with physical time frozen (relays)
   /// Near-active filter: steps solved again because a left-out constraint was not positive
   /// at a stage, and the largest number of pairs in an element system.
   long num_filter_rechecks = 0;
+  /// Largest number of complementarity pairs in one element system.
   long max_working_pairs = 0;
   /// Elements solved as a Radau IIA step of a smooth field (FesdOptions::reduce_smooth_elements)
   /// whose full element system then held without a Newton iteration of its own.
@@ -305,21 +355,38 @@ struct FesdStats {
   /// crossing that the search could not resolve (each one a warning), and the interval
   /// evaluations of the indicators the searches made.
   long num_inside_crossings = 0;
-  long num_unresolved_crossings = 0;
-  long num_bound_evaluations = 0;
-  /// Adjoint sensitivities: bytes the run kept for the reverse sweep (converged unknowns and
-  /// group data) and the thread CPU time of the sweep(s) in this result.
+  long num_unresolved_crossings = 0;  ///< (see num_inside_crossings)
+  long num_bound_evaluations = 0;     ///< (see num_inside_crossings)
+  /// Estimated error of the run relative to the solution's scale: the local error estimates
+  /// of the accepted steps accumulated, rtol sum_k (H_k / (tf - t0)) err_k with err_k the
+  /// estimate per unit step in the tolerance weights (docs/accuracy.md). Error-controlled runs
+  /// keep it near rtol by construction; fixed steps with estimate_error report theirs. -1
+  /// where not estimated (fixed steps without estimate_error, replays).
+  double error_estimate = -1.0;
+  /// Steps whose error could not be estimated (a comparison solve failed); not in
+  /// error_estimate.
+  long num_unestimated_steps = 0;
+  /// Adjoint sensitivities: bytes the run kept in memory for the reverse sweep (converged
+  /// unknowns and group data).
   double adjoint_memory_bytes = 0.0;
   double adjoint_file_bytes = 0.0;  ///< checkpoints beyond adjoint_memory_limit_mb (file)
+  /// Thread CPU time of the adjoint reverse sweep(s) in this result.
   double adjoint_cpu_seconds = 0.0;
+  /// CPU time of the run.
   double cpu_seconds = 0.0;
 
+  /// Sums counters and times; takes the max/min of the extreme values.
   FesdStats& operator+=(const FesdStats& other);
+  /// One line for the command line's summary.
   std::string Summary() const;
 };
 
+/// Result of SimulateFesd: status, final values, trajectories, events, elements with their
+/// certificates, sensitivities and statistics.
 struct FesdResult {
+  /// kSuccess, or why the run stopped.
   FesdStatus status = FesdStatus::kSuccess;
+  /// The time and reason when status != kSuccess.
   std::string message;
   double final_time = 0.0;      ///< physical time reached (the clock)
   Vector final_state;           ///< scene states
@@ -332,7 +399,9 @@ struct FesdResult {
   Trajectory numerical_trajectory;
   /// With hysteresis relays: each relay's memory w(t) in physical time.
   std::vector<RelaySignal> relays;
+  /// Switch events in physical time (enter, leave, switch, ...).
   std::vector<Event> events;
+  /// Every finite element with its certificates (in integration time).
   std::vector<FesdElement> elements;
   /// The accepted steps of an adaptive run (or of a replay) in the form FesdOptions::
   /// step_sequence takes them: the attempted length of every step, 0 for a step to the end
@@ -343,21 +412,23 @@ struct FesdResult {
   std::vector<Vector> sample_states;
   /// With FesdOptions::keep_adjoint: the reverse sweep of this run (shared by copies).
   std::shared_ptr<FesdAdjoint> adjoint;
+  /// Counters and certificates.
   FesdStats stats;
-  /// What the run suspects but could not resolve, one sentence each (e.g. a zero of a free
-  /// side between an element's nodes that the crossing search left undecided: a switch may
-  /// have been stepped over; docs/fesd-formulation.md, section 11).
+  /// What the caller should know although the run succeeded (an estimated error far above
+  /// the tolerance, a zero of a free side between an element's nodes that the crossing search
+  /// left undecided: a switch may have been stepped over; docs/fesd-formulation.md, section
+  /// 11), one sentence each.
   std::vector<std::string> warnings;
 };
 
 /// Gradients of q functionals of one run (FesdAdjoint::Sweep).
 struct FesdGradient {
-  Matrix theta;    ///< q x (n_x + n_p + n_u S): with respect to (x0, p, u_1..u_S)
-  Matrix lowered;  ///< q x (n_y + n_p + n_u S): with respect to (y0, p, u_1..u_S)
-  double cpu_seconds = 0.0;
+  Matrix theta;              ///< q x (n_x + n_p + n_u S): with respect to (x0, p, u_1..u_S)
+  Matrix lowered;            ///< q x (n_y + n_p + n_u S): with respect to (y0, p, u_1..u_S)
+  double cpu_seconds = 0.0;  ///< thread CPU time of the sweep
   /// False if the Jacobian of a group was singular at its checkpoint (message says where).
   bool success = true;
-  std::string message;
+  std::string message;  ///< why the sweep failed (empty on success)
 };
 
 /// The reverse sweep of a finished run (FesdOptions::keep_adjoint): the transpose of the
@@ -367,6 +438,7 @@ struct FesdGradient {
 /// and its lowered system. Not thread-safe; with FesdIntegrator, not concurrently with it.
 class FesdAdjoint {
  public:
+  /// Made by the run (FesdOptions::keep_adjoint), which passes itself; not for applications.
   explicit FesdAdjoint(std::shared_ptr<internal::FesdRun> run);
   /// final_weights: n_x x q or n_y x q (empty: zero); sample_weights: n_x x (q K) or n_y x
   /// (q K) for the K sample times (empty: zero). Throws std::invalid_argument for other
@@ -389,6 +461,8 @@ FesdResult SimulateFesd(const Scene& scene, const FesdOptions& options,
 /// Not thread-safe (one object per thread).
 class FesdIntegrator {
  public:
+  /// Validates the options and lowers the scene once; throws std::invalid_argument as SimulateFesd
+  /// does.
   FesdIntegrator(const Scene& scene, const FesdOptions& options);
   ~FesdIntegrator();
   FesdIntegrator(const FesdIntegrator&) = delete;

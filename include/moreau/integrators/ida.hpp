@@ -49,9 +49,11 @@
 
 namespace moreau {
 
+/// Options of the SUNDIALS IDA reference integrator (docs/ida.md); defaults are the values below.
 struct IdaOptions {
   /// Relative and absolute tolerances of IDA's local error test, > 0.
   double relative_tolerance = 1e-8;
+  /// Absolute tolerance of IDA's local error test, > 0.
   double absolute_tolerance = 1e-10;
   /// IDA's Newton iteration stops when its error estimate is below this fraction (in (0, 1])
   /// of the local error tolerance (IDA's default 0.33). With old Jacobians the remaining
@@ -73,6 +75,7 @@ struct IdaOptions {
   double event_tolerance = 1e-9;
   /// Internal steps allowed over the whole run (> 0), and events (Zeno guard, > 0).
   long max_steps = 10000000;
+  /// Events allowed over the whole run (Zeno guard), > 0.
   long max_events = 100000;
   /// Largest internal step (0: no limit).
   double max_step = 0.0;
@@ -80,11 +83,12 @@ struct IdaOptions {
   /// steps across them (any order; times outside (t0, tf) are ignored). The remedy for a root
   /// the bounds on the interpolant cannot resolve, at a time the user knows.
   std::vector<double> stop_times;
-  /// Record every internal step in the trajectory (false: events, breakpoints and the
-  /// output times only).
+  /// Record every internal step in the trajectory (false: events and breakpoints only).
+  /// Ignored with output_times.
   bool record_steps = true;
-  /// Extra trajectory points at these times in (t0, tf] (interpolated by IDA to the
-  /// integration accuracy). Need not be sorted.
+  /// Output times in [t0, tf] (need not be sorted): the trajectory is then exactly t0, these
+  /// times (interpolated by IDA to the integration accuracy) and tf, nothing else (events
+  /// are in IdaResult::events).
   std::vector<double> output_times;
 
   /// The reference-solution settings: rtol = 1e-12, atol = 1e-14, Newton convergence
@@ -105,18 +109,38 @@ enum class IdaStatus {
   kNoProgress,             ///< kMaxStalledIdaSteps consecutive internal steps did not advance t
                            ///< (steps below the resolution of t, e.g. at a point beyond which
                            ///< the model is singular or not finite)
+  kStepSizeTooSmall,       ///< kMaxCollapsedIdaSteps accepted internal steps in a row shorter
+                           ///< than 10 eps |t|: the step collapsed (the message names a
+                           ///< non-finite model value if IDA met one)
+  kNonFinite,              ///< IDA failed on non-finite residuals (repeated recoverable
+                           ///< residual errors); the message names the model function, its
+                           ///< output, t and the state
 };
+/// IDA steps shorter than this many units in the last place of t (10 eps |t|) count as
+/// collapsed; kMaxCollapsedIdaSteps of them in a row end the run with
+/// IdaStatus::kStepSizeTooSmall (IDA's first steps after a restart can be that short, but
+/// they double every step).
+inline constexpr double kMinIdaStepUlps = 10.0;
+inline constexpr int kMaxCollapsedIdaSteps = 20;  ///< collapsed steps in a row that end a run
 /// Consecutive internal IDA steps that leave t unchanged before IdaStatus::kNoProgress.
 inline constexpr int kMaxStalledIdaSteps = 100;
+/// The status as text (snake case, as in summary.json).
 std::string ToString(IdaStatus status);
 
+/// Counters and certificates of an IDA run (summed over its phases).
 struct IdaStats {
+  /// Internal IDA steps.
   long num_steps = 0;
+  /// Residual evaluations (IDA's, without Jacobian).
   long num_residual_evaluations = 0;
+  /// Jacobian evaluations.
   long num_jacobian_evaluations = 0;
+  /// Newton iterations of IDA's nonlinear solver.
   long num_nonlinear_iterations = 0;
+  /// Steps rejected by IDA's local error test.
   long num_error_test_failures = 0;
   long num_phases = 0;  ///< (re)starts of IDA: events and breakpoints
+  /// Events located (switches, contacts, relay jumps).
   long num_events = 0;
   /// KLU symbolic analyses: Jacobian evaluations whose sparsity pattern differed from the
   /// previous one (at most one per phase; 0 with the dense LU).
@@ -128,19 +152,27 @@ struct IdaStats {
   /// crossing search could not resolve (each one a warning; docs/ida.md, "Contacts inside a
   /// step").
   long num_unresolved_crossings = 0;
+  /// CPU time of the run.
   double cpu_seconds = 0.0;
 
+  /// One line for the command line's summary.
   std::string Summary() const;
 };
 
+/// Result of SimulateIda: status, final values, trajectory, events, relay memories and statistics.
 struct IdaResult {
+  /// kSuccess, or why the run stopped.
   IdaStatus status = IdaStatus::kSuccess;
+  /// The time and reason when status != kSuccess.
   std::string message;
+  /// Time reached.
   double final_time = 0.0;
   Vector final_state;     ///< scene states
   Trajectory trajectory;  ///< scene states and algebraic values (z layout) at recorded times
+  /// Located events in time order.
   std::vector<Event> events;
   std::vector<RelaySignal> relays;  ///< each relay's memory w(t)
+  /// Counters and certificates.
   IdaStats stats;
   /// What the run suspects but could not resolve, one sentence each (a root inside a step
   /// that the bounds admit and the search left undecided).
@@ -157,13 +189,20 @@ IdaResult SimulateIda(const Scene& scene, const IdaOptions& options,
 /// std::runtime_error with IDA's message if the run does not succeed, so that a test or
 /// benchmark never compares against a failed reference.
 struct ReferenceSolution {
+  /// Scene states at the final time.
   Vector final_state;
+  /// The final time reached (the scene's tf).
   double final_time = 0.0;
+  /// The events located on the way.
   std::vector<Event> events;
+  /// The times asked for (ascending).
   std::vector<double> sample_times;
   std::vector<Vector> samples;  ///< scene states at sample_times
+  /// Each relay's memory w(t).
   std::vector<RelaySignal> relays;
 };
+/// The reference solution of `scene` (see ReferenceSolution); throws std::runtime_error if IDA does
+/// not succeed.
 ReferenceSolution ComputeReference(const Scene& scene, const std::vector<double>& sample_times = {},
                                    const IdaOptions& options = IdaOptions::Reference());
 

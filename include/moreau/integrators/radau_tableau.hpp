@@ -13,10 +13,12 @@
 
 namespace moreau {
 
+/// Largest number of Radau IIA stages moreau computes tableaus for (order 13).
 inline constexpr int kMaxRadauStages = 7;
 
 /// Butcher tableau of Radau IIA with s stages, plus the data integrators derive from it.
 struct RadauTableau {
+  /// Number of stages s.
   int stages = 0;
   Vector c;          ///< nodes, c_s = 1
   Matrix a;          ///< coefficients a_ij
@@ -27,6 +29,7 @@ struct RadauTableau {
   double gamma0 = 0.0;
   Vector error_weights;  ///< e = A^{-T} (bhat - b)
 
+  /// The classical order 2s - 1.
   int order() const { return 2 * stages - 1; }
   /// Weights w_j(theta) of the collocation polynomial: u(t0 + theta h) = y0 + sum_j w_j Z_j.
   Vector InterpolationWeights(double theta) const;

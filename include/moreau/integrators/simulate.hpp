@@ -40,18 +40,23 @@ std::string FormatSetting(const SettingValue& value);
 
 /// One option of an integrator, declared once.
 struct OptionSpec {
+  /// The value type of an option.
   enum class Type { kBool, kInteger, kReal, kChoice, kRealList };
   std::string name;     ///< keyword (Python) and flag (command line, with '-' for '_')
   std::string meaning;  ///< one line: what it does, unit, valid range
+  /// The value type (what SettingValue alternatives it accepts).
   Type type = Type::kReal;
   std::vector<std::string> choices;  ///< kChoice: the accepted names
   SettingValue default_value;        ///< read off a default-constructed XxxOptions
 };
+/// "bool", "integer", "real", "choice" or "list of reals".
 std::string ToString(OptionSpec::Type type);
 
 /// One statistic of an integrator's run, declared once.
 struct StatSpec {
+  /// Name as in summary.json, Python's Result.stats and SimulationResult::Stat.
   std::string name;
+  /// One line: what it counts or measures.
   std::string meaning;
   bool count = false;  ///< an integer counter (num_*), else a real value
 };
@@ -65,12 +70,16 @@ struct IntegratorSpec {
   std::vector<std::string> supported_effects;
   /// Whether it supports a speed of time (Scene::time_scale_input).
   bool supports_time_scale = false;
+  /// Its options, in declaration order.
   std::vector<OptionSpec> options;
+  /// Its statistics, in declaration order.
   std::vector<StatSpec> stats;
   /// What a "step" and an "iteration" count in the common result (SimulationResult).
   std::string step_unit;
+  /// What SimulationResult::num_iterations counts ("Newton", "SQP", ...).
   std::string iteration_unit;
 
+  /// The option with this name, or nullptr.
   const OptionSpec* FindOption(const std::string& option) const;
 };
 
@@ -90,7 +99,9 @@ void RequireSupportedEffects(const Scene& scene, const std::string& name);
 /// What to run: an integrator ("auto" or a name) and option values by name. Options left out
 /// keep their declared defaults.
 struct SimulationSettings {
+  /// "auto" (AutomaticIntegrator) or an integrator's name.
   std::string integrator = "auto";
+  /// Option values by name (as the integrator declares them); others keep their defaults.
   std::map<std::string, SettingValue> options;
 };
 
@@ -102,9 +113,9 @@ struct SimulationSensitivities {
   Matrix parameters;                   ///< dx(T)/dp, n_x x n_p
   Matrix inputs;                       ///< dx(T)/du, n_x x (n_u * segments)
   std::vector<double> segment_starts;  ///< start of each control segment
-  /// Option `directions` (V, n_theta x k): dx(T)/dtheta V (n_x x k), and dx(t_j)/dtheta V at
-  /// every sample time.
+  /// Option `directions` (V, n_theta x k): dx(T)/dtheta V (n_x x k).
   Matrix directional;
+  /// Option `directions` with `sample_times`: dx(t_j)/dtheta V (n_x x k) at every sample time.
   std::vector<Matrix> sample_directional;
   /// Options `adjoint_weights` (W, n_x x q) and `adjoint_sample_weights`: the q x n_theta
   /// gradient rows W^T dx(T)/dtheta + sum_j W_j^T dx(t_j)/dtheta.
@@ -113,10 +124,10 @@ struct SimulationSensitivities {
 
 /// Gradients from a reverse sweep (AdjointSweep::Gradient).
 struct AdjointGradient {
-  bool success = true;  ///< false: a Jacobian was singular at its checkpoint (message)
-  std::string message;
-  Matrix theta;  ///< q x n_theta: with respect to (x0, p, u_1..u_S)
-  double cpu_seconds = 0.0;
+  bool success = true;       ///< false: a Jacobian was singular at its checkpoint (message)
+  std::string message;       ///< why the sweep failed (empty on success)
+  Matrix theta;              ///< q x n_theta: with respect to (x0, p, u_1..u_S)
+  double cpu_seconds = 0.0;  ///< thread CPU time of the sweep
 };
 
 /// The reverse sweep of a finished run (option `keep_adjoint`): gradients for weights chosen
@@ -134,39 +145,54 @@ class AdjointSweep {
 
 /// The common result of every integrator.
 struct SimulationResult {
+  /// The scene's name.
   std::string scene;
   std::string integrator;  ///< the integrator that ran ("auto" resolved)
   /// Every declared option of that integrator with the value used, in declaration order.
   std::vector<std::pair<std::string, SettingValue>> options;
+  /// True if the integrator reached the final time.
   bool success = false;
   std::string status;  ///< the integrator's status name (ToString of its enum)
+  /// The time and reason when success is false.
   std::string message;
+  /// Time reached (physical time).
   double final_time = 0.0;
+  /// The scene's state names.
   std::vector<std::string> state_names;
+  /// Scene states at final_time.
   Vector final_state;
   Vector final_inputs;  ///< algebraic inputs at T (alpha), else empty
+  /// The recorded trajectory in physical time.
   Trajectory trajectory;
   /// Every collocation stage point (FESD with record_stages), else empty.
   Trajectory stage_trajectory;
   /// Time-freezing scenes: the numerical-time trajectory (x, memories, clock), else empty.
   Trajectory numerical_trajectory;
+  /// Switch and contact events in time order.
   std::vector<Event> events;
+  /// Hysteresis relays: each memory w(t) in physical time.
   std::vector<RelaySignal> relays;
   /// The integrator's statistics, named as declared (IntegratorSpec::stats), in order.
   std::vector<std::pair<std::string, double>> stats;
   std::string stats_summary;  ///< the integrator's one-line Summary()
   long num_steps = 0;         ///< IntegratorSpec::step_unit
   long num_iterations = 0;    ///< IntegratorSpec::iteration_unit
+  /// CPU time of the run.
   double cpu_seconds = 0.0;
   /// Per-element (FESD) or per-step (alpha) certificates: column names and rows.
   std::vector<std::string> record_columns;
+  /// One row per element or step, values in record_columns order.
   std::vector<std::vector<double>> records;
   /// With the `sensitivities` option.
   std::optional<SimulationSensitivities> sensitivities;
   /// Adaptive FESD: the accepted steps, in the form its option `step_sequence` replays them.
   std::vector<double> step_sequence;
-  /// What the run suspects but could not resolve (the integrator's warnings), one sentence
-  /// each; a successful run with warnings is a result to check.
+  /// The run's estimated error relative to the solution's scale (docs/accuracy.md): local
+  /// error estimates accumulated over the steps (FESD, smooth Radau IIA), else empty.
+  std::optional<double> error_estimate;
+  /// What the user should know although the run may have succeeded (an estimated error far
+  /// above the tolerance, a suspected unresolved crossing, ...), one sentence each. Front ends
+  /// show them: the command line on stderr and in summary.json, Python by warnings.warn.
   std::vector<std::string> warnings;
   /// Option `sample_times`: the scene states at those times.
   std::vector<Vector> sample_states;
@@ -176,6 +202,15 @@ struct SimulationResult {
   /// The statistic with this name (std::invalid_argument if the integrator has none).
   double Stat(const std::string& name) const;
 };
+
+/// The options `given` for `integrator` with the scene's defaults (Scene::defaults) added
+/// where the user gave none: rtol, atol, h0 and h_max (IDA: max_step) only where the steps are
+/// error-controlled (no h given, or h with adaptive, rtol, atol or h0), output times (those
+/// inside [t0, tf]) and output_dt unless either is given; each only where the integrator
+/// declares the option. Simulate, Simulator and ValidateSimulationSettings apply it.
+std::map<std::string, SettingValue> WithSceneDefaults(
+    const Scene& scene, const std::string& integrator,
+    const std::map<std::string, SettingValue>& given);
 
 /// Checks the settings for `scene` without simulating: the integrator exists ("auto" is
 /// resolved for the scene) and supports the scene's effects, every option is declared, of the
@@ -196,13 +231,18 @@ SimulationResult Simulate(const Scene& scene, const SimulationSettings& settings
 /// "x0.<state>", parameters, "tf"); values not given keep the scene's own. Not thread-safe.
 class Simulator {
  public:
+  /// Resolves and checks the settings for `scene` (throws std::invalid_argument as Simulate).
   Simulator(const Scene& scene, const SimulationSettings& settings);
   ~Simulator();
   Simulator(const Simulator&) = delete;
   Simulator& operator=(const Simulator&) = delete;
+  /// Simulates with `values` set on the scene (SetSceneValue names); the result equals Simulate's
+  /// on that scene.
   SimulationResult Run(const std::vector<std::pair<std::string, double>>& values = {},
                        const ProgressCallback& progress = {});
+  /// The integrator that runs ("auto" resolved).
   const std::string& integrator() const;
+  /// The scene the simulator was made for.
   const Scene& scene() const;
 
  private:

@@ -17,11 +17,13 @@ namespace moreau {
 struct Trajectory {
   std::vector<std::string> state_names;      ///< the scene's states
   std::vector<std::string> algebraic_names;  ///< multipliers etc. (may be empty)
+  /// The recorded times, ascending.
   std::vector<double> t;
   std::vector<Vector> x;          ///< scene states at t
   std::vector<Vector> algebraic;  ///< algebraic values at t (empty vectors if none)
   std::vector<double> step;       ///< length of the step/element ending at t (0 at t0)
 
+  /// Number of recorded points.
   std::size_t size() const { return t.size(); }
   /// Appends one point (the vectors moved in: pass temporaries or std::move to avoid copies).
   void Append(double time, Vector state, Vector algebraic_values, double length);
@@ -31,8 +33,11 @@ struct Trajectory {
 /// initial_value on [t0, jump_times[0]), values[k] on [jump_times[k], jump_times[k + 1]).
 /// A relay whose initial memory is inconsistent with its input jumps at t0.
 struct RelaySignal {
+  /// The relay's name.
   std::string relay;
+  /// The memory at t0 (0 or 1).
   int initial_value = 0;
+  /// The times of the memory's jumps, ascending.
   std::vector<double> jump_times;
   std::vector<int> values;  ///< the value after each jump
 
@@ -44,6 +49,27 @@ struct RelaySignal {
 
 /// Called by integrators with the current time during long runs (may be empty).
 using ProgressCallback = std::function<void(double t)>;
+
+/// The default relative tolerance of the error-controlled integrators (FESD, smooth Radau
+/// IIA) when the user gives no step: chosen so that every built-in scene and example file
+/// meets 1e-5 relative accuracy with no options (docs/accuracy.md, where the measurement is;
+/// tests/integrators/default_accuracy_test.cpp checks it).
+inline constexpr double kDefaultRelativeTolerance = 1e-6;
+
+/// A run's estimated error (FesdStats::error_estimate, RadauStats::error_estimate) above this
+/// multiple of its relative tolerance makes a warning (fixed steps, whose error nothing
+/// controls; docs/accuracy.md).
+inline constexpr double kErrorWarningFactor = 10.0;
+
+/// The warning for an estimated error above kErrorWarningFactor times rtol (empty if it is
+/// not): the same sentence from every integrator.
+std::string ErrorEstimateWarning(double error_estimate, double relative_tolerance);
+
+/// Fixed grids: the number of steps of FixedStepGrid over the segments between `ends`.
+double FixedStepCount(const std::vector<double>& ends, double h);
+/// Throws std::invalid_argument, before any work, if a fixed step h over the segments between
+/// `ends` needs more than max_steps steps (naming both and the ways out).
+void RequireFixedStepsWithin(const std::vector<double>& ends, double h, long max_steps);
 
 /// Most steps a fixed-step grid may have on one segment (FixedStepGrid stores every point:
 /// 8e8 bytes at this limit).

@@ -32,6 +32,8 @@
 
 namespace moreau {
 
+/// Options of the fixed-step Radau IIA time-stepping baseline with stage complementarity; defaults
+/// are the values below.
 struct TimeSteppingOptions {
   /// Radau IIA stages s in [1, kMaxRadauStages].
   int stages = 1;
@@ -45,6 +47,8 @@ struct TimeSteppingOptions {
   /// a b = mu^2 (a, b > 0; Fischer-Burmeister only): the step map is smooth and the
   /// sensitivities are its classical derivatives (homotopies of the OCP layer).
   SemismoothNewtonOptions newton = DefaultNewtonOptions();
+  /// Most steps of a run, >= 1: a grid with more is refused before any work.
+  long max_steps = 1'000'000;
   /// Record every step in the trajectory (false: only the initial and final points).
   bool record_trajectory = true;
   /// Compute TimeSteppingResult::sensitivities: the implicit function theorem on every
@@ -61,6 +65,8 @@ struct TimeSteppingOptions {
   /// keeps one n_y x (n_y + n_p + n_u) transfer per step. Sample times and kept sweeps are
   /// FESD's only.
   Matrix sensitivity_directions;
+  /// Adjoint weights W (n_x x q, or n_y x q over the lowered state), as
+  /// FesdOptions::adjoint_weights: the gradients W^T dx(T)/dtheta (TimeSteppingResult::adjoint).
   Matrix adjoint_weights;
   /// Near-active constraint filter (docs/sparse-systems.md), as FesdOptions::constraint_filter:
   /// moving-set constraints far from contact are left out of the step systems and checked at
@@ -75,6 +81,7 @@ struct TimeSteppingOptions {
   /// empty: the scene's). Need not lie in the moving sets: the first step catches up.
   Vector initial_state;
 
+  /// The Newton settings when none are given.
   static SemismoothNewtonOptions DefaultNewtonOptions();
   /// Throws std::invalid_argument naming the first out-of-range option.
   void Validate() const;
@@ -86,38 +93,55 @@ enum class TimeSteppingStatus {
   kNewtonFailure,  ///< the semismooth Newton method did not converge in some step
                    ///< (its status and the time are in the message)
 };
+/// The status as text (snake case, as in summary.json).
 std::string ToString(TimeSteppingStatus status);
 
+/// Counters and certificates of a time-stepping run.
 struct TimeSteppingStats {
+  /// Steps taken.
   long num_steps = 0;
+  /// Newton iterations of all steps.
   long num_newton_iterations = 0;
+  /// LU factorizations of the Newton matrices.
   long num_factorizations = 0;
+  /// Line-search backtracks of the Newton iterations.
   long num_backtracks = 0;
   double max_complementarity_residual = 0.0;  ///< max over steps of max |min(a, b)|
   double max_newton_residual = 0.0;           ///< max over steps of ||S Phi||_inf
   /// Near-active filter: steps solved again (a left-out constraint not positive at a
   /// stage), and the most pairs in a step system.
   long num_filter_rechecks = 0;
+  /// Largest number of complementarity pairs in one step system.
   long max_working_pairs = 0;
   /// Steps in which a free side falls below zero between the nodes and rises again, or whose
   /// indicator bounds admit that without the search resolving it (each one a warning).
   long num_inside_crossings = 0;
+  /// CPU time of the run.
   double cpu_seconds = 0.0;
 
+  /// Sums counters and times; takes the max of the extreme values.
   TimeSteppingStats& operator+=(const TimeSteppingStats& other);
+  /// One line for the command line's summary.
   std::string Summary() const;
 };
 
+/// Result of SimulateTimeStepping: status, final values, trajectory, events, per-step certificates,
+/// sensitivities and statistics.
 struct TimeSteppingResult {
+  /// kSuccess, or why the run stopped.
   TimeSteppingStatus status = TimeSteppingStatus::kSuccess;
+  /// The time and reason when status != kSuccess.
   std::string message;
+  /// Time reached.
   double final_time = 0.0;
   Vector final_state;      ///< scene states
   Vector final_algebraic;  ///< algebraic unknowns at the last stage of the last step
   Trajectory trajectory;   ///< states and algebraic values at step ends
+  /// Switch and contact events (to the resolution of the step).
   std::vector<Event> events;
   /// Certificate per step: max_{stages, pairs} |min(a, b)| at the accepted solution.
   std::vector<double> step_complementarity_residual;
+  /// Counters and certificates.
   TimeSteppingStats stats;
   Vector final_lowered_state;  ///< y(T) = (x, clock)
   /// With options.sensitivities: d y(T) / d(y0, p, u per control segment), n_y rows; columns
@@ -129,10 +153,14 @@ struct TimeSteppingResult {
   /// a contact shorter than the step), which the stage complementarity never sees
   /// (docs/fesd-formulation.md, section 11).
   std::vector<std::string> warnings;
-  /// With sensitivity_directions (k): dx(T)/dtheta V (n_x x k) and the lowered dy(T) (n_y x k).
-  Matrix directional, directional_lowered;
-  /// With adjoint_weights (q): q x (n_x + n_p + n_u S), and over the lowered (y0, p, u).
-  Matrix adjoint, adjoint_lowered;
+  /// With sensitivity_directions (k): dx(T)/dtheta V (n_x x k).
+  Matrix directional;
+  /// With sensitivity_directions (k): the lowered dy(T)/dtheta V (n_y x k).
+  Matrix directional_lowered;
+  /// With adjoint_weights (q): the gradients, q x (n_x + n_p + n_u S).
+  Matrix adjoint;
+  /// With adjoint_weights (q): the gradients over the lowered (y0, p, u), q x (n_y + n_p + n_u S).
+  Matrix adjoint_lowered;
 };
 
 /// Simulates `scene` over [t0, tf]. Throws std::invalid_argument for invalid options, an

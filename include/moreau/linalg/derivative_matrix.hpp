@@ -20,6 +20,8 @@
 
 namespace moreau {
 
+/// A derivative block (rows x cols) stored dense or sparse, filled by accumulation and then read:
+/// the storage of every Jacobian block of a lowered system (docs/sparse-systems.md).
 class DerivativeMatrix {
  public:
   /// A rows x cols matrix of zeros in the given storage (true: sparse).
@@ -37,8 +39,11 @@ class DerivativeMatrix {
     sparse_ = false;
     finalized_ = true;
   }
+  /// Number of rows.
   int rows() const { return rows_; }
+  /// Number of columns.
   int cols() const { return cols_; }
+  /// True for sparse storage.
   bool is_sparse() const { return sparse_; }
 
   // --- accumulation ------------------------------------------------------------------------
@@ -63,6 +68,7 @@ class DerivativeMatrix {
                 double scale = 1.0);
   /// M = m (storage per is_sparse(), sizes from m; finished, no Finalize needed).
   void Assign(const Matrix& m);
+  /// M = m for a sparse m (storage per is_sparse()).
   void Assign(const SparseMatrix& m);
   /// M *= factor (all entries added so far).
   void Scale(double factor);
@@ -75,6 +81,7 @@ class DerivativeMatrix {
   /// finished). For producers that compute whole rows at once (velocity level).
   Matrix& MutableDense();
   const SparseMatrix& sparse() const;  ///< sparse storage only
+  /// A dense copy (either storage).
   Matrix ToDense() const;
   /// f(m) with m the dense Matrix or the SparseMatrix: code written once for both storages.
   template <class F>
@@ -92,10 +99,15 @@ class DerivativeMatrix {
 
   /// One (row, column, value) entry; Eigen's setFromTriplets reads it.
   struct Entry {
-    int r, c;
+    int r;  ///< row index
+    int c;  ///< column index
+    /// The value.
     double v;
+    /// Row index (for Eigen's setFromTriplets).
     int row() const { return r; }
+    /// Column index.
     int col() const { return c; }
+    /// The value.
     double value() const { return v; }
   };
 

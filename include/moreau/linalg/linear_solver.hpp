@@ -29,6 +29,7 @@ enum class LinearSolverKind {
   /// close to diagonally dominant (circuits, diffusion), poor on saddle points
   kKlu,
 };
+/// "auto", "dense", "sparse" or "klu".
 std::string ToString(LinearSolverKind kind);
 /// Parses "auto", "dense", "sparse" or "klu"; throws std::invalid_argument otherwise.
 LinearSolverKind ParseLinearSolverKind(const std::string& name);
@@ -44,7 +45,9 @@ class SystemMatrix {
  public:
   /// Starts a new n-by-n matrix of zeros in the given storage (true: sparse).
   void Reset(int n, bool sparse);
+  /// The dimension n.
   int size() const { return n_; }
+  /// True for sparse storage.
   bool sparse() const { return sparse_; }
   /// A(row0 + i, col0 + j) += scale * block(i, j), for all entries of the block (exact zeros
   /// included in sparse storage, so that the sparsity pattern does not depend on values).
@@ -65,11 +68,14 @@ class SystemMatrix {
   void AddScaledRow(int row, int col0, int k, double weight, const DerivativeMatrix& m);
   /// A(row0 + i, col0 + i) += value, i = 0..count-1.
   void AddDiagonal(int row0, int col0, int count, double value);
+  /// A(row, col) += value.
   void AddEntry(int row, int col, double value);
   /// Completes the assembly (sparse: builds the CSC matrix, summing duplicates).
   void Finalize();
 
+  /// The dense matrix (dense storage, after Finalize).
   const Matrix& dense() const { return dense_; }
+  /// The compressed sparse matrix (sparse storage, after Finalize).
   const SparseMatrix& sparse_matrix() const { return sparse_matrix_; }
   /// y = A x (after Finalize).
   Vector Multiply(const Vector& x) const;
@@ -98,6 +104,7 @@ enum class FactorizationStatus {
   kSingular,   ///< a zero pivot or reciprocal_condition() < kSingularRcond
   kNonFinite,  ///< the matrix contains NaN or infinity
 };
+/// The status as text.
 std::string ToString(FactorizationStatus status);
 
 /// Matrices whose conditioning indicator (reciprocal_condition) is below this value count as
@@ -108,6 +115,7 @@ inline constexpr double kSingularRcond = 1e-15;
 class LinearSolver {
  public:
   virtual ~LinearSolver() = default;
+  /// Which LU this is (never kAutomatic).
   virtual LinearSolverKind kind() const = 0;
   /// True if this solver wants sparse storage in SystemMatrix.
   bool wants_sparse() const {
@@ -128,6 +136,7 @@ class LinearSolver {
   int num_factorizations() const { return num_factorizations_; }
 
  protected:
+  /// Counter behind num_factorizations(), incremented by Factorize.
   int num_factorizations_ = 0;
 };
 

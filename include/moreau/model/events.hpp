@@ -18,11 +18,14 @@ enum class EventKind {
   kRelaySwitch,  ///< a hysteresis relay switched its memory state
   kAmbiguous,    ///< non-unique continuation; the documented (slow) solution was taken
 };
+/// The kind as text (as in summary.json: "enter", "leave", ...).
 std::string ToString(EventKind kind);
 
 /// A switch event.
 struct Event {
+  /// Time of the event (physical time).
   double t = 0.0;
+  /// What happened.
   EventKind kind = EventKind::kEnter;
   std::string what;    ///< which constraint, mode or relay (e.g. "wall.c1")
   std::string detail;  ///< free text (e.g. "below -> above")

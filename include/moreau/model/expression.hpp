@@ -39,6 +39,7 @@ struct ExpressionSymbols {
 struct ExpressionOrigin {
   std::string source;    ///< file name (or "<string>")
   std::string key_path;  ///< e.g. "effects[0].constraints[1]"
+  /// Line of the expression in the file (0: not from a file).
   int line = 0;
   int column = 0;  ///< column of the expression's first character
 };
@@ -53,9 +54,12 @@ struct ExpressionGraph;
 /// to themselves, duplicate names and nonsmooth functions.
 class ExpressionModel {
  public:
+  /// A model over `symbols`; `source` names the file (or "<string>") in messages.
   explicit ExpressionModel(ExpressionSymbols symbols, std::string source = "<string>");
   ~ExpressionModel();
+  /// Move construction.
   ExpressionModel(ExpressionModel&&) noexcept;
+  /// Move assignment.
   ExpressionModel& operator=(ExpressionModel&&) noexcept;
 
   /// Sets where the defs came from (for messages about them).

@@ -42,7 +42,9 @@ enum class SwitchingForm {
   kStewart,    ///< Stewart's convex-multiplier form (theta, lambda, mu)
   kHeaviside,  ///< Heaviside step form (alpha, lambda_n, lambda_p)
 };
+/// "stewart" or "heaviside".
 std::string ToString(SwitchingForm form);
+/// Parses "stewart" or "heaviside"; throws std::invalid_argument otherwise.
 SwitchingForm ParseSwitchingForm(const std::string& name);
 
 /// How hysteresis relays are lowered.
@@ -62,6 +64,7 @@ enum class DerivativeStorage {
   kDense,   ///< dense matrices, dense forward-mode AD (small systems: fastest)
   kSparse,  ///< compressed sparse matrices from sparse AD (large systems: cost ~ nonzeros)
 };
+/// "auto", "dense" or "sparse".
 std::string ToString(DerivativeStorage storage);
 
 /// The storage an integrator asks for given its linear solver option: sparse with the sparse
@@ -79,6 +82,7 @@ enum class ConstraintFilter {
   kOff,        ///< every constraint in every element system
   kOn,         ///< the filter on whatever the number of constraints
 };
+/// "auto", "off" or "on".
 std::string ToString(ConstraintFilter filter);
 /// Parses "auto", "off" or "on"; throws std::invalid_argument otherwise.
 ConstraintFilter ParseConstraintFilter(const std::string& name);
@@ -90,8 +94,12 @@ inline constexpr int kFilterThreshold = 64;
 /// more than kDenseSizeLimit = 256 unknowns, where the sparse LU takes over from the dense one.
 inline constexpr int kSparseStorageThreshold = 128;
 
+/// How a scene is lowered (defaults: Stewart's form, time-freezing, automatic storage).
 struct LoweringOptions {
+  /// Lowering of switching surfaces.
   SwitchingForm switching_form = SwitchingForm::kStewart;
+  /// Lowering of hysteresis relays (time-freezing for FESD and time-stepping, discrete memory for
+  /// IDA).
   RelayForm relay_form = RelayForm::kTimeFreezing;
   /// Require the scene's x0 to lie in its moving sets (ValidateScene); false for integrators
   /// that start from another state and project it (FesdOptions::initial_state).
@@ -110,10 +118,26 @@ enum class Derivatives {
 /// Values (and requested derivatives) of the lowered system at one point (y, z). The
 /// derivatives are stored as the system says (LoweredSystem::sparse()).
 struct PointEvaluation {
-  Vector F, G, A, B;
-  DerivativeMatrix F_y, F_z, G_y, G_z, A_y, A_z, B_y, B_z;
-  DerivativeMatrix F_u, G_u, A_u, B_u;  ///< with Derivatives::kAll
-  DerivativeMatrix F_p, G_p, A_p, B_p;  ///< with Derivatives::kAll
+  Vector F;              ///< the dynamics y' = F (n_y)
+  Vector G;              ///< the equations 0 = G (n_G)
+  Vector A;              ///< first sides of the pairs, 0 <= A ⟂ B >= 0 (n_pairs)
+  Vector B;              ///< second sides of the pairs (n_pairs)
+  DerivativeMatrix F_y;  ///< dF/dy (Derivatives::kStates or kAll)
+  DerivativeMatrix G_y;  ///< dG/dy (Derivatives::kStates or kAll)
+  DerivativeMatrix A_y;  ///< dA/dy (Derivatives::kStates or kAll)
+  DerivativeMatrix B_y;  ///< dB/dy (Derivatives::kStates or kAll)
+  DerivativeMatrix F_z;  ///< dF/dz (Derivatives::kStates or kAll)
+  DerivativeMatrix G_z;  ///< dG/dz (Derivatives::kStates or kAll)
+  DerivativeMatrix A_z;  ///< dA/dz (Derivatives::kStates or kAll)
+  DerivativeMatrix B_z;  ///< dB/dz (Derivatives::kStates or kAll)
+  DerivativeMatrix F_u;  ///< dF/du (Derivatives::kAll)
+  DerivativeMatrix G_u;  ///< dG/du (Derivatives::kAll)
+  DerivativeMatrix A_u;  ///< dA/du (Derivatives::kAll)
+  DerivativeMatrix B_u;  ///< dB/du (Derivatives::kAll)
+  DerivativeMatrix F_p;  ///< dF/dp (Derivatives::kAll)
+  DerivativeMatrix G_p;  ///< dG/dp (Derivatives::kAll)
+  DerivativeMatrix A_p;  ///< dA/dp (Derivatives::kAll)
+  DerivativeMatrix B_p;  ///< dB/dp (Derivatives::kAll)
 };
 
 /// Which side of a complementarity pair is continuous in time along solutions.
@@ -131,6 +155,7 @@ enum class ContinuousSide {
 struct PairInfo {
   std::string effect;  ///< name of the effect it comes from
   std::string name;    ///< e.g. "wall.c1" or "circle.theta[outside]"
+  /// Which side of the pair is continuous in time along solutions.
   ContinuousSide continuous = ContinuousSide::kA;
   int block = 0;  ///< index of the lowered effect (see block_names())
   /// ContinuousSide::kBoth: the index in z of the algebraic unknown that b is; -1 otherwise.
@@ -141,14 +166,21 @@ struct PairInfo {
 /// rows of d/d(y, u, p) [grad_y X(y) . d] for the continuous sides of pairs and for the
 /// differentiated equation rows, for a fixed direction d.
 struct CurvatureTerms {
-  DerivativeMatrix pair_y, pair_u, pair_p;              ///< n_pairs rows
-  DerivativeMatrix equation_y, equation_u, equation_p;  ///< n_G rows
+  DerivativeMatrix pair_y;      ///< continuous sides of the pairs, by y (n_pairs rows)
+  DerivativeMatrix pair_u;      ///< continuous sides of the pairs, by u (n_pairs rows)
+  DerivativeMatrix pair_p;      ///< continuous sides of the pairs, by p (n_pairs rows)
+  DerivativeMatrix equation_y;  ///< differentiated equation rows, by y (n_G rows)
+  DerivativeMatrix equation_u;  ///< differentiated equation rows, by u (n_G rows)
+  DerivativeMatrix equation_p;  ///< differentiated equation rows, by p (n_G rows)
 };
 
 /// Event indicators (free side of every pair) and their derivatives.
 struct IndicatorEvaluation {
-  Vector values;                        ///< n_pairs
-  DerivativeMatrix d_y, d_v, d_u, d_p;  ///< n_pairs rows
+  Vector values;         ///< n_pairs
+  DerivativeMatrix d_y;  ///< by the state y (n_pairs rows)
+  DerivativeMatrix d_v;  ///< by the velocity-level unknowns v (n_pairs rows)
+  DerivativeMatrix d_u;  ///< by the inputs u (n_pairs rows)
+  DerivativeMatrix d_p;  ///< by the parameters p (n_pairs rows)
 };
 
 /// Role of a pair in the velocity-level problem.
@@ -160,12 +192,21 @@ enum class PairRole {
 
 /// Rows of the velocity-level problem and their derivatives (see EvaluateVelocityLevel).
 struct VelocityLevelEvaluation {
-  Vector equations;  ///< n_G rows, then one row per pair with a decided role
-  Vector a, b;       ///< complementary pairs: (jump side value, continuous-side rate)
-  DerivativeMatrix equations_v, a_v, b_v;
-  DerivativeMatrix equations_y, a_y, b_y;  ///< with Derivatives::kStates or kAll
-  DerivativeMatrix equations_u, a_u, b_u;  ///< with Derivatives::kAll
-  DerivativeMatrix equations_p, a_p, b_p;
+  Vector equations;              ///< n_G rows, then one row per pair with a decided role
+  Vector a;                      ///< complementary pairs: the jump side's value
+  Vector b;                      ///< complementary pairs: the continuous side's rate
+  DerivativeMatrix equations_v;  ///< d equations / dv (always)
+  DerivativeMatrix a_v;          ///< d a / dv (always)
+  DerivativeMatrix b_v;          ///< d b / dv (always)
+  DerivativeMatrix equations_y;  ///< d equations / dy (Derivatives::kStates or kAll)
+  DerivativeMatrix a_y;          ///< d a / dy (Derivatives::kStates or kAll)
+  DerivativeMatrix b_y;          ///< d b / dy (Derivatives::kStates or kAll)
+  DerivativeMatrix equations_u;  ///< d equations / du (Derivatives::kAll)
+  DerivativeMatrix a_u;          ///< d a / du (Derivatives::kAll)
+  DerivativeMatrix b_u;          ///< d b / du (Derivatives::kAll)
+  DerivativeMatrix equations_p;  ///< d equations / dp (Derivatives::kAll)
+  DerivativeMatrix a_p;          ///< d a / dp (Derivatives::kAll)
+  DerivativeMatrix b_p;          ///< d b / dp (Derivatives::kAll)
 };
 
 /// Outcome of LoweredSystem::DecideStatuses.
@@ -190,12 +231,18 @@ class VelocitySolver;
 /// A scene lowered to a DCS (see file comment).
 class LoweredSystem {
  public:
+  /// Lowers every effect of `scene` (validated first; throws std::invalid_argument naming the
+  /// problem).
   explicit LoweredSystem(const Scene& scene, const LoweringOptions& options = {});
   ~LoweredSystem();
+  /// A copy with its own workspaces.
   LoweredSystem(const LoweredSystem& other);
+  /// A copy with its own workspaces.
   LoweredSystem& operator=(const LoweredSystem& other);
 
+  /// The scene it was lowered from (with the values last set by UpdateValues).
   const Scene& scene() const { return scene_; }
+  /// The options it was lowered with.
   const LoweringOptions& options() const { return options_; }
   int num_states() const { return num_states_; }                ///< n_y
   int num_scene_states() const { return scene_.num_states(); }  ///< n_x (y[0..n_x))
@@ -219,14 +266,21 @@ class LoweredSystem {
   /// inside a jump, 0 < w0 < 1).
   std::vector<Event> InitialEvents(double t, const Vector& y,
                                    const std::vector<bool>& a_zero) const;
+  /// Index of the clock in y (the last state).
   int clock_index() const { return num_states_ - 1; }
   int num_algebraic() const { return num_algebraic_; }  ///< n_z
   int num_equations() const { return num_equations_; }  ///< n_G
+  /// Number of complementarity pairs n_pairs.
   int num_pairs() const { return num_pairs_; }
+  /// Number of scene inputs n_u.
   int num_inputs() const { return scene_.num_inputs(); }
+  /// Number of scene parameters n_p.
   int num_parameters() const { return scene_.num_parameters(); }
+  /// Names of the lowered states y.
   const std::vector<std::string>& state_names() const { return state_names_; }
+  /// Names of the algebraic unknowns z.
   const std::vector<std::string>& algebraic_names() const { return algebraic_names_; }
+  /// Every complementarity pair of the working set, in order.
   const std::vector<PairInfo>& pairs() const { return pairs_; }
 
   /// y0 = (x0, internal initial states (relay memories w0), t0).
@@ -241,6 +295,7 @@ class LoweredSystem {
   void InitialAlgebraicGuess(const Vector& y, const Vector* previous, Vector* z) const;
   /// Sets the input values u used by Evaluate (held constant by integrators within a step).
   void SetInputs(const Vector& u);
+  /// The input values u set last.
   const Vector& inputs() const { return inputs_; }
   /// Sets the parameter values p (defaults: the scene's).
   void SetParameters(const Vector& p);
@@ -250,12 +305,14 @@ class LoweredSystem {
   /// compared). Used by integrators that run one lowered system many times (shooting).
   /// Throws std::invalid_argument if the structure differs.
   void UpdateValues(const Scene& scene);
+  /// The parameter values p set last.
   const Vector& parameters() const { return parameters_; }
 
   /// Evaluates F, G, A, B (and derivatives) at (y, z). Not thread-safe (see SmoothFunction).
   void Evaluate(const ConstVectorRef& y, const ConstVectorRef& z, Derivatives derivatives,
                 PointEvaluation* out) const {
     EvaluatePoint(y, z, derivatives, nullptr, out);
+    NoteNonFinite(y, *out, false);
   }
   /// F and its derivatives (F_y, F_z; F_u, F_p with Derivatives::kAll) as Evaluate gives them;
   /// G, A, B and their derivatives are sized but unspecified (blocks may skip them). For
@@ -269,11 +326,25 @@ class LoweredSystem {
   void EvaluateField(const ConstVectorRef& y, const ConstVectorRef& z, Derivatives derivatives,
                      PointEvaluation* out, int switching_mode = -1) const {
     EvaluatePoint(y, z, derivatives, nullptr, out, /*field_only=*/true, switching_mode);
+    NoteNonFinite(y, *out, true);
   }
+
+  /// Non-finite witness: the first point y since ClearNonFinite() at which Evaluate or
+  /// EvaluateField produced a non-finite F (or G, A, B), kept so that an integrator whose
+  /// solve failed can say which model function was not finite where (DescribeNonFinite)
+  /// instead of reporting the solver's failure alone. Not thread-safe (as Evaluate).
+  void ClearNonFinite() const { non_finite_seen_ = false; }
+  bool non_finite_seen() const { return non_finite_seen_; }  ///< a non-finite value since Clear
+  const Vector& non_finite_state() const { return non_finite_state_; }  ///< y where it first was
+  /// NonFiniteModelValue of the scene at the lowered state y (scene states, time from the
+  /// clock) with the current inputs and parameters; empty if every model function is finite
+  /// there.
+  std::string DescribeNonFinite(const Vector& y) const;
 
   /// Velocity-level structure: continuous algebraic unknowns (rates at velocity level) and
   /// differentiated equations (see EvaluateVelocityLevel).
   const std::vector<bool>& continuous_algebraic() const { return continuous_algebraic_; }
+  /// Per equation row of G: whether the velocity level differentiates it.
   const std::vector<bool>& differentiated_equations() const { return differentiated_; }
 
   /// Candidate sets larger than this are resolved by one semismooth Newton solve of the
@@ -299,15 +370,19 @@ class LoweredSystem {
   bool SetWorkingPairs(const std::vector<bool>& keep);
   /// Where the state of an integrator sits in a working set (for the Remap functions).
   struct WorkingLayout {
-    std::vector<int> z_offset, pair_offset;
-    std::vector<std::vector<int>> working;  // per block: its working pairs (block-local)
-    int num_algebraic = 0, num_pairs = 0;
+    std::vector<int> z_offset;              ///< per block: offset of its algebraic unknowns
+    std::vector<int> pair_offset;           ///< per block: offset of its pairs
+    std::vector<std::vector<int>> working;  ///< per block: its working pairs (block-local)
+    int num_algebraic = 0;                  ///< algebraic unknowns in all
+    int num_pairs = 0;                      ///< pairs in all
   };
+  /// The current layout (for the Remap functions).
   WorkingLayout working_layout() const;
   /// z (laid out as in `from`) in the current layout; unknowns new to it get `fill`.
   Vector RemapAlgebraic(const Vector& z, const WorkingLayout& from, double fill) const;
   /// Per-pair values (laid out as in `from`) in the current layout; new pairs get `fill`.
   Vector RemapPairValues(const Vector& values, const WorkingLayout& from, double fill) const;
+  /// Per-pair statuses (laid out as in `from`) in the current layout; new pairs get `fill`.
   std::vector<bool> RemapStatuses(const std::vector<bool>& a_zero, const WorkingLayout& from,
                                   bool fill) const;
   /// For every declared moving-set constraint (NaN for other declared pairs): its value
@@ -321,7 +396,9 @@ class LoweredSystem {
   void ExcludedViolations(const Vector& y, double threshold, std::vector<bool>* include) const;
   /// The algebraic unknowns of every declared pair: z with zeros for left-out multipliers.
   Vector DeclaredAlgebraic(const Vector& z) const;
+  /// Number of algebraic unknowns of every declared pair (DeclaredAlgebraic's size).
   int num_declared_algebraic() const;
+  /// Their names.
   std::vector<std::string> declared_algebraic_names() const;
 
   /// True if derivatives are stored sparse (LoweringOptions::storage resolved).
@@ -330,8 +407,16 @@ class LoweredSystem {
   /// initial point (sparse storage; dense storage counts every entry), for sizing linear
   /// solvers before the first evaluation.
   struct Nonzeros {
-    double F_y = 0, F_z = 0, G_y = 0, G_z = 0, A_y = 0, A_z = 0, B_y = 0, B_z = 0;
+    double F_y = 0;  ///< structural nonzeros of F_y
+    double F_z = 0;  ///< structural nonzeros of F_z
+    double G_y = 0;  ///< structural nonzeros of G_y
+    double G_z = 0;  ///< structural nonzeros of G_z
+    double A_y = 0;  ///< structural nonzeros of A_y
+    double A_z = 0;  ///< structural nonzeros of A_z
+    double B_y = 0;  ///< structural nonzeros of B_y
+    double B_z = 0;  ///< structural nonzeros of B_z
   };
+  /// The nonzero counts at the initial point.
   const Nonzeros& nonzeros() const;
   /// Number of structurally nonzero entries of F_y (for choosing dense or sparse LU).
   double EstimatedNonzerosFy() const { return nonzeros().F_y; }
@@ -419,6 +504,16 @@ class LoweredSystem {
                      bool field_only = false, int switching_mode = -1) const;
   // Completes sparse accumulation (DerivativeMatrix::Finalize) of the requested blocks.
   void FinalizeEvaluation(Derivatives derivatives, PointEvaluation* out) const;
+  // Records y as the non-finite witness if none is kept and the evaluation is not finite.
+  void NoteNonFinite(const ConstVectorRef& y, const PointEvaluation& out, bool field_only) const {
+    if (non_finite_seen_ ||
+        (out.F.allFinite() &&
+         (field_only || (out.G.allFinite() && out.A.allFinite() && out.B.allFinite())))) {
+      return;
+    }
+    non_finite_seen_ = true;
+    non_finite_state_ = y;
+  }
 
   Scene scene_;
   LoweringOptions options_;
@@ -448,6 +543,8 @@ class LoweredSystem {
   mutable Vector f_scratch_;
   mutable Eigen::RowVectorXd rate_gradient_;
   mutable PointEvaluation velocity_point_;  // EvaluateVelocityLevel's workspace
+  mutable bool non_finite_seen_ = false;    // the non-finite witness (NoteNonFinite)
+  mutable Vector non_finite_state_;
   mutable CurvatureTerms curvature_;
   mutable std::unique_ptr<internal::ArgumentMatrix> dynamics_jacobian_holder_;
   // SolveVelocityLevel's solver and its last solutions (velocity_level.cpp); not copied.

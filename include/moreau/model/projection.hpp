@@ -24,7 +24,10 @@ namespace moreau {
 /// states this close to the boundary.
 inline constexpr double kMovingSetBoundaryTolerance = 1e-10;
 
+/// Result of ProjectOntoMovingSets: the projected state, its multipliers and (with derivatives) the
+/// projection's derivatives.
 struct MovingSetProjection {
+  /// True if the projection problem was solved.
   bool converged = false;
   std::string message;    ///< why not converged
   Vector x;               ///< the projected state
@@ -32,8 +35,10 @@ struct MovingSetProjection {
   double distance = 0.0;  ///< |x - x0|
   /// With derivatives: dx/dx0 (n_x x n_x), dx/dt (n_x), dx/du (n_x x n_u), dx/dp (n_x x n_p).
   Matrix d_x0;
+  /// dx/dt (n_x).
   Vector d_t;
-  Matrix d_u, d_p;
+  Matrix d_u;  ///< dx/du (n_x x n_u)
+  Matrix d_p;  ///< dx/dp (n_x x n_p)
 };
 
 /// Projects x0 onto the scene's moving sets at time t, inputs u and parameters p. Scenes

@@ -38,8 +38,11 @@ namespace moreau {
 
 /// A named scalar parameter of a scene (an entry of p).
 struct ParameterSpec {
+  /// The name (a `--set` name, and the key in scene files).
   std::string name;
+  /// The value.
   double value = 0.0;
+  /// One line for `moreau show`.
   std::string description;
 };
 
@@ -47,16 +50,22 @@ struct ParameterSpec {
 /// breakpoints strictly increasing (values.size() == breakpoints.size() + 1). A constant
 /// signal has no breakpoints. Integrators never step across a breakpoint.
 struct PiecewiseConstantSignal {
+  /// Breakpoints t_1 < t_2 < ..., possibly none.
   std::vector<double> breakpoints;
+  /// The values, one more than breakpoints.
   std::vector<double> values{0.0};
+  /// The value at time t (right-continuous at breakpoints).
   double ValueAt(double t) const;
 };
 
 /// An input u_i of the dynamics: either a control signal given as a function of time, or an
 /// algebraic variable determined by a PathConstraints effect (DAI), with bounds.
 struct InputSpec {
+  /// A control signal, or an algebraic variable of a DAI.
   enum class Kind { kControl, kAlgebraic };
+  /// The input's name.
   std::string name;
+  /// Control or algebraic.
   Kind kind = Kind::kControl;
   /// kControl: the input's value. kAlgebraic: the user input function w(t) that the variable
   /// follows where no active constraint needs it (alpha stepper, AlphaDaiObjective::kReference).
@@ -64,12 +73,14 @@ struct InputSpec {
   double lower = -std::numeric_limits<double>::infinity();  ///< bound (algebraic inputs)
   double upper = std::numeric_limits<double>::infinity();   ///< bound (algebraic inputs)
   double initial_guess = 0.0;                               ///< algebraic inputs at t0
+  /// One line for `moreau show`.
   std::string description;
 };
 
 /// Sweeping process / (extended) projected dynamical system with the moving set
 /// C(t) = {x : c(x, t) >= 0}: x' = f + E E^T grad_x c(x, t) lambda, 0 <= lambda ⟂ c >= 0.
 struct MovingSet {
+  /// The effect's name (unique among the scene's effects; prefixes events and multipliers).
   std::string name;
   std::vector<std::string> constraint_names;  ///< one name per component of c
   SmoothFunction constraints;                 ///< c(x, u, t, p), u is not used
@@ -84,6 +95,7 @@ struct MovingSet {
 /// f_k(x, u, t, p) is added to the smooth dynamics; on switching surfaces the Filippov
 /// convexification applies.
 struct SwitchingSurfaces {
+  /// The effect's name (unique among the scene's effects).
   std::string name;
   std::vector<std::string> surface_names;  ///< one per component of c
   SmoothFunction surfaces;                 ///< c(x, u, t, p)
@@ -95,6 +107,7 @@ struct SwitchingSurfaces {
 /// psi = (input - lower)/(upper - lower) is the normalized input: the relay switches A -> B
 /// when psi reaches 1 and B -> A when psi falls to 0. Thresholds are scene parameters.
 struct HysteresisRelay {
+  /// The effect's name (unique among the scene's effects).
   std::string name;
   SmoothFunction input;      ///< scalar input(x, u, t, p) compared with the thresholds
   int lower_threshold = -1;  ///< index of the parameter at which B -> A
@@ -112,6 +125,7 @@ struct HysteresisRelay {
 /// Differential-algebraic inequalities: phi(x, u, t, p) <= 0 and state bounds, where the
 /// algebraic inputs (InputSpec::Kind::kAlgebraic) are determined at every time.
 struct PathConstraints {
+  /// The effect's name (unique among the scene's effects).
   std::string name;
   std::vector<std::string> constraint_names;  ///< one per component of phi
   SmoothFunction constraints;                 ///< phi(x, u, t, p) <= 0
@@ -135,6 +149,7 @@ struct PathConstraints {
 /// Effects that couple through D must be one effect; pairs without D coupling may be split
 /// into an index-1 and an index-2 effect.
 struct Complementarity {
+  /// The effect's name (unique among the scene's effects).
   std::string name;
   std::vector<std::string> pair_names;  ///< m names, one per pair (e.g. the diodes)
   /// B: n_x x m, row-major: out[i * m + j] = B_ij (state i, pair j).
@@ -145,6 +160,8 @@ struct Complementarity {
   SmoothFunction feedthrough;
 };
 
+/// One effect of a scene: a moving set, switching surfaces, a hysteresis relay, path constraints or
+/// a complementarity system.
 using Effect =
     std::variant<MovingSet, SwitchingSurfaces, HysteresisRelay, PathConstraints, Complementarity>;
 
@@ -153,17 +170,45 @@ std::string EffectKind(const Effect& effect);
 /// The effect's name.
 const std::string& EffectName(const Effect& effect);
 
+/// What a scene's author knows of its scales (scene files: the [defaults] table,
+/// docs/scene-files.md): integrator settings that moreau::Simulate uses where the user gives
+/// none (docs/accuracy.md). Zero or empty: the integrator's own default.
+struct SceneDefaults {
+  double relative_tolerance = 0.0;  ///< rtol of error-controlled runs, >= 0
+  double absolute_tolerance = 0.0;  ///< atol of error-controlled runs (one for every state), >= 0
+  double initial_step = 0.0;        ///< initial step of error-controlled runs (h0), >= 0
+  double max_step = 0.0;            ///< largest step of error-controlled runs (h_max), >= 0
+  /// Output times: the trajectory at these times (dense output), in [t0, tf]; times beyond a
+  /// horizon the user shortened are left out.
+  std::vector<double> output_times;
+  double output_step = 0.0;  ///< output every output_step from t0 (output_dt), >= 0
+
+  bool empty() const {  ///< whether the scene declares nothing (every field zero or empty)
+    return relative_tolerance == 0.0 && absolute_tolerance == 0.0 && initial_step == 0.0 &&
+           max_step == 0.0 && output_times.empty() && output_step == 0.0;
+  }
+};
+
 /// A complete problem description (see file comment).
 struct Scene {
+  /// The scene's name (messages, output directories).
   std::string name;
+  /// One line for `moreau list` and `moreau show`.
   std::string description;
+  /// The names of the states x, in order.
   std::vector<std::string> state_names;
+  /// Initial state x0.
   Vector initial_state;
+  /// Initial time t0.
   double initial_time = 0.0;
+  /// Final time tf.
   double final_time = 1.0;
+  /// The parameters p, in order.
   std::vector<ParameterSpec> parameters;
+  /// The inputs u, in order.
   std::vector<InputSpec> inputs;
   SmoothFunction dynamics;  ///< f(x, u, t, p) with n_x outputs; empty means f = 0
+  /// The effects, in order.
   std::vector<Effect> effects;
   /// Speed of time (time transformation for free final times), -1 for none. Otherwise the
   /// index of a control input s > 0: the scene's time axis (initial_time, final_time, control
@@ -172,12 +217,17 @@ struct Scene {
   /// (smooth dynamics, switching modes, relay fields; moving-set multipliers adapt). Supported
   /// by the FESD integrator.
   int time_scale_input = -1;
+  /// Integrator settings the scene's author chose for its scales (see SceneDefaults).
+  SceneDefaults defaults;
   /// How figures and animations show the scene (names, units, planar geometry); never
   /// changes the dynamics (moreau/model/view.hpp).
   SceneView view;
 
+  /// Number of states n_x.
   int num_states() const { return static_cast<int>(state_names.size()); }
+  /// Number of inputs n_u.
   int num_inputs() const { return static_cast<int>(inputs.size()); }
+  /// Number of parameters n_p.
   int num_parameters() const { return static_cast<int>(parameters.size()); }
   /// Adds a parameter and returns its index in p.
   int AddParameter(const std::string& name, double value, const std::string& description);
@@ -226,6 +276,14 @@ inline constexpr int kMaxEnumeratedPMatrixSize = 16;
 /// every q (Cottle, Pang, Stone, The Linear Complementarity Problem, Thm. 3.3.7). Throws
 /// std::invalid_argument for a non-square D or an m too large to enumerate.
 std::string PMatrixViolation(const Matrix& d);
+
+/// Empty if every model function of the scene (dynamics and every effect's functions) is
+/// finite at the state x, inputs u, time t and parameters p; otherwise names the first that is
+/// not: which function, which output, its value, and the point, e.g. "the dynamics f, output
+/// 'y' (the rate of state y), is nan at t = 0.1276, x = (x = -1e-17, y = 0.03)". Integrators put
+/// it into their non-finite statuses (a runaway named, never an unexplained solver failure).
+std::string NonFiniteModelValue(const Scene& scene, const Vector& x, const Vector& u, double t,
+                                const Vector& p);
 
 /// Names accepted by SetSceneValue: "tf", "x0.<state>" and every parameter name.
 std::vector<std::string> OverridableNames(const Scene& scene);

@@ -22,6 +22,7 @@ struct Scene;
 /// A body drawn at (x, y) = (state `x`, state `y`): a disc of `radius` (0: a point). A body
 /// of a one-dimensional scene leaves `y` empty and moves on the line y = 0.
 struct ViewBody {
+  /// The body's name (legends, messages).
   std::string name;
   std::string x;        ///< state name of the centre's first coordinate
   std::string y;        ///< state name of the centre's second coordinate, or empty (y = 0)
@@ -31,12 +32,17 @@ struct ViewBody {
 
 /// An obstacle whose geometry may move: each coordinate an expression of t and the parameters.
 struct ViewObstacle {
+  /// The kind of an obstacle.
   enum class Shape {
     kCircle,   ///< expressions: centre x, centre y, radius
     kSegment,  ///< expressions: x1, y1, x2, y2 (a wall, a floor, a moving boundary)
   };
+  /// The obstacle's name (legends, messages).
   std::string name;
+  /// Circle or segment.
   Shape shape = Shape::kSegment;
+  /// The coordinates as expressions of t and the parameters, as many as the shape takes
+  /// (NumExpressions).
   std::vector<std::string> expressions;
 };
 /// "circle", "segment".
@@ -50,7 +56,9 @@ struct SceneView {
   std::map<std::string, std::string> units;
   /// State name (or "t") -> label ("position").
   std::map<std::string, std::string> labels;
+  /// The bodies to draw.
   std::vector<ViewBody> bodies;
+  /// The obstacles to draw.
   std::vector<ViewObstacle> obstacles;
   /// Visible region {xmin, xmax, ymin, ymax}, or empty: the bounding box of the bodies' paths
   /// and the obstacles at t0.

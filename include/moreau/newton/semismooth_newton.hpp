@@ -37,6 +37,7 @@ namespace moreau {
 class MixedComplementaritySystem {
  public:
   virtual ~MixedComplementaritySystem() = default;
+  /// Number of unknowns w (n_eq + n_pairs).
   virtual int num_unknowns() const = 0;
   virtual int num_equations() const = 0;  ///< n_eq
   virtual int num_pairs() const = 0;      ///< n_pairs = num_unknowns() - n_eq
@@ -53,6 +54,7 @@ class MixedComplementaritySystem {
   virtual double EstimatedJacobianNonzeros() const;
 };
 
+/// Options of the semismooth Newton method; defaults are the values below.
 struct SemismoothNewtonOptions {
   /// NCP function for the pairs (Fischer-Burmeister: smooth merit, recommended).
   NcpFunctionKind ncp_function = NcpFunctionKind::kFischerBurmeister;
@@ -79,6 +81,7 @@ struct SemismoothNewtonOptions {
   /// Armijo condition is still taken (the test is not scale invariant: large multipliers
   /// beside small states make a good Newton step fail it).
   double descent_rho = 1e-10;
+  /// Exponent p of the descent test grad . d <= -rho ||d||^p (with descent_rho).
   double descent_power = 2.1;
   /// kStagnated when the merit decreased by less than a relative 1e-3 over this many
   /// iterations (no progress; slow but steady progress ends at max_iterations instead).
@@ -86,7 +89,9 @@ struct SemismoothNewtonOptions {
   /// After a full Newton step that contracted ||S Phi|| by less than polish_ratio, try a
   /// min-map (active-set) step.
   bool active_set_polish = true;
+  /// Contraction ratio below which no min-map polish step is tried (see active_set_polish).
   double polish_ratio = 0.2;
+  /// Dense or sparse LU of the generalized Jacobian (automatic: by size and density).
   LinearSolverKind linear_solver = LinearSolverKind::kAutomatic;
   /// On convergence, factorize the generalized Jacobian at the solution (one more
   /// factorization) so that last_jacobian_solver() serves sensitivity computations.
@@ -111,30 +116,42 @@ enum class NewtonStatus {
   kStationaryPoint,   ///< grad theta = J^T S^2 Phi vanishes (to round-off) while Phi != 0
   kNonFinite,         ///< the residual at the initial point is not finite or not defined
 };
+/// The status as text (snake case).
 std::string ToString(NewtonStatus status);
 
+/// Counters of a Newton solve.
 struct SemismoothNewtonStats {
+  /// Newton iterations.
   long iterations = 0;
+  /// Residual evaluations (line search included).
   long residual_evaluations = 0;
+  /// Evaluations with the Jacobian.
   long jacobian_evaluations = 0;
+  /// LU factorizations.
   long factorizations = 0;
   long backtracks = 0;          ///< step-length reductions in the line search
   long gradient_steps = 0;      ///< steepest-descent fallbacks
   long polish_steps = 0;        ///< accepted min-map (active-set) steps
   long singular_jacobians = 0;  ///< generalized Jacobians found singular
 
+  /// Sums the counters.
   SemismoothNewtonStats& operator+=(const SemismoothNewtonStats& other);
+  /// One line of counters.
   std::string Summary() const;
 };
 
+/// Result of a SemismoothNewton solve.
 struct SemismoothNewtonResult {
+  /// kConverged, or why the solve stopped.
   NewtonStatus status = NewtonStatus::kConverged;
   std::string message;                    ///< reason when not converged
   Vector solution;                        ///< last iterate
   double residual_norm = 0.0;             ///< ||S Phi||_inf at the solution
   double complementarity_residual = 0.0;  ///< max_k |min(a_k, b_k)| at the solution
   std::vector<double> residual_history;   ///< ||S Phi||_inf at every iterate
+  /// Counters of the solve.
   SemismoothNewtonStats stats;
+  /// True if status is NewtonStatus::kConverged.
   bool converged() const { return status == NewtonStatus::kConverged; }
 };
 
@@ -142,11 +159,13 @@ struct SemismoothNewtonResult {
 /// solves of systems with the same structure.
 class SemismoothNewton {
  public:
+  /// A solver with these options.
   explicit SemismoothNewton(const SemismoothNewtonOptions& options = {});
   ~SemismoothNewton();
   SemismoothNewton(const SemismoothNewton&) = delete;
   SemismoothNewton& operator=(const SemismoothNewton&) = delete;
 
+  /// The options it was made with.
   const SemismoothNewtonOptions& options() const { return options_; }
   /// Solves from `initial_guess`. With options().factorize_at_solution the generalized
   /// Jacobian at the solution stays factorized (see last_jacobian_solver).

@@ -11,9 +11,12 @@
 
 namespace moreau {
 
+/// A built-in optimal control problem: its name, a one-line summary, its factory and the options it
+/// is solved with.
 struct OcpDefinition {
   std::string name;     ///< command-line name, e.g. "wave_rider"
   std::string summary;  ///< one line for `moreau list`
+  /// Makes the problem.
   std::function<OcpProblem()> make;
   /// The options this problem is solved with by `moreau ocp` (command-line flags override
   /// them), the tests and the benchmarks: the defaults plus what the problem needs (a

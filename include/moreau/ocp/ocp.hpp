@@ -35,7 +35,9 @@
 /// terminal equalities |g| <= eps (docs/ocp.md, "Homotopy").
 ///
 /// Verification: the optimal controls (in physical time) are re-simulated by IDA at
-/// rtol = 1e-12 and the terminal-constraint error of that simulation is reported.
+/// rtol = 1e-12 and by FESD on a fine grid, and the terminal-constraint error of those
+/// simulations is reported; a solve whose re-simulations both end farther from its x(T) than
+/// kOcpVerificationTolerance is OcpStatus::kNotVerified, not solved.
 
 #include <functional>
 #include <memory>
@@ -56,8 +58,11 @@ namespace moreau {
 /// functions: x the scene states (without the quadrature state), u all scene inputs, t the
 /// physical time, p the scene parameters.
 struct OcpProblem {
+  /// The problem's name (output directories, messages).
   std::string name;
+  /// One line for `moreau list`.
   std::string description;
+  /// The dynamics, effects, horizon, inputs and parameters.
   Scene scene;
   /// N >= 1 control intervals of equal length on [initial_time, final_time] of the scene.
   int intervals = 10;
@@ -70,10 +75,14 @@ struct OcpProblem {
   Matrix initial_controls;
   /// Initial states that are decisions (the others are the scene's x0).
   struct FreeInitialState {
+    /// Index of the state in x.
     int state = 0;
+    /// Lower bound of its initial value.
     double lower = -1e20;
+    /// Upper bound of its initial value.
     double upper = 1e20;
   };
+  /// The initial states that are decisions.
   std::vector<FreeInitialState> free_initial_states;
   SmoothFunction running_cost;           ///< L: 1 output (empty: none)
   SmoothFunction terminal_cost;          ///< Phi at (x(T), u_{N-1}, T): 1 output (empty: none)
@@ -83,11 +92,16 @@ struct OcpProblem {
   SmoothFunction path_constraints;
   /// Free final time: a speed of time per interval (a control input is added to the scene).
   struct SpeedOfTime {
+    /// True for a free final time.
     bool enabled = false;
+    /// Lower bound of the speed of time s (> 0).
     double lower = 0.1;
+    /// Upper bound of the speed of time.
     double upper = 10.0;
+    /// Initial guess of the speed on every interval.
     double initial_guess = 1.0;
   };
+  /// The speed of time (free final time), disabled by default.
   SpeedOfTime speed;
 };
 
@@ -105,7 +119,9 @@ enum class OcpTranscription {
   /// from the last relaxed solution. Moving sets only (sweeping processes), no speed of time.
   kCollocation,
 };
+/// "multiple_shooting", "single_shooting" or "collocation".
 std::string ToString(OcpTranscription transcription);
+/// Parses the names of ToString; throws std::invalid_argument otherwise.
 OcpTranscription ParseOcpTranscription(const std::string& name);
 
 /// The discretization of every control interval.
@@ -114,7 +130,9 @@ enum class OcpIntegrator {
   kTimeStepping,  ///< standard time-stepping, N_fe fixed steps: for comparisons only (its
                   ///< NLP is only piecewise smooth in the controls; no hysteresis, no free T)
 };
+/// "fesd" or "timestepping".
 std::string ToString(OcpIntegrator integrator);
+/// Parses the names of ToString; throws std::invalid_argument otherwise.
 OcpIntegrator ParseOcpIntegrator(const std::string& name);
 
 /// Second-order information for IPOPT (docs/ocp.md, "Second-order information").
@@ -138,7 +156,9 @@ enum class OcpHessian {
   /// of c, is left out (zero for constraints quadratic in x and independent of t).
   kSecondOrder,
 };
+/// The name as the command line's --hessian takes it.
 std::string ToString(OcpHessian hessian);
+/// Parses the names of ToString; throws std::invalid_argument otherwise.
 OcpHessian ParseOcpHessian(const std::string& name);
 
 /// One level of a homotopy (OcpOptions::homotopy): an easier problem solved before the exact
@@ -169,6 +189,7 @@ struct OcpMultipliers {
   Vector constraints;   ///< one per NLP constraint
   Vector lower_bounds;  ///< one per NLP variable (z_L >= 0)
   Vector upper_bounds;  ///< one per NLP variable (z_U >= 0)
+  /// True if no multipliers are held (a cold start).
   bool empty() const { return constraints.size() == 0; }
 };
 
@@ -177,25 +198,35 @@ struct OcpProgress {
   int level = 0;   ///< 0-based; levels - 1 is the exact problem
   int levels = 1;  ///< homotopy levels + 1
   int stages = 0;  ///< Radau IIA stages of the transcription solved (refinement: more)
+  /// The values of the level being solved.
   OcpHomotopyLevel parameters;
   int iteration = 0;  ///< IPOPT's iteration counter within the level
+  /// Objective at the iterate.
   double objective = 0.0;
+  /// Constraint violation at the iterate (IPOPT's inf_pr).
   double primal_infeasibility = 0.0;
+  /// Dual infeasibility at the iterate (IPOPT's inf_du).
   double dual_infeasibility = 0.0;
 };
 
+/// Options of SolveOcp (docs/ocp.md); defaults are the values below.
 struct OcpOptions {
+  /// The transcription (multiple shooting by default).
   OcpTranscription transcription = OcpTranscription::kMultipleShooting;
+  /// The integrator of every control interval (FESD by default).
   OcpIntegrator integrator = OcpIntegrator::kFesd;
   /// Per interval: Radau IIA stages and finite elements (FESD; the step is the interval) or
   /// fixed steps (time-stepping); the other integrator settings are their defaults.
   int stages = 3;
+  /// Finite elements (FESD) or fixed steps (time-stepping) per control interval.
   int finite_elements = 3;
   /// IPOPT: convergence tolerance of the exact (last) level (tol, also used as
   /// constr_viol_tol), iterations per level, log level (0: silent, 5: IPOPT's default output
   /// on stdout).
   double tolerance = 1e-10;
+  /// IPOPT iterations allowed per level.
   int max_iterations = 1000;
+  /// IPOPT's output level (0: silent).
   int print_level = 0;
   /// Second-order information (docs/ocp.md, "Second-order information": measured on the
   /// example problems, IPOPT's limited-memory BFGS is the most robust).
@@ -261,6 +292,7 @@ struct OcpOptions {
   /// warm_start_multipliers (a previous OcpResult::multipliers) IPOPT starts from the
   /// primal-dual point.
   Vector warm_start;
+  /// Their multipliers (a previous OcpResult::multipliers), or empty.
   OcpMultipliers warm_start_multipliers;
   /// Re-simulate the optimal controls with IDA (reference settings) and report the
   /// terminal-constraint error.
@@ -272,23 +304,41 @@ struct OcpOptions {
   void Validate() const;
 };
 
-/// Outcome of an OCP solve; the criterion is IPOPT's (tol on the scaled KKT error).
+/// Largest gap between the optimum's x(T) and a verification re-simulation of its controls
+/// for which the result counts as solved: |x_sim(T) - x(T)|_inf <= this times
+/// max(1, |x(T)|_inf), for the closer of the two re-simulations (IDA at its reference
+/// settings, FESD on a grid ten times finer than the controls'). The default accuracy of a
+/// simulation (docs/accuracy.md): an optimum whose own trajectory is not reproduced to it
+/// is an optimum of the discretization, not of the problem.
+inline constexpr double kOcpVerificationTolerance = 1e-5;
+
+/// Outcome of an OCP solve; the criterion is IPOPT's (tol on the scaled KKT error), and with
+/// OcpOptions::verify the re-simulation of the controls (kOcpVerificationTolerance).
 enum class OcpStatus {
-  kSolved,              ///< IPOPT: optimal solution found
-  kSolvedToAcceptable,  ///< IPOPT: solved to its acceptable tolerances
+  kSolved,              ///< IPOPT: optimal solution found (and verified, with verify)
+  kSolvedToAcceptable,  ///< IPOPT: solved to its acceptable tolerances (and verified)
   kInfeasible,          ///< IPOPT: locally infeasible
   kMaxIterations,       ///< IPOPT: iteration limit
   kSimulationFailure,   ///< an interval integration failed at the initial point
   kSolverFailure,       ///< any other IPOPT failure (the message names it)
+  kNotVerified,         ///< IPOPT solved the NLP (solved or acceptable), but no re-simulation
+                        ///< of its controls ends within kOcpVerificationTolerance of its x(T)
+                        ///< (OcpResult::verification_gap; infinite if none succeeded): the
+                        ///< discretization is too coarse for the trajectory it claims
 };
+/// The status as text (snake case, as in summary.json).
 std::string ToString(OcpStatus status);
 
 /// One IPOPT iteration.
 struct OcpIteration {
   int level = 0;  ///< homotopy level (the last one is the exact problem)
+  /// IPOPT's iteration counter within the level.
   int iteration = 0;
+  /// Objective at the iterate.
   double objective = 0.0;
+  /// Constraint violation (IPOPT's inf_pr).
   double primal_infeasibility = 0.0;
+  /// Dual infeasibility (IPOPT's inf_du).
   double dual_infeasibility = 0.0;
 };
 
@@ -297,29 +347,42 @@ struct OcpLevelResult {
   OcpHomotopyLevel parameters;  ///< (0, 0, none) for the exact problem
   int intervals = 0;            ///< N of this level (mesh continuation)
   int stages = 0;               ///< Radau IIA stages s of this level's transcription (refinement)
+  /// How the level ended.
   OcpStatus status = OcpStatus::kSolverFailure;
   std::string message;  ///< IPOPT's return status
+  /// IPOPT iterations of the level.
   int iterations = 0;
+  /// Objective at the level's solution.
   double objective = 0.0;
+  /// Wall time of the level.
   double seconds = 0.0;
 };
 
+/// Counters and sizes of an OCP solve.
 struct OcpStats {
   int iterations = 0;    ///< IPOPT iterations, all levels
   long simulations = 0;  ///< interval integrations (each with sensitivities)
+  /// FESD finite elements of all interval integrations.
   long fesd_elements = 0;
+  /// CPU time of the solve.
   double cpu_seconds = 0.0;
+  /// Time spent in the verification re-simulations.
   double verification_seconds = 0.0;
   /// Memory of the NLP's derivative data: structural nonzeros of the constraint Jacobian
   /// and of the Hessian approximation (lower triangle; 0 for limited memory).
   long jacobian_nonzeros = 0;
+  /// Structural nonzeros of the Hessian approximation (lower triangle; 0 for limited memory).
   long hessian_nonzeros = 0;
 };
 
+/// Result of SolveOcp: the status, the optimal controls and states, the solver's log and the
+/// verification by re-simulation.
 struct OcpResult {
   /// Status of the exact (last) level; the homotopy levels are in `levels`.
   OcpStatus status = OcpStatus::kSolverFailure;
+  /// IPOPT's return status or the failure's reason.
   std::string message;
+  /// Objective at the returned point.
   double objective = 0.0;
   Vector decision;                       ///< the NLP variables (for warm starts)
   OcpMultipliers multipliers;            ///< their multipliers (for warm starts)
@@ -339,22 +402,37 @@ struct OcpResult {
   Trajectory trajectory;            ///< FESD at the optimum, physical time
   std::vector<Event> events;        ///< switches of that trajectory
   std::vector<RelaySignal> relays;  ///< relay memories of that trajectory
+  /// Every IPOPT iteration of every level.
   std::vector<OcpIteration> log;
+  /// One entry per level (homotopy levels, then the exact problem).
   std::vector<OcpLevelResult> levels;
   /// Verification by re-simulation (IDA at rtol 1e-12, controls piecewise constant in
   /// physical time): x(T) of the re-simulation, max(|g|, h^+) there, and |x_sim(T) - x(T)|.
   bool verified = false;
+  /// Why the IDA re-simulation failed (empty if verified).
   std::string verification_message;
+  /// x(T) of the IDA re-simulation.
   Vector resimulated_final_state;
+  /// max(|g|, h^+) of the terminal constraints at the re-simulated x(T).
   double resimulated_terminal_error = 0.0;
+  /// |x_sim(T) - x(T)| (infinity norm).
   double resimulated_state_difference = 0.0;
   /// The same by FESD with switch detection (s = 3, 3 elements, steps a tenth of a control
   /// interval), a second reference where IDA's is unreliable (docs/ocp.md, "Verification").
   bool fesd_verified = false;
+  /// Why the FESD re-simulation failed (empty if verified).
   std::string fesd_verification_message;
+  /// x(T) of the FESD re-simulation.
   Vector fesd_resimulated_final_state;
+  /// max(|g|, h^+) at the FESD-re-simulated x(T).
   double fesd_resimulated_terminal_error = 0.0;
+  /// |x_fesd(T) - x(T)| (infinity norm).
   double fesd_resimulated_state_difference = 0.0;
+  /// With verify: the smaller of the two re-simulations' |x_sim(T) - x(T)|_inf (infinity if
+  /// neither succeeded); above kOcpVerificationTolerance max(1, |x(T)|_inf) a solved status
+  /// becomes kNotVerified. -1 without verification.
+  double verification_gap = -1.0;
+  /// Counters and sizes.
   OcpStats stats;
 };
 
@@ -366,22 +444,29 @@ OcpResult SolveOcp(const OcpProblem& problem, const OcpOptions& options = {});
 /// Jacobian), and the Hessian approximation of OcpOptions::hessian. Layout in docs/ocp.md.
 class ShootingNlp {
  public:
+  /// The NLP of `problem` with `options` (validated; throws std::invalid_argument).
   ShootingNlp(const OcpProblem& problem, const OcpOptions& options);
   ~ShootingNlp();
   ShootingNlp(const ShootingNlp&) = delete;
   ShootingNlp& operator=(const ShootingNlp&) = delete;
 
+  /// Number of NLP variables.
   int num_variables() const;
+  /// Number of NLP constraints.
   int num_constraints() const;
+  /// Lower bounds of the variables.
   const Vector& variable_lower() const;
+  /// Upper bounds of the variables.
   const Vector& variable_upper() const;
   /// Constraint bounds of the current level (relaxed terminal equalities: [-eps, eps]).
   const Vector& constraint_lower() const;
+  /// Upper constraint bounds of the current level.
   const Vector& constraint_upper() const;
   /// Selects the problem of a homotopy level (default: the exact problem, (0, 0), the
   /// problem's parameters). Throws std::invalid_argument if the scene does not allow
   /// smoothing (see OcpHomotopyLevel) or has no parameter of a given name.
   void SetLevel(const OcpHomotopyLevel& level);
+  /// The level selected last.
   const OcpHomotopyLevel& level() const;
   /// The initial guess: controls and speeds from the problem, node states from a forward
   /// simulation with them.
@@ -415,7 +500,9 @@ class ShootingNlp {
   /// The point with these decisions (N rows: the controls, then the speed of time; clamped to
   /// their bounds) and free initial states, node states from a forward simulation.
   Vector PointFromDecisions(const Matrix& decisions, const Vector& free_initial);
+  /// Interval integrations so far.
   long simulations() const;
+  /// FESD finite elements of those integrations.
   long fesd_elements() const;
 
  private:

@@ -11,9 +11,11 @@
 
 namespace moreau {
 
+/// A built-in scene: its name, a one-line summary and its factory.
 struct SceneDefinition {
   std::string name;     ///< command-line name, e.g. "F1"
   std::string summary;  ///< one line for `moreau list`
+  /// Makes the scene.
   std::function<Scene()> make;
 };
 
@@ -25,7 +27,7 @@ const std::vector<SceneDefinition>& SceneCatalog();
 /// defaults. Throws std::invalid_argument naming the unknown scene (listing the available
 /// ones) or the bad option.
 Scene MakeScene(const std::string& name);
-/// The scene simulated by the README's first command.
+/// The scene `moreau run` simulates when none is named (S3).
 std::string DefaultSceneName();
 
 }  // namespace moreau

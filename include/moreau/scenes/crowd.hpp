@@ -92,7 +92,9 @@ std::string ToString(CrowdWall wall);
 
 /// One wall constraint: agent (0-based) and wall.
 struct CrowdWallConstraint {
+  /// The agent (0-based).
   int agent = 0;
+  /// The wall.
   CrowdWall wall = CrowdWall::kLeft;
 };
 
@@ -115,6 +117,7 @@ struct CrowdLayout {
   /// Constraint k of the "walls" effect, sorted by agent.
   std::vector<CrowdWallConstraint> walls;
 
+  /// Number of agents N.
   int num_agents() const { return options.agents; }
   /// Gap between agent i's disc and a wall at state q: the distance of its centre to the
   /// wall (line or jamb disc) minus r; negative for an overlap.
@@ -128,6 +131,7 @@ CrowdLayout MakeCrowdLayout(const CrowdOptions& options);
 /// The crowd scene of a layout (name CrowdSceneName(options)); MakeCrowdScene(options) is
 /// MakeCrowdScene(MakeCrowdLayout(options)). Parameters: speed, smoothing, exit_x, exit_y.
 Scene MakeCrowdScene(const CrowdLayout& layout);
+/// The crowd scene for these options (MakeCrowdScene(MakeCrowdLayout(options))).
 Scene MakeCrowdScene(const CrowdOptions& options);
 
 /// The same crowd restarted from the state q (2N positions, e.g. a simulation's state at the
@@ -150,14 +154,18 @@ struct CrowdCertificate {
   /// Smallest gap |q_i - q_j| - 2r over all pairs (negative: overlap) and its pair; +infinity
   /// if no two centres are within 4r (pairs farther apart have gaps above 2r).
   double min_pair_gap = 0.0;
-  int pair_i = -1, pair_j = -1;
+  int pair_i = -1;  ///< the pair (agents i < j) where min_pair_gap is attained: i
+  int pair_j = -1;  ///< ... and j
   /// The same over the pairs *not* in the neighbour list: while it stays positive the fixed
   /// list has missed no contact.
   double min_unlisted_pair_gap = 0.0;
-  int unlisted_i = -1, unlisted_j = -1;
+  int unlisted_i = -1;  ///< the unlisted pair where min_unlisted_pair_gap is attained: i
+  int unlisted_j = -1;  ///< ... and j
   /// Smallest gap between an agent and a wall over all agents and all five walls, and where.
   double min_wall_gap = 0.0;
+  /// The agent where min_wall_gap is attained.
   int wall_agent = -1;
+  /// The wall where min_wall_gap is attained.
   CrowdWall wall = CrowdWall::kLeft;
   /// The same over the (agent, wall) combinations without a declared constraint.
   double min_unlisted_wall_gap = 0.0;
