@@ -63,7 +63,7 @@ TYPEDEF_HIDES_STRUCT   = YES
 # Implementation details and the using-declarations that put moreau's math into namespace std
 # (dual.hpp) are not API: they stay out of the reference.
 EXCLUDE_SYMBOLS        = internal moreau::internal std Eigen detail MOREAU_DECLARE_MATH_IN_STD \
-                         MOREAU_DUAL_* MOREAU_TRACER_*
+                         MOREAU_DUAL_* MOREAU_TRACER_* MOREAU_INTERVAL_*
 """
 
 

@@ -175,6 +175,13 @@ OptionBinding<Options> BindLinearSolver(LinearSolverKind Options::*member) {
                     "LU backend (auto: dense up to 256 unknowns, sparse UMFPACK above; klu: "
                     "SuiteSparse KLU)");
 }
+// Stop times of FESD, time-stepping, Radau and IDA: the user's breakpoints.
+template <class Options>
+OptionBinding<Options> BindStopTimes(std::vector<double> Options::*member) {
+  return BindRealList("tstops", member,
+                      "breakpoints: steps end at these times in (t0, tf) and never cross them (a "
+                      "switch the steps cannot see, at a time you know)");
+}
 // The near-active constraint filter of FESD and time-stepping (docs/sparse-systems.md).
 template <class Options>
 std::vector<OptionBinding<Options>> BindConstraintFilter(ConstraintFilter Options::*filter,

@@ -92,4 +92,28 @@ std::vector<double> SegmentEnds(double t0, double tf, const std::vector<double>&
   return ends;
 }
 
+std::vector<double> StretchEnds(double t0, double tf, const std::vector<double>& breakpoints,
+                                const std::vector<double>& stops, std::vector<int>* control) {
+  for (double stop : stops) {
+    RequireArgument(std::isfinite(stop), "stop time (tstops) must be finite, got ", stop);
+  }
+  const std::vector<double> segments = SegmentEnds(t0, tf, breakpoints);
+  std::vector<double> sorted = stops;
+  std::sort(sorted.begin(), sorted.end());
+  std::vector<double> ends{t0};
+  if (control != nullptr) control->clear();
+  std::size_t next_stop = 0;
+  for (std::size_t segment = 0; segment + 1 < segments.size(); ++segment) {
+    const double end = segments[segment + 1];
+    for (; next_stop < sorted.size() && sorted[next_stop] < end; ++next_stop) {
+      if (sorted[next_stop] <= ends.back()) continue;
+      ends.push_back(sorted[next_stop]);
+      if (control != nullptr) control->push_back(static_cast<int>(segment));
+    }
+    ends.push_back(end);
+    if (control != nullptr) control->push_back(static_cast<int>(segment));
+  }
+  return ends;
+}
+
 }  // namespace moreau

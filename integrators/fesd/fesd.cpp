@@ -66,6 +66,9 @@ void FesdOptions::Validate() const {
                     "step_sequence entries must be finite and >= 0 (0: to the segment end), got ",
                     h);
   }
+  for (double t : stop_times) {
+    RequireArgument(std::isfinite(t), "stop times (tstops) must be finite, got ", t);
+  }
   RequireArgument(std::isfinite(filter_safety) && filter_safety >= 1.0,
                   "filter safety must be >= 1, got ", filter_safety);
   RequireArgument(sensitivity_directions.allFinite(), "sensitivity directions must be finite");
@@ -128,6 +131,9 @@ FesdStats& FesdStats::operator+=(const FesdStats& other) {
   num_filter_rechecks += other.num_filter_rechecks;
   max_working_pairs = std::max(max_working_pairs, other.max_working_pairs);
   num_reduced_elements += other.num_reduced_elements;
+  num_inside_crossings += other.num_inside_crossings;
+  num_unresolved_crossings += other.num_unresolved_crossings;
+  num_bound_evaluations += other.num_bound_evaluations;
   if (other.error_estimate >= 0.0)
     error_estimate = std::max(error_estimate, 0.0) + other.error_estimate;
   num_unestimated_steps += other.num_unestimated_steps;
@@ -186,7 +192,10 @@ FesdResult FesdRun::Run() {
     }
   }
   result_.stats.min_element_length = std::numeric_limits<double>::infinity();
-  segment_ends_ = SegmentEnds(scene.initial_time, scene.final_time, scene.ControlBreakpoints());
+  control_starts_ = SegmentEnds(scene.initial_time, scene.final_time, scene.ControlBreakpoints());
+  control_starts_.pop_back();
+  segment_ends_ = StretchEnds(scene.initial_time, scene.final_time, scene.ControlBreakpoints(),
+                              options_.stop_times, &segment_control_);
   const bool error_control = options_.ErrorControlled();
   const bool replay = !options_.step_sequence.empty();
   // A fixed grid longer than max_steps is refused before any work (with a speed of time the
@@ -267,9 +276,9 @@ void FesdRun::Integrate() {
   const Scene& scene = system_.scene();
   const double nominal = options_.step_size / options_.finite_elements;
   for (std::size_t segment = 0; segment + 1 < segment_ends_.size() && !failed(); ++segment) {
-    segment_ = static_cast<int>(segment);
+    segment_ = segment_control_[segment];
     system_.SetInputs(scene.InputValues(segment_ends_[segment]));
-    if (segment > 0 && !smooth_ && !DecideAtBreakpoint()) break;
+    if (StartsControlSegment(segment) && !smooth_ && !DecideAtBreakpoint()) break;
     const std::vector<double> grid =
         FixedStepGrid(segment_ends_[segment], segment_ends_[segment + 1], options_.step_size);
     for (std::size_t index = 1; index < grid.size() && !failed(); ++index) {
@@ -311,9 +320,9 @@ void FesdRun::IntegrateTimeFreezing() {
   const Scene& scene = system_.scene();
   const int clock = system_.clock_index();
   for (std::size_t segment = 0; segment + 1 < segment_ends_.size() && !failed(); ++segment) {
-    segment_ = static_cast<int>(segment);
+    segment_ = segment_control_[segment];
     system_.SetInputs(scene.InputValues(segment_ends_[segment]));
-    if (segment > 0 && !DecideAtBreakpoint()) break;
+    if (StartsControlSegment(segment) && !DecideAtBreakpoint()) break;
     const double target = segment_ends_[segment + 1];
     const double tolerance = kClockTolerance * std::max(1.0, std::fabs(target));
     while (!failed() && target - y_[clock] > tolerance) {
@@ -409,6 +418,18 @@ FesdResult FesdRun::Finish(std::chrono::steady_clock::time_point start) {
                               0.0);
   }
   if (options_.sensitivities) FinishSensitivities();
+  if (result_.stats.num_unresolved_crossings > 0) {
+    std::ostringstream warning;
+    warning.precision(10);
+    warning << result_.stats.num_unresolved_crossings
+            << (result_.stats.num_unresolved_crossings == 1 ? " element" : " elements")
+            << " (the first at t = " << first_unresolved_time_
+            << ") where an event indicator may cross zero between the element's nodes (its bounds "
+               "admit it, or a crossing found there could not be located) and the search could "
+               "not resolve it: a switch may have been stepped over; bound the step (h_max, or a "
+               "smaller h) or give its time as a breakpoint (tstops)";
+    result_.warnings.push_back(warning.str());
+  }
   if (result_.elements.empty()) result_.stats.min_element_length = 0.0;
   result_.stats.num_factorizations = factorizations_;
   result_.stats.cpu_seconds =

@@ -49,6 +49,15 @@ constexpr int kDipSamples = 64;
 double DipSample(int m) { return (m + 0.5) / kDipSamples; }
 // Steps below this many ulps of the time cannot be told apart from zero-length steps.
 constexpr double kMinStepUlps = 64.0;
+// An attempt whose crossing search stayed unresolved (the indicator bounds admit a zero between
+// an element's nodes that neither samples nor halvings decided, FesdRun::InsideViolation) is
+// retried with half the step (the search's resolution in time halves with it), at most this
+// many times in a row; then it is accepted and the run warns (FesdResult::warnings), and so are
+// the steps after it until one is free of unresolved crossings. Twice: a graze within the
+// bounds' overestimate of zero (the doorway S5's pusher passing a doorway disc at a distance of
+// 1e-3) stays undecided at every resolution, and six halvings walked the steps onto the
+// tangency, where the statuses could not be decided (status_decision_failure).
+constexpr int kMaxUnresolvedRetries = 2;
 
 // y = y0 + increments * weights (a point of a collocation polynomial) with the arithmetic Eigen
 // uses for that expression (its matrix-vector product sums each row from zero over the columns
@@ -91,6 +100,7 @@ void FesdRun::Save(Snapshot* snapshot) const {
   s.last_w = last_w_;
   s.tau = tau_;
   s.last_h = last_h_;
+  s.first_unresolved_time = first_unresolved_time_;
   s.have_last_w = have_last_w_;
   s.a_zero = a_zero_;
   s.working = filter_.working();
@@ -126,6 +136,7 @@ void FesdRun::Restore(const Snapshot& s) {
   last_w_ = s.last_w;
   tau_ = s.tau;
   last_h_ = s.last_h;
+  first_unresolved_time_ = s.first_unresolved_time;
   have_last_w_ = s.have_last_w;
   a_zero_ = s.a_zero;
   last_z_matrix_ = s.last_z_matrix;
@@ -150,6 +161,7 @@ void FesdRun::Restore(const Snapshot& s) {
   result_.stats.num_event_retries = work.num_event_retries;
   result_.stats.num_rejected_steps = work.num_rejected_steps;
   result_.stats.num_failed_steps = work.num_failed_steps;
+  result_.stats.num_bound_evaluations = work.num_bound_evaluations;
   result_.status = FesdStatus::kSuccess;
   result_.message.clear();
 }
@@ -211,11 +223,12 @@ void FesdRun::IntegrateAdaptive(bool clock_targets) {
                                                  : StartingStep(horizon);
   std::size_t next_replay = 0;
   if (full_) d_step_end_ = Eigen::RowVectorXd::Zero(sensitivity_.cols());
-  Snapshot before;  // the state before the current attempt (kept across attempts)
+  Snapshot before;             // the state before the current attempt (kept across attempts)
+  int unresolved_retries = 0;  // consecutive attempts retried for an unresolved crossing
   for (std::size_t segment = 0; segment + 1 < segment_ends_.size() && !failed(); ++segment) {
-    segment_ = static_cast<int>(segment);
+    segment_ = segment_control_[segment];
     system_.SetInputs(scene.InputValues(segment_ends_[segment]));
-    if (segment > 0 && !smooth_ && !DecideAtBreakpoint()) break;
+    if (StartsControlSegment(segment) && !smooth_ && !DecideAtBreakpoint()) break;
     const double segment_end = segment_ends_[segment + 1];
     const double reached =
         clock_targets ? kClockTolerance * std::max(1.0, std::fabs(segment_end)) : 0.0;
@@ -298,6 +311,16 @@ void FesdRun::IntegrateAdaptive(bool clock_targets) {
                "inside it was not located");
         }
       }
+      if (!failed() &&
+          result_.stats.num_unresolved_crossings > before.stats.num_unresolved_crossings &&
+          unresolved_retries < kMaxUnresolvedRetries && kFailureFactor * length >= minimum) {
+        ++unresolved_retries;
+        Restore(before);
+        ++result_.stats.num_failed_steps;
+        controller.Failed();
+        step = kFailureFactor * length;
+        continue;
+      }
       if (!failed()) {
         estimate = EstimateError(piece_length / horizon, before.elements);
         if (!std::isfinite(estimate.acceptance)) {
@@ -347,6 +370,12 @@ void FesdRun::IntegrateAdaptive(bool clock_targets) {
           options_.relative_tolerance * (piece_length / horizon) * estimate.proposal;
       scale_.Update(y_);
       step = controller.Accept(piece_length, length, proposal, switched);
+      // The retries start again after a step without an unresolved crossing: next to an
+      // undecidable graze every step is unresolved, and retrying each of them again would
+      // cost 2^kMaxUnresolvedRetries steps per step without ever deciding it.
+      if (result_.stats.num_unresolved_crossings == before.stats.num_unresolved_crossings) {
+        unresolved_retries = 0;
+      }
       if (progress_) progress_(y_[clock]);
     }
   }

@@ -18,15 +18,37 @@ namespace moreau::internal {
 // fixed-length elements; if a free side turns negative, a group solve of equal elements that
 // ends on the switch. Returns true if a switch ended the advance.
 bool FesdRun::Advance(double step_end, int* remaining) {
+  // Fixed steps: a crossing found between an element's nodes (InsideViolation) that the group
+  // solves then cannot locate (a graze at the event tolerance, a dip of a sliding mode's
+  // indicator) would end a run that succeeds without the search, and a fixed step cannot be
+  // shortened: the step is taken again without it, and the crossing counts as unresolved (a
+  // warning, FesdResult::warnings). Error-controlled runs instead retry the step shorter and,
+  // at min_step_size, end with the failure's status.
+  const bool fallback = np_ > 0 && !inside_search_off_ && !options_.ErrorControlled();
+  const long found = result_.stats.num_inside_crossings;
+  const int remaining_before = *remaining;
+  if (fallback) Save(&advance_before_);
+  bool switched = false;
   for (;;) {
     UpdateWorkingSet(step_end - tau_);
     bool retry = false;
-    const bool switched = AdvanceOnce(step_end, remaining, &retry);
+    switched = AdvanceOnce(step_end, remaining, &retry);
     if (!retry) {
       filter_.StepAccepted();
-      return switched;
+      break;
     }
   }
+  if (fallback && failed() && result_.stats.num_inside_crossings > found) {
+    const double t = advance_before_.y[system_.clock_index()];
+    Restore(advance_before_);
+    *remaining = remaining_before;
+    ++result_.stats.num_unresolved_crossings;
+    if (!std::isfinite(first_unresolved_time_)) first_unresolved_time_ = t;
+    inside_search_off_ = true;
+    switched = Advance(step_end, remaining);
+    inside_search_off_ = false;
+  }
+  return switched;
 }
 
 bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
@@ -109,6 +131,9 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
     group_.EndState(solved.solution, &buffers.y_next);
     const Vector& y_next = buffers.y_next;
     if (!violation.found) violation = EndViolation(group_.element(0), y_next, scales, e, &v_end);
+    if (!violation.found) {
+      violation = InsideViolation(group_.element(0), y, solved.solution, scales, e);
+    }
     if (!violation.found) {
       if (records.size() == num_records) records.emplace_back();  // before taking a0, b0
       const Vector& a0 = num_records == 0 ? boundary_a_ : records[num_records - 1].a_last;
@@ -221,6 +246,11 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
       }
       if (!inner.found && k + 1 < m) {
         inner = EndViolation(group_.element(k), group_.ElementStart(w, k + 1), scales, k, &v_inner);
+      }
+      if (!inner.found) {
+        inner =
+            InsideViolation(group_.element(k), group_.ElementStart(w, k),
+                            w.segment(group_.element_offset(k), group_.element_size()), scales, k);
       }
     }
     if (inner.found && trajectory_try) {

@@ -48,7 +48,7 @@ FesdOptions FesdRun::Tracking(const FesdOptions& options) {
 void FesdRun::InitializeTape() {
   const Scene& scene = system_.scene();
   const int np = system_.num_parameters(), nu = system_.num_inputs();
-  const int segments = static_cast<int>(segment_ends_.size()) - 1;
+  const int segments = static_cast<int>(control_starts_.size());
   const int n_theta = np + nu * segments;
   tape_ = SensitivityTape();
   tape_.sample_times = options_.sample_times;
@@ -71,7 +71,8 @@ void FesdRun::InitializeTape() {
                   options_.adjoint_sample_weights.size() > 0 || options_.keep_adjoint;
   if (tape_.adjoint) {
     for (int k = 0; k < segments; ++k) {
-      tape_.segment_inputs.push_back(scene.InputValues(segment_ends_[static_cast<std::size_t>(k)]));
+      tape_.segment_inputs.push_back(
+          scene.InputValues(control_starts_[static_cast<std::size_t>(k)]));
     }
     tape_.parameters = system_.parameters();
     tape_.layouts.push_back(WorkingFlags(system_));
@@ -446,7 +447,7 @@ void FesdRun::FinishSensitivities() {
     result_.sensitivities.inputs = sensitivity_.topRightCorner(nx_, sensitivity_.cols() - ny_ - np);
     result_.sensitivities.lowered = sensitivity_.topRows(ny_);
   }
-  result_.sensitivities.segment_starts.assign(segment_ends_.begin(), segment_ends_.end() - 1);
+  result_.sensitivities.segment_starts = control_starts_;
   const bool success = result_.status == FesdStatus::kSuccess;
   if (success && tape_.next_sample < tape_.sample_times.size()) {
     std::ostringstream s;

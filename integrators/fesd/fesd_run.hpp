@@ -5,6 +5,7 @@
 //   fesd_advance.cpp       one advance: trial elements, switch detection, group solves
 //   fesd_smooth.cpp        smooth elements and reduced switch groups (Radau IIA steps of one field)
 //   fesd_switches.cpp      status decisions at t0, at switches and at step boundaries
+//   fesd_crossings.cpp     zeros of free sides between an element's nodes (bounds, Hermite)
 //   fesd_record.cpp        committing solved elements: trajectories and certificates
 //   fesd_sensitivities.cpp implicit-function-theorem transfers and saltation
 //   fesd_directional.cpp   directional and adjoint sensitivities (sensitivity_tape.hpp)
@@ -20,6 +21,7 @@
 #include <vector>
 
 #include "../common/constraint_filter.hpp"
+#include "../common/crossing_search.hpp"
 #include "../common/smooth_collocation.hpp"
 #include "../common/step_size.hpp"
 #include "group_system.hpp"
@@ -370,6 +372,23 @@ class FesdRun {
   Violation JumpStageViolation(const internal::CollocationStages& stages, const Vector& scales,
                                int element) const;
 
+  // Zeros of the continuous free sides between the nodes of a solved element (start y0, stage
+  // unknowns w_e), where the checks at the stages and the end see none: the crossing search of
+  // common/crossing_search.hpp on the element's collocation polynomial, with bounds from the
+  // model functions (LoweredSystem::BoundEventIndicators) and, for free sides without bounds,
+  // the extremum of the Hermite interpolant of their values and exact derivatives at the start
+  // and the stages. A crossing is a violation in `element` at the fraction of its first zero.
+  // A search that stays unresolved is counted (FesdStats::num_unresolved_crossings, the first
+  // time in first_unresolved_time_) and gives no violation.
+  Violation InsideViolation(const internal::CollocationStages& stages, const Vector& y0,
+                            const ConstVectorRef& w_e, const Vector& scales, int element);
+  // Error-controlled runs: zeros of the jump free sides between the stages of a solved element
+  // (a multiplier that turns negative and back between two stages: a release shorter than
+  // the element), from consistent velocity-level solves at points of the collocation
+  // polynomial where the stage values suggest a dip (fesd_crossings.cpp). Called by
+  // InsideViolation once the continuous sides show no crossing.
+  Violation JumpDipViolation(const internal::CollocationStages& stages, int element);
+
   // Crossing fraction of pair k between the second-to-last stage and a negative end value.
   double EndCrossing(const internal::CollocationStages& stages, int k, double end_value) const;
 
@@ -451,7 +470,7 @@ class FesdRun {
   struct Snapshot {
     Vector y, z_guess, z_last, boundary_a, boundary_b, last_w;
     EndVelocity velocity;
-    double tau = 0.0, last_h = 0.0;
+    double tau = 0.0, last_h = 0.0, first_unresolved_time = 0.0;
     bool have_last_w = false;
     std::vector<bool> a_zero;
     std::vector<bool> working;  // the near-active filter's working set
@@ -555,8 +574,16 @@ class FesdRun {
   Vector last_w_;                   // last committed element (for extrapolated guesses)
   bool have_last_w_ = false;
   double last_h_ = 0.0;
+  // The stretches the run steps through: ends at the control breakpoints and the stop times
+  // (StretchEnds), the control segment of each, and the start of every control segment.
   std::vector<double> segment_ends_;
-  int segment_ = 0;
+  std::vector<int> segment_control_;
+  std::vector<double> control_starts_;
+  int segment_ = 0;  // the control segment being integrated (input sensitivities)
+  // True if stretch `segment` starts a control segment after the first (new input values).
+  bool StartsControlSegment(std::size_t segment) const {
+    return segment > 0 && segment_control_[segment] != segment_control_[segment - 1];
+  }
   long factorizations_ = 0;
   Matrix sensitivity_;                                         // d(y, tau) / d(x0, p, u)
   std::unique_ptr<internal::SmoothCollocationSolver> smooth_;  // elements without pairs
@@ -590,6 +617,22 @@ class FesdRun {
   std::vector<double> crossing_values_;  // CrossingGuess's node values (kept: no allocation)
   PointEvaluation switch_field_;
   double extrapolation_ratio_ = -1.0;
+  // InsideViolation's workspace (kept across elements).
+  struct InsideBuffers {
+    PolynomialPath path;
+    Matrix increments;
+    std::vector<char> watched;
+    Vector thresholds, y, dy, box_lower, box_upper;
+    IndicatorEvaluation at;
+    std::vector<Vector> node_values, node_slopes;
+    std::vector<double> values, slopes;
+  };
+  InsideBuffers inside_;
+  // Advance's fallback: the state before the step, and the search switched off while the step
+  // is taken again without it.
+  Snapshot advance_before_;
+  bool inside_search_off_ = false;
+  double first_unresolved_time_ = std::numeric_limits<double>::infinity();
   // Adaptive steps and dense output.
   bool keep_polynomials_ = false;         // record ElementPolynomial of committed elements
   bool estimating_ = false;               // fixed steps with FesdOptions::estimate_error

@@ -72,7 +72,7 @@ void FesdRun::InitializeSensitivities() {
   if (!full_) return;
   const int np = system_.num_parameters();
   const int nu = system_.num_inputs();
-  const int segments = static_cast<int>(segment_ends_.size()) - 1;
+  const int segments = static_cast<int>(control_starts_.size());
   // Rows: y (n_y) and tau; columns: y0 (the lowered initial state), p, u of every segment.
   sensitivity_.setZero(ny_ + 1, ny_ + np + nu * segments);
   sensitivity_.topLeftCorner(ny_, ny_).setIdentity();

@@ -45,24 +45,28 @@ void GroupSystem::Configure(const GroupSetup& setup) {
     value_elements_.emplace_back(system_, s_);
   }
   if (setup.with_event && nz_ > 0) {
+    // Every row by the size of its terms at y_start: its value at v = 0 and its change to the
+    // consistent guess (|q| + |M v0| for a row M v + q; Stewart's rates are theta times the
+    // mode fields, zero at v = 0). Rates of the continuous sides and of the equations are of
+    // the size of the rates of the model, which a fast time scale (circuits in seconds, a
+    // switching function that changes by 1 in a microsecond: rates of 1e5 and more) makes too
+    // large for an absolute 1e-12: their round-off exceeds it, the group's Newton cannot
+    // converge and the switch is not located. Relative to the data the rows keep their
+    // accuracy: a row scaled by 1 / max(1, size) determines v to 1e-12 max(1, size) / |M|, of
+    // the size of v itself.
     velocity_scale_.setOnes(nz_);
-    // Index-1 pairs (both sides continuous) alone are scaled by the free velocity level:
-    // without them (hysteresis relays, Stewart's form) it is not evaluated.
-    const auto& pairs = system_->pairs();
-    const bool index1 = std::any_of(pairs.begin(), pairs.end(), [](const PairInfo& pair) {
-      return pair.continuous == ContinuousSide::kBoth;
-    });
-    if (index1) {
-      VelocityLevelEvaluation free;
-      system_->EvaluateVelocityLevel(setup.y_start, Vector::Zero(nz_),
-                                     LoweredSystem::RolesFor(setup.a_zero), Derivatives::kNone,
-                                     &free);
-      for (int k = 0; k < np_; ++k) {
-        const auto info = static_cast<std::size_t>(k);
-        if (pairs[info].continuous != ContinuousSide::kBoth) continue;
-        const double size = std::fabs(free.equations[ng_ + k]);
-        if (std::isfinite(size)) velocity_scale_[ng_ + k] = 1.0 / std::max(1.0, size);
-      }
+    const std::vector<PairRole> roles = LoweredSystem::RolesFor(setup.a_zero);
+    VelocityLevelEvaluation free, guessed;
+    system_->EvaluateVelocityLevel(setup.y_start, Vector::Zero(nz_), roles, Derivatives::kNone,
+                                   &free);
+    system_->InitialAlgebraicGuess(setup.y_start, nullptr, &scale_guess_);
+    system_->EvaluateVelocityLevel(setup.y_start, scale_guess_, roles, Derivatives::kNone,
+                                   &guessed);
+    const Eigen::Index rows = std::min<Eigen::Index>(nz_, free.equations.size());
+    for (Eigen::Index r = 0; r < rows; ++r) {
+      const double size = std::fabs(free.equations[r]) +
+                          std::fabs(guessed.equations[r] - free.equations[r]);
+      if (std::isfinite(size)) velocity_scale_[r] = 1.0 / std::max(1.0, size);
     }
   }
   da_status_.resize(s_ * np_);

@@ -111,13 +111,10 @@ class GroupSystem final : public MixedComplementaritySystem {
   bool last_with_jacobian_ = true;                 // which of the two the last Evaluate set
   Vector da_status_, db_status_;                   // status rows: (1, 0) or (0, 1)
   Vector pair_a_, pair_b_;                         // scratch: stage pair sides
-  // Scales of the velocity-level rows: 1 / max(1, |row at v = 0|) at y_start for the rows of
-  // index-1 pairs (ContinuousSide::kBoth), 1 for the others. Those rows are affine in v with
-  // terms of the size of the free rates, which a fast time scale (circuits in seconds: rates
-  // ~1e5) makes too large for an absolute 1e-12; their v (lambda') is read by nothing else in
-  // the group (index-1 indicators come from the state), so a relative tolerance costs no
-  // accuracy. Other rows keep their absolute scale (their v locates switches).
+  // Scales of the velocity-level rows: 1 / max(1, |row at v = 0|) at y_start (Configure says
+  // why).
   Vector velocity_scale_;
+  Vector scale_guess_;  // scratch: the consistent guess the scales are taken at
   std::vector<PairRole> velocity_roles_;  // RolesFor(setup_.a_zero), made by Configure
   Vector start_scratch_;                  // scratch: element start state
   Vector end_scratch_;                    // scratch: the group's end state (with the event)

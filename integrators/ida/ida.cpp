@@ -36,6 +36,9 @@ void IdaOptions::Validate() const {
   RequireArgument(max_events > 0, "max events must be positive, got ", max_events);
   RequireArgument(std::isfinite(max_step) && max_step >= 0.0,
                   "max step must be nonnegative (0: no limit), got ", max_step);
+  for (double t : stop_times) {
+    RequireArgument(std::isfinite(t), "stop times (tstops) must be finite, got ", t);
+  }
   for (double t : output_times) {
     RequireArgument(std::isfinite(t), "output times must be finite, got ", t);
   }

@@ -29,6 +29,7 @@ IntegratorEntry IdaEntry() {
       BindInteger("max_steps", &O::max_steps, "internal steps over the run, > 0"),
       BindInteger("max_events", &O::max_events, "events over the run (Zeno guard), > 0"),
       BindReal("max_step", &O::max_step, "largest internal step (0: no limit)"),
+      BindStopTimes(&O::stop_times),
       BindBool("record_steps", &O::record_steps,
                "record every internal step (false: events, breakpoints, output times)"),
       BindRealList("output_times", &O::output_times, "extra trajectory points in (t0, tf]"),
@@ -45,6 +46,8 @@ IntegratorEntry IdaEntry() {
       BindStat("num_nonlinear_iterations", &S::num_nonlinear_iterations, "Newton iterations"),
       BindStat("num_error_test_failures", &S::num_error_test_failures, "error-test failures"),
       BindStat("max_drift", &S::max_drift, "largest position-level drift before projection"),
+      BindStat("num_unresolved_crossings", &S::num_unresolved_crossings,
+               "steps whose root-function bounds admit a zero the search did not resolve"),
       BindStat("cpu_seconds", &S::cpu_seconds, "thread CPU time"),
   };
   return MakeEntry<O, IdaResult>(spec, options, stats, SimulateIda,

@@ -5,6 +5,7 @@
 #include <array>
 #include <cmath>
 
+#include "../common/crossing_search.hpp"
 #include "ida_run.hpp"
 
 namespace moreau::internal {
@@ -116,7 +117,8 @@ bool IdaRun::FindHiddenRoot(double t_a, double t_b, double* t_root) {
       }
     }
   }
-  if (!std::isfinite(t_negative)) return false;
+  // A pulse narrower than the samples: the bounds of the root functions on the interpolant.
+  if (!std::isfinite(t_negative) && !BoundedHiddenRoot(t_a, t_b, &t_negative)) return false;
   // The first zero of the watched functions in [t_a, t_negative]: positive at lo, a
   // watched function at or below zero at hi.
   auto watched_minimum = [&](const Vector& values) {
@@ -142,6 +144,65 @@ bool IdaRun::FindHiddenRoot(double t_a, double t_b, double* t_root) {
     }
   }
   *t_root = hi;
+  return true;
+}
+
+bool IdaRun::BoundedHiddenRoot(double t_a, double t_b, double* t_negative) {
+  const int m = np_ + nr_;
+  int order = 0;
+  if (IDAGetLastOrder(memory_, &order) < 0 || order < 1) return false;
+  // y(t_a + theta H) = sum_k D_k ((theta - 1) H)^k / k!, D_k the k-th derivative at t_b:
+  // monomial coefficients a_d = sum_{k >= d} E_k binom(k, d) (-1)^(k - d), E_k = D_k H^k / k!.
+  const double span = t_b - t_a;
+  internal::PolynomialPath path;
+  Matrix& a = path.coefficients();
+  a.setZero(n_, order + 1);
+  double scale = 1.0;  // H^k / k!
+  for (int k = 0; k <= order; ++k) {
+    if (k > 0) scale *= span / k;
+    if (IDAGetDky(memory_, t_b, k, dky_->vector) < 0) return false;
+    const Vector e = View(dky_->vector) * scale;
+    double binomial = 1.0;  // binom(k, d)
+    for (int d = 0; d <= k; ++d) {
+      if (d > 0) binomial = binomial * (k - d + 1) / d;
+      a.col(d) += ((k - d) % 2 == 0 ? binomial : -binomial) * e;
+    }
+  }
+  std::vector<char> watched(static_cast<std::size_t>(m), 0);
+  for (int i = 0; i < m; ++i) watched[static_cast<std::size_t>(i)] = hidden_samples_(0, i) > 0.0;
+  const Vector thresholds = Vector::Constant(m, options_.event_tolerance);
+  Vector box_lower, box_upper, pair_lower, pair_upper, relay_lower, relay_upper;
+  internal::CrossingFunctions functions;
+  functions.values = [&](double theta, Vector* values) {
+    return RootsAt(t_a + theta * span, values);
+  };
+  functions.bounds = [&](double lo, double hi, Vector* lower, Vector* upper) {
+    path.Box(lo, hi, &box_lower, &box_upper);
+    lower->resize(m);
+    upper->resize(m);
+    if (np_ > 0) {
+      system_.BoundEventIndicators(box_lower.head(ny_), box_upper.head(ny_), a_zero_, &pair_lower,
+                                   &pair_upper);
+      for (int k = 0; k < np_; ++k) {
+        const double offset = root_offset_[static_cast<std::size_t>(k)];
+        (*lower)[k] = pair_lower[k] + offset;
+        (*upper)[k] = pair_upper[k] + offset;
+      }
+    }
+    if (nr_ > 0) {
+      system_.BoundMemorySwitchingFunctions(box_lower.head(ny_), box_upper.head(ny_), &relay_lower,
+                                            &relay_upper);
+      lower->tail(nr_) = relay_lower;
+      upper->tail(nr_) = relay_upper;
+    }
+  };
+  const internal::Crossing crossing = internal::SearchCrossing(watched, thresholds, functions);
+  if (crossing.outcome == internal::CrossingOutcome::kUnresolved) {
+    if (result_.stats.num_unresolved_crossings == 0) first_unresolved_time_ = t_a;
+    ++result_.stats.num_unresolved_crossings;
+  }
+  if (crossing.outcome != internal::CrossingOutcome::kFound) return false;
+  *t_negative = t_a + crossing.sample * span;
   return true;
 }
 

@@ -94,7 +94,9 @@ IdaResult IdaRun::Run() {
   for (int i = 0; i < nr_; ++i)
     result_.relays[static_cast<std::size_t>(i)].initial_value = static_cast<int>(y_[nx_ + i]);
   const double t0 = scene.initial_time;
-  const std::vector<double> ends = SegmentEnds(t0, scene.final_time, scene.ControlBreakpoints());
+  std::vector<int> control;  // the control segment of every stretch
+  const std::vector<double> ends =
+      StretchEnds(t0, scene.final_time, scene.ControlBreakpoints(), options_.stop_times, &control);
   Y_ = std::make_unique<SerialVector>(n_, context_.context);
   Yp_ = std::make_unique<SerialVector>(n_, context_.context);
   dky_ = std::make_unique<SerialVector>(n_, context_.context);
@@ -108,7 +110,8 @@ IdaResult IdaRun::Run() {
       system_.SetInputs(scene.InputValues(ends[segment]));
       // New input values at a breakpoint: decide there (an indicator may be zero) and
       // restart from consistent values.
-      if (segment > 0 && !DecideAtBoundary(ends[segment])) break;
+      const bool new_inputs = segment > 0 && control[segment] != control[segment - 1];
+      if (new_inputs && !DecideAtBoundary(ends[segment])) break;
       Integrate(ends[segment + 1]);
     }
     // An event exactly at tf.
@@ -117,6 +120,17 @@ IdaResult IdaRun::Run() {
   result_.final_time = t_;
   result_.final_state = y_.head(nx_);
   if (result_.trajectory.t.empty() || result_.trajectory.t.back() != t_) Record(t_, 0.0);
+  if (result_.stats.num_unresolved_crossings > 0) {
+    std::ostringstream warning;
+    warning.precision(10);
+    warning << result_.stats.num_unresolved_crossings
+            << (result_.stats.num_unresolved_crossings == 1 ? " step" : " steps")
+            << " (the first from t = " << first_unresolved_time_
+            << ") where the bounds of a root function on IDA's interpolant admit a zero that the "
+               "search could not resolve: an event may have been stepped over; bound the step "
+               "(max_step) or give its time as a breakpoint (tstops)";
+    result_.warnings.push_back(warning.str());
+  }
   // The last phase's counters: a run that fails inside a phase has no IDAReInit after it
   // (hard_corner with the Newton factor 0.001 reported 48 steps after 10^7).
   AccumulateStats();

@@ -233,6 +233,13 @@ class IdaRun {
   // The root functions at t on IDA's interpolant of the last step; false outside it.
   bool RootsAt(double t, Vector* g);
 
+  // The crossing search of common/crossing_search.hpp on IDA's interpolant over [t_a, t_b]
+  // (its Taylor expansion at t_b from IDAGetDky, of the order IDA used): bounds of the root
+  // functions over the interpolant's boxes, values on it. Watches the functions positive at
+  // t_a (the columns of hidden_samples_ row 0). Returns true with *t_negative a time where a
+  // watched function is below -event_tolerance; counts an unresolved search.
+  bool BoundedHiddenRoot(double t_a, double t_b, double* t_negative);
+
   // At the end of a phase: the drift certificate, then the projection onto the phase's
   // position-level conditions and the continuous free sides that reached zero (definition).
   void EndPhase(const std::vector<int>* roots = nullptr);
@@ -331,6 +338,7 @@ class IdaRun {
   Matrix hidden_samples_;
   Vector hidden_work_;
   std::vector<int> hidden_roots_;
+  double first_unresolved_time_ = 0.0;
   // The root functions without offsets at the end of the last scanned step, and its time
   // (NaN after a restart): the next step's first sample.
   double last_sample_time_ = std::numeric_limits<double>::quiet_NaN();

@@ -36,6 +36,9 @@ void RadauOptions::Validate() const {
   RequireArgument(max_newton_iterations >= 1, "max Newton iterations must be >= 1, got ",
                   max_newton_iterations);
   RequireArgument(max_steps >= 1, "max steps must be >= 1, got ", max_steps);
+  for (double t : stop_times) {
+    RequireArgument(std::isfinite(t), "stop times (tstops) must be finite, got ", t);
+  }
 }
 
 std::string ToString(RadauStatus status) {
@@ -108,7 +111,8 @@ class RadauRun {
     Vector y = system_.InitialState();
     const int nx = system_.num_scene_states();
     const std::vector<double> ends =
-        SegmentEnds(scene.initial_time, scene.final_time, scene.ControlBreakpoints());
+        StretchEnds(scene.initial_time, scene.final_time, scene.ControlBreakpoints(),
+                    options_.stop_times, nullptr);
     const bool adaptive = options_.ErrorControlled();
     // A fixed grid longer than max_steps is refused before any work.
     if (!adaptive) RequireFixedStepsWithin(ends, options_.step_size, options_.max_steps);
@@ -126,7 +130,7 @@ class RadauRun {
       const double t_begin = ends[segment];
       const double t_end = ends[segment + 1];
       system_.SetInputs(scene.InputValues(t_begin));
-      have_previous_ = false;  // no extrapolation across a control breakpoint
+      have_previous_ = false;  // no extrapolation across a breakpoint
       const bool ok = adaptive ? RunAdaptive(t_begin, t_end, &y, &h_next, &result)
                                : RunFixed(t_begin, t_end, &y, &result);
       if (!ok) break;

@@ -29,6 +29,7 @@ IntegratorEntry RadauEntry() {
                "initial step of the error-controlled steps, > 0 (0: automatic)"),
       BindReal("h_min", &O::min_step_size, "smallest error-controlled step, > 0"),
       BindReal("h_max", &O::max_step_size, "largest error-controlled step, > 0"),
+      BindStopTimes(&O::stop_times),
       BindReal("newton_tol", &O::newton_tolerance,
                "Newton tolerance on max |dZ_i| / (1 + |y_i|) (fixed step), > 0"),
       BindInteger("max_newton_iterations", &O::max_newton_iterations,

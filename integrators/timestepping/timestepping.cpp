@@ -8,6 +8,7 @@
 
 #include "../common/collocation.hpp"
 #include "../common/constraint_filter.hpp"
+#include "../common/crossing_search.hpp"
 #include "../common/sensitivity_arguments.hpp"
 #include "moreau/core/error.hpp"
 #include "moreau/integrators/simulate.hpp"
@@ -29,6 +30,9 @@ void TimeSteppingOptions::Validate() const {
                   "step size h must be positive and finite, got ", step_size);
   RequireArgument(std::isfinite(filter_safety) && filter_safety >= 1.0,
                   "filter safety must be >= 1, got ", filter_safety);
+  for (double t : stop_times) {
+    RequireArgument(std::isfinite(t), "stop times (tstops) must be finite, got ", t);
+  }
   RequireArgument(max_steps >= 1, "max_steps must be >= 1, got ", max_steps);
   RequireArgument(sensitivity_directions.allFinite() && adjoint_weights.allFinite(),
                   "sensitivity directions and adjoint weights must be finite");
@@ -42,6 +46,7 @@ std::string ToString(TimeSteppingStatus status) {
 TimeSteppingStats& TimeSteppingStats::operator+=(const TimeSteppingStats& other) {
   num_steps += other.num_steps;
   num_newton_iterations += other.num_newton_iterations;
+  num_inside_crossings += other.num_inside_crossings;
   num_factorizations += other.num_factorizations;
   num_backtracks += other.num_backtracks;
   max_complementarity_residual =
@@ -183,6 +188,64 @@ bool StepTransfer(internal::CollocationStages* stages, const Vector& y0, const V
   return true;
 }
 
+// Free sides that time-stepping's stage complementarity checks against zero: crossings deeper
+// than this (relative to 1 + |value at the step start|) count, as FESD's default event
+// tolerance (FesdOptions::event_tolerance) counts them.
+constexpr double kInsideCrossingTolerance = 1e-9;
+
+// True if a continuous free side of a pair whose status did not change over the step (from
+// `before` at its start to `after` at its end) falls below zero between the step's nodes, or
+// may (bounds that the search could not resolve): the crossing search of FESD
+// (common/crossing_search.hpp) on the step's collocation polynomial from y with the stage
+// increments of w. Jump free sides (multipliers) are not watched.
+bool CrossesInsideStep(const LoweredSystem& system, const internal::CollocationStages& stages,
+                       const RadauTableau& tableau, const Vector& y, const Vector& w,
+                       const Vector& z, const std::vector<bool>& before,
+                       const std::vector<bool>& after, internal::PolynomialPath* path) {
+  const int np = system.num_pairs(), ny = system.num_states(), s = tableau.stages;
+  std::vector<char> watched(static_cast<std::size_t>(np), 0);
+  bool any = false;
+  IndicatorEvaluation at;
+  system.EvaluateEventIndicators(y, z, before, Derivatives::kNone, &at);
+  Vector thresholds(np);
+  for (int k = 0; k < np; ++k) {
+    const auto i = static_cast<std::size_t>(k);
+    const ContinuousSide side = system.pairs()[i].continuous;
+    // The free side under the status: b if a is kept at zero.
+    const bool continuous =
+        side == ContinuousSide::kBoth || before[i] == (side == ContinuousSide::kB);
+    thresholds[k] = kInsideCrossingTolerance * (1.0 + std::fabs(at.values[k]));
+    if (continuous && before[i] == after[i] && at.values[k] >= -thresholds[k]) {
+      watched[i] = 1;
+      any = true;
+    }
+  }
+  if (!any) return false;
+  Matrix increments(ny, s);
+  for (int i = 0; i < s; ++i) increments.col(i) = w.segment(stages.state_offset(i), ny);
+  path->SetCollocation(tableau, y, increments);
+  Vector point, box_lower, box_upper;
+  internal::CrossingFunctions functions;
+  functions.values = [&](double theta, Vector* values) {
+    path->Point(theta, &point);
+    system.EvaluateEventIndicators(point, z, before, Derivatives::kNone, &at);
+    *values = at.values;
+    return values->allFinite();
+  };
+  functions.bounds = [&](double a, double c, Vector* lower, Vector* upper) {
+    path->Box(a, c, &box_lower, &box_upper);
+    system.BoundEventIndicators(box_lower, box_upper, before, lower, upper);
+  };
+  // The end of the step must be above the thresholds too (else the status would have changed).
+  Vector end;
+  if (!functions.values(1.0, &end)) return false;
+  for (int k = 0; k < np; ++k) {
+    if (!(end[k] >= -thresholds[k])) watched[static_cast<std::size_t>(k)] = 0;
+  }
+  return internal::SearchCrossing(watched, thresholds, functions).outcome !=
+         internal::CrossingOutcome::kNone;
+}
+
 std::vector<bool> PairStatuses(const PointEvaluation& e) {
   std::vector<bool> status(static_cast<std::size_t>(e.A.size()));
   for (Eigen::Index k = 0; k < e.A.size(); ++k) {
@@ -243,11 +306,16 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
 
   Vector previous_w;
   double previous_h = 0.0;
+  std::vector<int> control;  // the control segment of every stretch
   const std::vector<double> ends =
+      StretchEnds(scene.initial_time, scene.final_time, scene.ControlBreakpoints(),
+                  options.stop_times, &control);
+  std::vector<double> control_starts =
       SegmentEnds(scene.initial_time, scene.final_time, scene.ControlBreakpoints());
+  control_starts.pop_back();
   bool failed = false;
   Matrix& sensitivity = result.sensitivities;
-  const int segments = static_cast<int>(ends.size()) - 1;
+  const int segments = static_cast<int>(control_starts.size());
   const int n_theta = np + nu * segments;
   if (options.sensitivities) {
     sensitivity.setZero(ny, ny + np + nu * segments);
@@ -275,8 +343,11 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
                                                   "adjoint weights", &lowered_weights);
   }
   const bool derivatives = options.sensitivities || directional || adjoint;
-  if (derivatives) result.segment_starts.assign(ends.begin(), ends.end() - 1);
+  if (derivatives) result.segment_starts = control_starts;
   Matrix transfer;
+  const RadauTableau& tableau = RadauIIA(s);
+  internal::PolynomialPath path;
+  double first_inside_crossing = 0.0;
   for (std::size_t segment = 0; segment + 1 < ends.size() && !failed; ++segment) {
     system.SetInputs(scene.InputValues(ends[segment]));
     previous_h = 0.0;  // no extrapolation across a control breakpoint
@@ -352,7 +423,7 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
           failed = true;
           break;
         }
-        const int column = ny + np + nu * static_cast<int>(segment);
+        const int column = ny + np + nu * control[segment];
         if (options.sensitivities) {
           sensitivity.leftCols(ny + np) = transfer.leftCols(ny) * sensitivity.leftCols(ny + np);
           sensitivity.middleCols(ny, np) += transfer.middleCols(ny, np);
@@ -368,7 +439,13 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
           }
           directions = std::move(next);
         }
-        if (adjoint) transfers.emplace_back(static_cast<int>(segment), transfer);
+        if (adjoint) transfers.emplace_back(control[segment], transfer);
+      }
+      const std::vector<bool> now = PairStatuses(stages.stage(s - 1));
+      if (system.num_pairs() > 0 &&
+          CrossesInsideStep(system, stages, tableau, y, w, z, statuses, now, &path)) {
+        if (stats.num_inside_crossings == 0) first_inside_crossing = grid[k];
+        ++stats.num_inside_crossings;
       }
       y = stages.EndState(y, w);
       // The clock on the exact grid (shifted with a given initial clock, which the
@@ -388,7 +465,6 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
           std::max(stats.max_complementarity_residual, certificate);
       result.step_complementarity_residual.push_back(certificate);
       // Events: pair statuses at the last stage against the previous step's.
-      const std::vector<bool> now = PairStatuses(stages.stage(s - 1));
       for (Event& event : system.StatusEvents(grid[k + 1], statuses, now)) {
         result.events.push_back(std::move(event));
       }
@@ -428,6 +504,16 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
     if (result.trajectory.t.back() != result.final_time) {
       result.trajectory.Append(result.final_time, result.final_state, declared(z), previous_h);
     }
+  }
+  if (stats.num_inside_crossings > 0) {
+    std::ostringstream warning;
+    warning.precision(10);
+    warning << stats.num_inside_crossings << (stats.num_inside_crossings == 1 ? " step" : " steps")
+            << " (the first from t = " << first_inside_crossing
+            << ") in which a free side falls below zero between the nodes and rises again, or "
+               "may: time-stepping does not resolve such a switch; use a smaller h there "
+               "(tstops to place a step boundary) or the fesd integrator";
+    result.warnings.push_back(warning.str());
   }
   stats.cpu_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

@@ -19,6 +19,7 @@ IntegratorEntry TimeSteppingEntry() {
   std::vector<OptionBinding<O>> options = {
       BindInteger("stages", &O::stages, "Radau IIA stages s in 1..7"),
       BindReal("h", &O::step_size, "fixed step > 0"),
+      BindStopTimes(&O::stop_times),
       BindSwitching(&O::switching_form),
       BindInteger("max_steps", &O::max_steps, "most steps (a longer grid is refused), >= 1"),
       BindBool("record_trajectory", &O::record_trajectory,
@@ -49,6 +50,8 @@ IntegratorEntry TimeSteppingEntry() {
                "max over steps of max |min(a, b)|"),
       BindStat("max_newton_residual", &S::max_newton_residual,
                "max over steps of ||S Phi||_inf at convergence"),
+      BindStat("num_inside_crossings", &S::num_inside_crossings,
+               "steps with a free side below zero between their nodes (not resolved: a warning)"),
       BindStat("cpu_seconds", &S::cpu_seconds, "thread CPU time"),
   };
   return MakeEntry<O, TimeSteppingResult>(

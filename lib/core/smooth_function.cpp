@@ -81,6 +81,38 @@ void TypedFunction::DenseHessianDirection(const ConstVectorRef& x, const ConstVe
   }
 }
 
+bool TypedFunction::Bounds(const ConstVectorRef& x_lower, const ConstVectorRef& x_upper,
+                           const ConstVectorRef& u, double t_lower, double t_upper,
+                           const ConstVectorRef& p, Vector* lower, Vector* upper) {
+  MOREAU_ASSERT(x_lower.size() == x_upper.size(), "Bounds: state bounds of different sizes");
+  Space<Interval>& space = interval_space_;
+  space.x.resize(static_cast<std::size_t>(x_lower.size()));
+  space.u.resize(static_cast<std::size_t>(u.size()));
+  space.p.resize(static_cast<std::size_t>(p.size()));
+  space.out.assign(static_cast<std::size_t>(num_outputs_), Interval(0.0));
+  for (Eigen::Index i = 0; i < x_lower.size(); ++i) {
+    space.x[static_cast<std::size_t>(i)] = Interval(x_lower[i], x_upper[i]);
+  }
+  for (Eigen::Index i = 0; i < u.size(); ++i) space.u[static_cast<std::size_t>(i)] = Interval(u[i]);
+  for (Eigen::Index i = 0; i < p.size(); ++i) space.p[static_cast<std::size_t>(i)] = Interval(p[i]);
+  space.t = Interval(t_lower, t_upper);
+  IntervalFlags& flags = CurrentIntervalFlags();
+  flags = IntervalFlags{};
+  Call(space.x.data(), static_cast<int>(space.x.size()), space.u.data(),
+       static_cast<int>(space.u.size()), space.t, space.p.data(), static_cast<int>(space.p.size()),
+       space.out.data());
+  const bool decided = !flags.undecided;
+  flags = IntervalFlags{};
+  if (!decided) return false;
+  lower->resize(num_outputs_);
+  upper->resize(num_outputs_);
+  for (int k = 0; k < num_outputs_; ++k) {
+    (*lower)[k] = space.out[static_cast<std::size_t>(k)].lower();
+    (*upper)[k] = space.out[static_cast<std::size_t>(k)].upper();
+  }
+  return true;
+}
+
 SparseDerivativeStats TypedFunction::sparse_derivative_stats() const {
   return sparse_ ? sparse_->stats() : SparseDerivativeStats{};
 }
@@ -384,6 +416,13 @@ void SmoothFunction::Concept::SparseWeightedHessian(
 SparseDerivativeStats SmoothFunction::sparse_derivative_stats() const {
   const internal::TypedFunction* f = typed();
   return f != nullptr ? f->sparse_derivative_stats() : SparseDerivativeStats{};
+}
+
+bool SmoothFunction::Bounds(const ConstVectorRef& x_lower, const ConstVectorRef& x_upper,
+                            const ConstVectorRef& u, double t_lower, double t_upper,
+                            const ConstVectorRef& p, Vector* lower, Vector* upper) const {
+  RequireNonEmpty(*this);
+  return impl_->Bounds(x_lower, x_upper, u, t_lower, t_upper, p, lower, upper);
 }
 
 bool SmoothFunction::has_sparse_state_jacobian() const {

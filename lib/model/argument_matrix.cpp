@@ -10,6 +10,15 @@
 
 namespace moreau::internal {
 
+bool FunctionBounds(const BlockContext& context, const SmoothFunction& function,
+                    const ConstVectorRef& y_lower, const ConstVectorRef& y_upper, Vector* lower,
+                    Vector* upper) {
+  const int nx = context.num_scene_states;
+  return function.Bounds(y_lower.head(nx), y_upper.head(nx), *context.inputs,
+                         y_lower[context.clock_index], y_upper[context.clock_index],
+                         *context.parameters, lower, upper);
+}
+
 void ArgumentMatrix::Layout(const BlockContext& context, Derivatives derivatives) {
   is_sparse_ = context.sparse;
   all_ = derivatives == Derivatives::kAll;

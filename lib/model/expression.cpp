@@ -564,7 +564,9 @@ void Run(const Program& program, const T* x, const T* u, const T& t, const T* p,
         r = scratch[in.a] - scratch[in.b];
         break;
       case Op::kMul:
-        r = scratch[in.a] * scratch[in.b];
+        // x^2 is stored as x*x (one node twice): passed as one object, so that an interval
+        // evaluation takes it as the square it is (for other scalars the same product).
+        r = in.a == in.b ? scratch[in.a] * scratch[in.a] : scratch[in.a] * scratch[in.b];
         break;
       case Op::kDiv:
         r = scratch[in.a] / scratch[in.b];
@@ -626,8 +628,8 @@ void Run(const Program& program, const T* x, const T* u, const T& t, const T* p,
   }
 }
 
-// A model function given by expressions: one program, evaluated for T = double, Dual1, Dual2
-// and SparsityTracer (sparsity detection).
+// A model function given by expressions: one program, evaluated for T = double, Dual1, Dual2,
+// SparsityTracer (sparsity detection) and Interval (enclosures over boxes).
 class ExpressionFunction final : public TypedFunctionFor<ExpressionFunction> {
   using Base = TypedFunctionFor<ExpressionFunction>;
   friend Base;
@@ -649,6 +651,8 @@ class ExpressionFunction final : public TypedFunctionFor<ExpressionFunction> {
       return scratch1_;
     } else if constexpr (std::is_same_v<T, Dual2>) {
       return scratch2_;
+    } else if constexpr (std::is_same_v<T, Interval>) {
+      return scratch_interval_;
     } else {
       static_assert(std::is_same_v<T, SparsityTracer>);
       return scratch_trace_;
@@ -675,6 +679,7 @@ class ExpressionFunction final : public TypedFunctionFor<ExpressionFunction> {
   std::vector<Dual1> scratch1_;
   std::vector<Dual2> scratch2_;
   std::vector<SparsityTracer> scratch_trace_;
+  std::vector<Interval> scratch_interval_;
 };
 
 }  // namespace

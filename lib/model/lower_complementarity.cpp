@@ -186,6 +186,23 @@ class ComplementarityBlock final : public LoweredBlock {
   // Free side of each pair. Index 2: the multiplier of an active pair (velocity level), g of
   // an inactive one. Index 1: the consistent values at y for the statuses: lambda_k of a pair
   // kept at w = 0, w_k of a pair kept at lambda = 0 (both functions of the state).
+  // Index 2, inactive pair (lambda = 0): w = g(x, t) over the box. Index 1: the free sides
+  // involve the consistent multipliers (an LCP in the state), which have no enclosure here.
+  void IndicatorBounds(const BlockContext& context, const ConstVectorRef& y_lower,
+                       const ConstVectorRef& y_upper, const std::vector<bool>& a_zero,
+                       VectorRef lower, VectorRef upper) override {
+    if (index_one_) return;
+    if (!FunctionBounds(context, effect_.output, y_lower, y_upper, &bound_lower_, &bound_upper_)) {
+      return;
+    }
+    const int k0 = layout.pair_offset;
+    for (int k = 0; k < m_; ++k) {
+      if (a_zero[static_cast<std::size_t>(k0 + k)]) continue;
+      lower[k0 + k] = bound_lower_[k];
+      upper[k0 + k] = bound_upper_[k];
+    }
+  }
+
   void EventIndicators(const BlockContext& context, const ConstVectorRef& y,
                        const ConstVectorRef& v, const std::vector<bool>& a_zero,
                        Derivatives derivatives, IndicatorEvaluation* out) override {
@@ -403,6 +420,7 @@ class ComplementarityBlock final : public LoweredBlock {
   int m_;
   bool index_one_;
   Vector x_, g_, b_values_, d_values_, lambda_, lambda_bar_;
+  Vector bound_lower_, bound_upper_;  // IndicatorBounds' enclosures of g
   Matrix jac_g_, jac_b_, jac_d_, d_lambda_bar_, hessian_;
   ArgumentMatrix directions_;
 };

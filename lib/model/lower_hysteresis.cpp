@@ -119,6 +119,24 @@ class RelayBlockBase : public LoweredBlock {
     }
   }
 
+  // Enclosures of psi_i over a box into psi_bounds_; false if an input has none.
+  bool PsiBounds(const BlockContext& context, const ConstVectorRef& y_lower,
+                 const ConstVectorRef& y_upper) {
+    const Vector& params = *context.parameters;
+    psi_bounds_.resize(static_cast<std::size_t>(num_relays_));
+    for (int i = 0; i < num_relays_; ++i) {
+      const HysteresisRelay& relay = relays_[static_cast<std::size_t>(i)];
+      if (!FunctionBounds(context, relay.input, y_lower, y_upper, &input_lower_, &input_upper_)) {
+        return false;
+      }
+      const double lower = params[relay.lower_threshold];
+      const double upper = params[relay.upper_threshold];
+      psi_bounds_[static_cast<std::size_t>(i)] =
+          (Interval(input_lower_[0], input_upper_[0]) - lower) / Interval(upper - lower);
+    }
+    return true;
+  }
+
   // One mode field's values (no derivatives).
   static void EvaluateMode(const BlockContext& context, const ConstVectorRef& y,
                            const SmoothFunction& mode, ArgumentMatrix* jacobian, Vector* values) {
@@ -143,6 +161,8 @@ class RelayBlockBase : public LoweredBlock {
   int num_states_;
   int num_relays_;
   std::vector<Psi> psi_;
+  std::vector<Interval> psi_bounds_;  // PsiBounds' enclosures
+  Vector input_lower_, input_upper_;
   Vector x_, input_, mode_a_, mode_b_;
   Matrix input_jacobian_;
   ArgumentMatrix mode_a_jacobian_, mode_b_jacobian_, directions_;
@@ -375,6 +395,31 @@ class HysteresisBlock final : public RelayBlockBase {
     }
   }
 
+  // Inactive region k of relay i: g_k - g_active, affine in psi and w, over the box.
+  void IndicatorBounds(const BlockContext& context, const ConstVectorRef& y_lower,
+                       const ConstVectorRef& y_upper, const std::vector<bool>& a_zero,
+                       VectorRef lower, VectorRef upper) override {
+    if (!PsiBounds(context, y_lower, y_upper)) return;
+    for (int i = 0; i < num_relays_; ++i) {
+      int active = -1;
+      for (int k = 0; k < kRegions && active < 0; ++k) {
+        if (!a_zero[static_cast<std::size_t>(Pair(i, k))]) active = k;
+      }
+      if (active < 0) continue;
+      const Interval psi = psi_bounds_[static_cast<std::size_t>(i)];
+      const Interval w(y_lower[MemoryIndex(i)], y_upper[MemoryIndex(i)]);
+      for (int k = 0; k < kRegions; ++k) {
+        const int pair = Pair(i, k);
+        if (!a_zero[static_cast<std::size_t>(pair)]) continue;
+        const Interval value = (PointNormSquared(k) - PointNormSquared(active)) -
+                               2.0 * (kPointPsi[k] - kPointPsi[active]) * psi -
+                               2.0 * (kPointW[k] - kPointW[active]) * w;
+        lower[pair] = value.lower();
+        upper[pair] = value.upper();
+      }
+    }
+  }
+
   // theta: the region containing (psi, w), split evenly between regions tied to round-off
   // (a point on a boundary: theta = 1/2 on each side is the sliding value), or `previous`
   // when given and the point lies on a boundary; lambda = g - min g, mu = min g.
@@ -546,6 +591,18 @@ class DiscreteRelayBlock final : public RelayBlockBase {
     for (int i = 0; i < num_relays_; ++i) {
       const double psi = psi_[static_cast<std::size_t>(i)].value;
       out[i] = y[MemoryIndex(i)] < 0.5 ? 1.0 - psi : psi;
+    }
+  }
+  void MemorySwitchingBounds(const BlockContext& context, const ConstVectorRef& y_lower,
+                             const ConstVectorRef& y_upper, VectorRef lower,
+                             VectorRef upper) override {
+    if (!PsiBounds(context, y_lower, y_upper)) return;
+    for (int i = 0; i < num_relays_; ++i) {
+      const Interval psi = psi_bounds_[static_cast<std::size_t>(i)];
+      // The memory is constant between switches (w' = 0): its lower bound decides.
+      const Interval value = y_lower[MemoryIndex(i)] < 0.5 ? 1.0 - psi : psi;
+      lower[i] = value.lower();
+      upper[i] = value.upper();
     }
   }
 

@@ -201,6 +201,23 @@ class MovingSetBlock final : public LoweredBlock {
     }
   }
 
+  // Inactive constraint: c_k over the box.
+  void IndicatorBounds(const BlockContext& context, const ConstVectorRef& y_lower,
+                       const ConstVectorRef& y_upper, const std::vector<bool>& a_zero,
+                       VectorRef lower, VectorRef upper) override {
+    const int k0 = layout.pair_offset;
+    if (!FunctionBounds(context, set_.constraints, y_lower, y_upper, &bound_lower_,
+                        &bound_upper_)) {
+      return;
+    }
+    for (int j = 0; j < num_working(); ++j) {
+      if (a_zero[static_cast<std::size_t>(k0 + j)]) continue;
+      const int k = working_[static_cast<std::size_t>(j)];
+      lower[k0 + j] = bound_lower_[k];
+      upper[k0 + j] = bound_upper_[k];
+    }
+  }
+
   std::vector<Event> StatusEvents(double t, const std::vector<bool>& before,
                                   const std::vector<bool>& after) const override {
     std::vector<Event> events;
@@ -242,8 +259,9 @@ class MovingSetBlock final : public LoweredBlock {
   MovingSet set_;
   int num_states_;
   int num_constraints_;
-  std::vector<int> working_;  // constraints in the system, increasing
-  std::vector<int> pushing_;  // working constraints with lambda != 0 (scratch)
+  std::vector<int> working_;          // constraints in the system, increasing
+  Vector bound_lower_, bound_upper_;  // IndicatorBounds' enclosures of c
+  std::vector<int> pushing_;          // working constraints with lambda != 0 (scratch)
   bool all_working_ = true;
   bool has_projection_ = false;
   Matrix projection_;  // P = E E^T (only with a projection basis E; P = I otherwise)

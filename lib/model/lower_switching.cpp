@@ -101,6 +101,19 @@ class SwitchingBlockBase : public LoweredBlock {
     stacked_jacobian_.AddRows(first, outputs, weight, row0, dy, du, dp);
   }
 
+  // Enclosures of the surfaces c over a box into c_bounds_ (false if there are none).
+  bool SurfaceBounds(const BlockContext& context, const ConstVectorRef& y_lower,
+                     const ConstVectorRef& y_upper) {
+    if (!FunctionBounds(context, effect_.surfaces, y_lower, y_upper, &c_lower_, &c_upper_)) {
+      return false;
+    }
+    c_bounds_.resize(static_cast<std::size_t>(num_surfaces_));
+    for (int j = 0; j < num_surfaces_; ++j) {
+      c_bounds_[static_cast<std::size_t>(j)] = Interval(c_lower_[j], c_upper_[j]);
+    }
+    return true;
+  }
+
   // True if some switching function vanishes to round-off at the last evaluated point.
   bool OnSurface() const {
     for (Eigen::Index j = 0; j < c_.size(); ++j) {
@@ -121,6 +134,8 @@ class SwitchingBlockBase : public LoweredBlock {
   int num_surfaces_;
   int num_modes_;
   Vector x_, c_;
+  Vector c_lower_, c_upper_;        // SurfaceBounds' enclosures
+  std::vector<Interval> c_bounds_;  // the same as intervals
   ArgumentMatrix c_jacobian_, directions_;
   std::vector<Vector> f_;
   std::vector<ArgumentMatrix> f_jacobian_;
@@ -266,6 +281,28 @@ class StewartBlock final : public SwitchingBlockBase {
         const double weight = -(Sign(k, j) - Sign(active, j));
         if (weight != 0.0) c_jacobian_.AddRow(j, weight, k0 + k, &out->d_y, &out->d_u, &out->d_p);
       }
+    }
+  }
+
+  // Inactive mode k: lambda_k = g_k - g_active = -(S_k - S_active) c over the box.
+  void IndicatorBounds(const BlockContext& context, const ConstVectorRef& y_lower,
+                       const ConstVectorRef& y_upper, const std::vector<bool>& a_zero,
+                       VectorRef lower, VectorRef upper) override {
+    const int k0 = layout.pair_offset;
+    int active = -1;
+    for (int k = 0; k < num_modes_ && active < 0; ++k) {
+      if (!a_zero[static_cast<std::size_t>(k0 + k)]) active = k;
+    }
+    if (active < 0 || !SurfaceBounds(context, y_lower, y_upper)) return;
+    for (int k = 0; k < num_modes_; ++k) {
+      if (!a_zero[static_cast<std::size_t>(k0 + k)]) continue;
+      Interval value(0.0);
+      for (int j = 0; j < num_surfaces_; ++j) {
+        const double weight = -(Sign(k, j) - Sign(active, j));
+        if (weight != 0.0) value += weight * c_bounds_[static_cast<std::size_t>(j)];
+      }
+      lower[k0 + k] = value.lower();
+      upper[k0 + k] = value.upper();
     }
   }
 
@@ -449,6 +486,25 @@ class HeavisideBlock final : public SwitchingBlockBase {
           out->values[pair] = side == 0 ? v[z0 + j] : 1.0 - v[z0 + j];
           if (derivatives != Derivatives::kNone) out->d_v.Add(pair, z0 + j, side == 0 ? 1.0 : -1.0);
         }
+      }
+    }
+  }
+
+  // Pairs 2j (alpha_j, lambda_n) and 2j + 1 (1 - alpha_j, lambda_p) whose alpha side is kept
+  // at zero: their free sides lambda_n = -c_j and lambda_p = c_j over the box.
+  void IndicatorBounds(const BlockContext& context, const ConstVectorRef& y_lower,
+                       const ConstVectorRef& y_upper, const std::vector<bool>& a_zero,
+                       VectorRef lower, VectorRef upper) override {
+    if (!SurfaceBounds(context, y_lower, y_upper)) return;
+    const int k0 = layout.pair_offset;
+    for (int j = 0; j < num_surfaces_; ++j) {
+      for (int side = 0; side < 2; ++side) {
+        const int pair = k0 + 2 * j + side;
+        if (!a_zero[static_cast<std::size_t>(pair)]) continue;
+        const Interval value = side == 0 ? -c_bounds_[static_cast<std::size_t>(j)]
+                                         : c_bounds_[static_cast<std::size_t>(j)];
+        lower[pair] = value.lower();
+        upper[pair] = value.upper();
       }
     }
   }

@@ -47,6 +47,13 @@ struct BlockContext {
 // (Wrt::XT, or Wrt::All with Derivatives::kAll), dense or sparse, and whose rows the blocks
 // scatter into the y (x columns and the clock column), u and p derivative blocks of the
 // lowered system: a model function's Jacobian, or its second derivatives along a direction.
+// Enclosure of a block's model function over a box of lowered states (x = the first n_x
+// entries, t = the clock's entry; inputs and parameters from the context): false if the
+// function has no interval evaluation there (SmoothFunction::Bounds).
+bool FunctionBounds(const BlockContext& context, const SmoothFunction& function,
+                    const ConstVectorRef& y_lower, const ConstVectorRef& y_upper, Vector* lower,
+                    Vector* upper);
+
 class ArgumentMatrix {
  public:
   // Jacobian of `function` at the block's point x = y[0..n_x), t = y[clock] (values into
@@ -150,6 +157,18 @@ class LoweredBlock {
                                const ConstVectorRef& v, const std::vector<bool>& a_zero,
                                Derivatives derivatives, IndicatorEvaluation* out) = 0;
 
+  // Enclosures of the continuous free sides over a box of states (LoweredSystem::
+  // BoundEventIndicators): for every pair of the block whose free side under a_zero is a
+  // function of the state through the block's model functions, [lower, upper] (at the pair's
+  // index) containing its value at every y in [y_lower, y_upper] (the clock's entries bound
+  // the time), by interval evaluation of those functions. Other pairs (jump free sides, free
+  // sides that depend on algebraic unknowns, functions without interval evaluation) are left
+  // as the caller set them (-inf, +inf).
+  virtual void IndicatorBounds(const BlockContext& /*context*/, const ConstVectorRef& /*y_lower*/,
+                               const ConstVectorRef& /*y_upper*/,
+                               const std::vector<bool>& /*a_zero*/, VectorRef /*lower*/,
+                               VectorRef /*upper*/) {}
+
   // --- internal states and time-freezing (docs/lowering.md, "Hysteresis relays") ---------
   // Internal states of the block (hysteresis memories), stored in y from layout.y_offset.
   virtual int num_internal_states() const { return 0; }
@@ -182,6 +201,11 @@ class LoweredBlock {
   virtual int num_memory_switches() const { return 0; }
   virtual void MemorySwitchingFunctions(const BlockContext& /*context*/,
                                         const ConstVectorRef& /*y*/, VectorRef /*out*/) {}
+  // Their enclosures over a box of states (as IndicatorBounds; left as set where unavailable).
+  virtual void MemorySwitchingBounds(const BlockContext& /*context*/,
+                                     const ConstVectorRef& /*y_lower*/,
+                                     const ConstVectorRef& /*y_upper*/, VectorRef /*lower*/,
+                                     VectorRef /*upper*/) {}
 
   // False if the block-local pair roles of a velocity-level assignment are contradictory by
   // construction (e.g. every theta of a Stewart subsystem kept at zero although they sum to

@@ -413,6 +413,39 @@ Vector LoweredSystem::MemorySwitchingFunctions(const Vector& y) const {
   return out;
 }
 
+void LoweredSystem::BoundMemorySwitchingFunctions(const ConstVectorRef& y_lower,
+                                                  const ConstVectorRef& y_upper, Vector* lower,
+                                                  Vector* upper) const {
+  const double infinity = std::numeric_limits<double>::infinity();
+  const int n = memory_block_ < 0
+                    ? 0
+                    : blocks_[static_cast<std::size_t>(memory_block_)]->num_memory_switches();
+  lower->setConstant(n, -infinity);
+  upper->setConstant(n, infinity);
+  if (n == 0) return;
+  internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
+  context.sparse = sparse_;
+  blocks_[static_cast<std::size_t>(memory_block_)]->MemorySwitchingBounds(context, y_lower, y_upper,
+                                                                          *lower, *upper);
+}
+
+void LoweredSystem::BoundEventIndicators(const ConstVectorRef& y_lower,
+                                         const ConstVectorRef& y_upper,
+                                         const std::vector<bool>& a_zero, Vector* lower,
+                                         Vector* upper) const {
+  MOREAU_ASSERT(static_cast<int>(a_zero.size()) == num_pairs_, "wrong number of statuses");
+  MOREAU_ASSERT(y_lower.size() == num_states_ && y_upper.size() == num_states_,
+                "BoundEventIndicators: wrong state size");
+  const double infinity = std::numeric_limits<double>::infinity();
+  lower->setConstant(num_pairs_, -infinity);
+  upper->setConstant(num_pairs_, infinity);
+  internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
+  context.sparse = sparse_;
+  for (const auto& block : blocks_) {
+    block->IndicatorBounds(context, y_lower, y_upper, a_zero, *lower, *upper);
+  }
+}
+
 void LoweredSystem::SwitchMemory(int relay, Vector* y) const {
   MOREAU_ASSERT(memory_block_ >= 0 && relay >= 0 && relay < static_cast<int>(relay_names_.size()),
                 "SwitchMemory: no such discrete-memory relay");

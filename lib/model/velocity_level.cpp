@@ -534,12 +534,24 @@ class VelocitySystem final : public MixedComplementaritySystem {
 
  private:
   // Reset's row scales (and a linear level's expansion point).
+  // The size of a row is that of its terms: its value at v = 0 and its change to the guess v0
+  // (|q| + |M v0| for a row M v + q). The value at v = 0 alone misses the terms that come with
+  // v: Stewart's rates are sums of theta_k times the mode fields, zero at theta = 0, of size
+  // 1e5 for a scene in microseconds, where an absolute 1e-12 is below their round-off and the
+  // decision fails ("no consistent continuation").
   void Scale(const Vector& v0) {
     if (linear_) {
       v0_ = v0;
       step_ = -v0;  // the values at v = 0
       Model(step_, &zero_r_, &zero_a_, &zero_b_);
+      guess_r_ = evaluation_.equations;  // the values at v0, the expansion point
+      guess_a_ = evaluation_.a;
+      guess_b_ = evaluation_.b;
     } else {
+      system_.EvaluateVelocityLevel(y_, v0, roles_, Derivatives::kNone, &values_);
+      guess_r_ = values_.equations;
+      guess_a_ = values_.a;
+      guess_b_ = values_.b;
       system_.EvaluateVelocityLevel(y_, Vector::Zero(num_unknowns()), roles_, Derivatives::kNone,
                                     &values_);
     }
@@ -547,9 +559,12 @@ class VelocitySystem final : public MixedComplementaritySystem {
     const Vector& a0 = linear_ ? zero_a_ : values_.a;
     const Vector& b0 = linear_ ? zero_b_ : values_.b;
     scale_.resize(num_unknowns());
-    for (int i = 0; i < num_equations(); ++i) scale_[i] = 1.0 / (1.0 + std::fabs(r0[i]));
+    for (int i = 0; i < num_equations(); ++i) {
+      scale_[i] = 1.0 / (1.0 + std::fabs(r0[i]) + std::fabs(guess_r_[i] - r0[i]));
+    }
     for (int k = 0; k < complementary_; ++k) {
-      const double size = std::max(std::fabs(a0[k]), std::fabs(b0[k]));
+      const double size = std::max(std::fabs(a0[k]) + std::fabs(guess_a_[k] - a0[k]),
+                                   std::fabs(b0[k]) + std::fabs(guess_b_[k] - b0[k]));
       scale_[num_equations() + k] = 1.0 / (1.0 + size);
     }
     if (!scale_.allFinite()) scale_.setOnes();  // a non-finite model is reported by Evaluate
@@ -607,6 +622,7 @@ class VelocitySystem final : public MixedComplementaritySystem {
   // evaluation at v0.
   VelocityLevelEvaluation evaluation_, values_;
   Vector v0_, zero_r_, zero_a_, zero_b_;
+  Vector guess_r_, guess_a_, guess_b_;  // Scale's values at the guess
   mutable Vector step_;
   Vector scale_;
   CurvatureTerms no_curvature_;  // (rows without derivatives with respect to y)

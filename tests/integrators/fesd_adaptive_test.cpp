@@ -284,8 +284,10 @@ TEST(FesdAdaptiveTest, FailedSolvesAreRetriedShorterDownToTheMinimumStep) {
   const FesdResult rescued = SimulateFesd(scene, options);
   ASSERT_EQ(rescued.status, FesdStatus::kSuccess) << rescued.message;
   EXPECT_GE(rescued.stats.num_failed_steps, 1);
-  // Switches every 1e-3: a minimum step of 0.04 cannot resolve them (0.1, then 0.05 fail).
-  options.min_step_size = 0.04;
+  // Switches every 1e-3: the step of 0.1 fails, and halving it would go below a minimum step
+  // of 0.06. (With 0.04 the halved step 0.05 succeeds: the switch found inside it shortens
+  // it.)
+  options.min_step_size = 0.06;
   const FesdResult failed = SimulateFesd(scene, options);
   EXPECT_EQ(failed.status, FesdStatus::kEventLocationFailure) << failed.message;
   EXPECT_NE(failed.message.find("at t = "), std::string::npos) << failed.message;
@@ -428,13 +430,13 @@ TEST(StepControllerTest, ProposalsFollowTheDocumentedFactors) {
   using internal::StepController;
   constexpr double kExact = 1e-15;
   StepController controller(5);  // s = 3: p = 5
-  // err = 1: the safety factor; err = 0: the first step grows by kSafety kMinError^(-1/p)
-  // (below kMaxFirstFactor), later ones by at most kMaxFactor.
+  // err = 1: the safety factor; err = 0: every step, the first included, grows by at most
+  // kMaxFactor (kSafety kMinError^(-1/p) would be far more).
   EXPECT_NEAR(controller.Accept(0.1, 0.1, 1.0, false), 0.1 * StepController::kSafety, kExact);
   StepController fresh(5);
-  const double first = StepController::kSafety * std::pow(StepController::kMinError, -0.2);
-  ASSERT_LT(first, StepController::kMaxFirstFactor);
-  EXPECT_NEAR(fresh.Accept(0.1, 0.1, 0.0, false), 0.1 * first, 1e-12);
+  ASSERT_GT(StepController::kSafety * std::pow(StepController::kMinError, -0.2),
+            StepController::kMaxFactor);
+  EXPECT_NEAR(fresh.Accept(0.1, 0.1, 0.0, false), 0.1 * StepController::kMaxFactor, kExact);
   EXPECT_NEAR(fresh.Accept(0.1, 0.1, 0.0, false), 0.1 * StepController::kMaxFactor, kExact);
   // Gustafsson: an error that grew from the previous step shrinks the proposal further.
   StepController gustafsson(5);
@@ -450,9 +452,10 @@ TEST(StepControllerTest, ProposalsFollowTheDocumentedFactors) {
               0.1 * StepController::kMinFactor, kExact);
   EXPECT_LE(rejecting.Accept(0.1, 0.1, 1e-6, false), 0.1);
   // A step cut short by a switch: growth from the piece, bounded by kMaxFactor times the
-  // attempted step (after the first step).
+  // attempted step.
   StepController switching(5);
-  EXPECT_NEAR(switching.Accept(1e-6, 0.1, 0.0, true), 1e-6 * first, 1e-12);
+  const double from_piece = StepController::kSafety * std::pow(StepController::kMinError, -0.2);
+  EXPECT_NEAR(switching.Accept(1e-6, 0.1, 0.0, true), 1e-6 * from_piece, 1e-12);
   EXPECT_NEAR(switching.Accept(0.1, 0.1, 0.0, true), 0.1 * StepController::kMaxFactor, kExact);
 }
 

@@ -12,8 +12,10 @@
 /// weighted Hessians (forward-mode automatic differentiation, chunked in blocks of
 /// Dual<double>::kCapacity directions, so there is no limit on the number of inputs), and
 /// T = SparsityTracer to detect which inputs each output depends on, for the sparse
-/// derivatives (docs/sparse-derivatives.md). Derivatives are therefore exact to round-off; no
-/// solver ever uses finite differences.
+/// derivatives (docs/sparse-derivatives.md), and T = Interval for enclosures of the outputs over
+/// a box of arguments (interval arithmetic, core/interval.hpp: integrators bound event
+/// indicators over a step). Derivatives are therefore exact to round-off; no solver ever uses
+/// finite differences.
 ///
 /// Reading x[i] outside the argument's size or writing out[k] outside the declared output
 /// size throws std::invalid_argument naming the function, the argument and both sizes.
@@ -29,6 +31,7 @@
 #include <vector>
 
 #include "moreau/core/dual.hpp"
+#include "moreau/core/interval.hpp"
 #include "moreau/core/sparsity_tracer.hpp"
 #include "moreau/core/types.hpp"
 
@@ -219,6 +222,14 @@ class SmoothFunction {
                               const ConstVectorRef& p, Wrt wrt, const ConstVectorRef& direction,
                               SparseMatrix* rows_matrix,
                               const std::vector<int>* rows = nullptr) const;
+  /// Enclosure of g over a box: lower_k <= g_k(x, u, t, p) <= upper_k for every x with
+  /// x_lower <= x <= x_upper and every t in [t_lower, t_upper] (u and p fixed), by interval
+  /// arithmetic (core/interval.hpp). Returns false, with lower and upper unspecified, if no
+  /// bound is available: a hand-written function, or a branch (comparison) of the function that
+  /// the box does not decide.
+  bool Bounds(const ConstVectorRef& x_lower, const ConstVectorRef& x_upper, const ConstVectorRef& u,
+              double t_lower, double t_upper, const ConstVectorRef& p, Vector* lower,
+              Vector* upper) const;
   /// Counters of SparseJacobian and SparseWeightedHessian (all zero for functions without
   /// automatic differentiation).
   SparseDerivativeStats sparse_derivative_stats() const;
@@ -265,6 +276,12 @@ class SmoothFunction {
                                         const ConstVectorRef& p, Wrt wrt,
                                         const ConstVectorRef& direction, SparseMatrix* rows_matrix,
                                         const std::vector<int>* rows);
+    /// See SmoothFunction::Bounds.
+    virtual bool Bounds(const ConstVectorRef& /*x_lower*/, const ConstVectorRef& /*x_upper*/,
+                        const ConstVectorRef& /*u*/, double /*t_lower*/, double /*t_upper*/,
+                        const ConstVectorRef& /*p*/, Vector* /*lower*/, Vector* /*upper*/) {
+      return false;
+    }
     /// See SmoothFunction::has_sparse_state_jacobian.
     virtual bool has_sparse_state_jacobian() const { return false; }
     /// See SmoothFunction::SparseStateJacobian.
@@ -288,7 +305,8 @@ using Dual2 = Dual<Dual<double>>;
 
 // A function evaluated by one routine templated over the scalar type: values (double),
 // Jacobians (Dual1, forward mode in chunks of Dual1::kCapacity directions), weighted
-// Hessians (Dual2) and sparsity patterns (SparsityTracer) come from the four Call overloads.
+// Hessians (Dual2), sparsity patterns (SparsityTracer) and enclosures over boxes (Interval)
+// come from the five Call overloads.
 // Implemented by generic lambdas (AutoDiffFunction) and by compositions of such functions (stacked
 // functions).
 class TypedFunction : public SmoothFunction::Concept {
@@ -320,6 +338,9 @@ class TypedFunction : public SmoothFunction::Concept {
                               const ConstVectorRef& p, Wrt wrt, const ConstVectorRef& direction,
                               SparseMatrix* rows_matrix, const std::vector<int>* rows) override;
   SparseDerivativeStats sparse_derivative_stats() const;
+  bool Bounds(const ConstVectorRef& x_lower, const ConstVectorRef& x_upper, const ConstVectorRef& u,
+              double t_lower, double t_upper, const ConstVectorRef& p, Vector* lower,
+              Vector* upper) override;
   // Dense counterpart of SparseHessianDirection for at most Dual1::kCapacity selected columns:
   // rows(k, j) = (d^2 g_k / d(selected)^2 . direction)_j for every output, from one Dual2
   // evaluation (outer directions: the selected columns; inner: the direction). No sparsity
@@ -340,6 +361,8 @@ class TypedFunction : public SmoothFunction::Concept {
   virtual void Call(const SparsityTracer* x, int nx, const SparsityTracer* u, int nu,
                     const SparsityTracer& t, const SparsityTracer* p, int np,
                     SparsityTracer* out) = 0;
+  virtual void Call(const Interval* x, int nx, const Interval* u, int nu, const Interval& t,
+                    const Interval* p, int np, Interval* out) = 0;
 
  protected:
   std::string name_;
@@ -357,6 +380,7 @@ class TypedFunction : public SmoothFunction::Concept {
   void SeedInputs(Space<T>* space, const ConstVectorRef& x, const ConstVectorRef& u, double t,
                   const ConstVectorRef& p, Wrt wrt, Seed&& seed);
   Space<Dual1> space1_;
+  Space<Interval> interval_space_;
   // Made at the first dense WeightedHessian: its scalar t alone is a Dual2 (~2.3 kB), which
   // would make every function object, and every copy of a scene, a large allocation.
   std::unique_ptr<Space<Dual2>> space2_;
@@ -374,7 +398,7 @@ class TypedFunction : public SmoothFunction::Concept {
   std::unique_ptr<SparseDerivatives> sparse_;
 };
 
-// A TypedFunction whose four Call overloads forward to one template
+// A TypedFunction whose five Call overloads forward to one template
 // Derived::Invoke<T>(x, nx, u, nu, t, p, np, out) (declare TypedFunctionFor<Derived> a friend
 // if Invoke is private).
 template <class Derived>
@@ -395,6 +419,10 @@ class TypedFunctionFor : public TypedFunction {
   }
   void Call(const SparsityTracer* x, int nx, const SparsityTracer* u, int nu,
             const SparsityTracer& t, const SparsityTracer* p, int np, SparsityTracer* out) final {
+    static_cast<Derived*>(this)->Invoke(x, nx, u, nu, t, p, np, out);
+  }
+  void Call(const Interval* x, int nx, const Interval* u, int nu, const Interval& t,
+            const Interval* p, int np, Interval* out) final {
     static_cast<Derived*>(this)->Invoke(x, nx, u, nu, t, p, np, out);
   }
 };

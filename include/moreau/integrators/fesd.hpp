@@ -194,6 +194,11 @@ struct FesdOptions {
   double min_step_size = 1e-12;
   /// Largest adaptive step, >= 0 (0: no bound; steps never cross control breakpoints).
   double max_step_size = 0.0;
+  /// Stop times (breakpoints): steps end at these times and never cross them, fixed and
+  /// adaptive (any order; times outside (t0, tf) are ignored; in the scene's time axis, as
+  /// control breakpoints). The remedy for what a step cannot see (docs/fesd-formulation.md,
+  /// section 11): a switch the indicator bounds cannot resolve, at a time the user knows.
+  std::vector<double> stop_times;
   /// Dense output: the trajectory holds the state at these times (physical time, in
   /// [t0, tf], any order) instead of every element end, evaluated on the collocation
   /// polynomial of the element that contains the time (never across a switch; accuracy:
@@ -345,6 +350,13 @@ struct FesdStats {
   /// Elements solved as a Radau IIA step of a smooth field (FesdOptions::reduce_smooth_elements)
   /// whose full element system then held without a Newton iteration of its own.
   long num_reduced_elements = 0;
+  /// Zeros of free sides between an element's nodes (docs/fesd-formulation.md, section 11):
+  /// crossings found there (and then located as switches), searches whose bounds admitted a
+  /// crossing that the search could not resolve (each one a warning), and the interval
+  /// evaluations of the indicators the searches made.
+  long num_inside_crossings = 0;
+  long num_unresolved_crossings = 0;  ///< (see num_inside_crossings)
+  long num_bound_evaluations = 0;     ///< (see num_inside_crossings)
   /// Estimated error of the run relative to the solution's scale: the local error estimates
   /// of the accepted steps accumulated, rtol sum_k (H_k / (tf - t0)) err_k with err_k the
   /// estimate per unit step in the tolerance weights (docs/accuracy.md). Error-controlled runs
@@ -403,7 +415,9 @@ struct FesdResult {
   /// Counters and certificates.
   FesdStats stats;
   /// What the caller should know although the run succeeded (an estimated error far above
-  /// the tolerance, ...), one sentence each.
+  /// the tolerance, a zero of a free side between an element's nodes that the crossing search
+  /// left undecided: a switch may have been stepped over; docs/fesd-formulation.md, section
+  /// 11), one sentence each.
   std::vector<std::string> warnings;
 };
 

@@ -23,14 +23,17 @@
 /// the next phase are decided. Root functions watch the free side of every pair
 /// (LoweredSystem::EvaluateEventIndicators: c of inactive constraints, multipliers of active
 /// ones, lambda of inactive modes, theta of sliding ones) and the relays' switching functions;
-/// they are also sampled inside every step on IDA's interpolant, so that a contact that begins
-/// and ends within one step is found. At a root the new statuses come from the velocity-level
+/// they are also sampled inside every step on IDA's interpolant and bounded on it by interval
+/// arithmetic (docs/ida.md, "Contacts inside a step"), so that a contact or a pulse of a
+/// switching function that begins and ends within one step is found (or, where the bounds
+/// cannot decide, a warning says so). At a root the new statuses come from the velocity-level
 /// complementarity problem at the event state (LoweredSystem::DecideStatuses: the slow
 /// solution), a relay flips its memory, and IDA restarts from consistent values. Sliding modes
 /// are DAE phases, never chattering. Control breakpoints restart IDA with the new input values;
 /// an indicator that is zero at a breakpoint or at tf is decided there.
 ///
-/// Accuracy is tolerance-driven (rtol, atol); IdaOptions::Reference() (rtol = 1e-12) gives
+/// Step growth is SUNDIALS IDA's: at most a factor 2 per step. Accuracy is tolerance-driven
+/// (rtol, atol); IdaOptions::Reference() (rtol = 1e-12) gives
 /// the reference solutions that tests and benchmarks compare the other integrators with.
 ///
 /// Effects supported: moving sets, switching surfaces, hysteresis relays. Path constraints
@@ -76,6 +79,10 @@ struct IdaOptions {
   long max_events = 100000;
   /// Largest internal step (0: no limit).
   double max_step = 0.0;
+  /// Stop times (breakpoints): IDA stops exactly at these times (IDASetStopTime) and never
+  /// steps across them (any order; times outside (t0, tf) are ignored). The remedy for a root
+  /// the bounds on the interpolant cannot resolve, at a time the user knows.
+  std::vector<double> stop_times;
   /// Record every internal step in the trajectory (false: events and breakpoints only).
   /// Ignored with output_times.
   bool record_steps = true;
@@ -141,6 +148,10 @@ struct IdaStats {
   /// Largest |P| (position-level conditions of the phase) at the end of a phase, before the
   /// projection: the drift certificate.
   double max_drift = 0.0;
+  /// Steps in which the bounds of a root function on IDA's interpolant admit a zero that the
+  /// crossing search could not resolve (each one a warning; docs/ida.md, "Contacts inside a
+  /// step").
+  long num_unresolved_crossings = 0;
   /// CPU time of the run.
   double cpu_seconds = 0.0;
 
@@ -163,6 +174,9 @@ struct IdaResult {
   std::vector<RelaySignal> relays;  ///< each relay's memory w(t)
   /// Counters and certificates.
   IdaStats stats;
+  /// What the run suspects but could not resolve, one sentence each (a root inside a step
+  /// that the bounds admit and the search left undecided).
+  std::vector<std::string> warnings;
 };
 
 /// Simulates `scene` over [t0, tf]. Throws std::invalid_argument for invalid options, an

@@ -11,11 +11,11 @@
 /// Step size: controlled by the embedded estimate err = (I - h gamma0 J)^{-1}(gamma0 h F(y_n) +
 /// sum_j e_j Z_j) of local order s + 1 (Hairer & Wanner II, Sec. IV.8) in the weighted RMS norm
 /// with weights atol_i + rtol max(|y_n,i|, |y_{n+1},i|), h_new = h min(5, max(0.2, 0.9
-/// err^{-1/(s+1)})) (the default: no step given), or fixed (a uniform grid between control
+/// err^{-1/(s+1)})), a step growing by at most 5 (the default: no step given), or fixed (a uniform grid between control
 /// breakpoints), whose steps get the same estimate, accumulated into RadauStats::
 /// error_estimate (docs/accuracy.md). A step below max(min_step_size, 10 eps |t|) ends the
 /// run (kStepSizeTooSmall); a non-finite model value is named (kNonFinite).
-/// Steps never cross control breakpoints. Scenes with effects are refused (use the
+/// Steps never cross control breakpoints or the stop times (RadauOptions::stop_times). Scenes with effects are refused (use the
 /// time-stepping, FESD, IDA or alpha-method integrators).
 
 #include <string>
@@ -65,6 +65,9 @@ struct RadauOptions {
   bool estimate_error = true;
   /// Dense or sparse LU for the Newton matrices (automatic: by size).
   LinearSolverKind linear_solver = LinearSolverKind::kAutomatic;
+  /// Stop times (breakpoints): steps end at these times and never cross them (any order;
+  /// times outside (t0, tf) are ignored), e.g. where a forcing term changes abruptly.
+  std::vector<double> stop_times;
   /// Record every accepted step in the trajectory (false: only the initial and final point).
   bool record_trajectory = true;
 

@@ -87,4 +87,12 @@ std::vector<double> FixedStepGrid(double t0, double tf, double h);
 /// end points t0 < b1 < ... < tf.
 std::vector<double> SegmentEnds(double t0, double tf, const std::vector<double>& breakpoints);
 
+/// Splits [t0, tf] at the control breakpoints (sorted) and at the user's stop times (any order;
+/// those outside (t0, tf) are ignored): the end points t0 < e1 < ... < tf of the stretches an
+/// integrator steps through without crossing. *control (if not null) receives, per stretch,
+/// the index of the control segment (SegmentEnds(t0, tf, breakpoints)) it lies in. Throws
+/// std::invalid_argument for a stop time that is not finite.
+std::vector<double> StretchEnds(double t0, double tf, const std::vector<double>& breakpoints,
+                                const std::vector<double>& stops, std::vector<int>* control);
+
 }  // namespace moreau

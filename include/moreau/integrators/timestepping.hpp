@@ -14,7 +14,10 @@
 /// global error is O(h) across switches whatever s is (Radau IIA order 2s - 1 on smooth
 /// phases only), and derivatives of the result with respect to initial values or
 /// parameters do not account for the switch times. Events are reported at the end of the
-/// step in which a pair changed status (resolution h).
+/// step in which a pair changed status (resolution h). A free side that crosses zero and
+/// back between the nodes of one step (found on the step's collocation polynomial by the
+/// crossing search of FESD, with bounds from the model functions) is not resolved: the run
+/// warns (TimeSteppingResult::warnings) and a smaller h resolves it.
 ///
 /// Effects supported: moving sets and switching surfaces. Hysteresis relays and path
 /// constraints are refused (use fesd/ida and alpha, respectively).
@@ -71,6 +74,9 @@ struct TimeSteppingOptions {
   ConstraintFilter constraint_filter = ConstraintFilter::kAutomatic;
   /// Safety factor of the filter's margin, >= 1.
   double filter_safety = 4.0;
+  /// Stop times (breakpoints): the fixed grid is laid out between them as between control
+  /// breakpoints, so that a step ends at each (any order; times outside (t0, tf) are ignored).
+  std::vector<double> stop_times;
   /// Start from this lowered state y0 = (x, clock) instead of the scene's x0 (shooting codes;
   /// empty: the scene's). Need not lie in the moving sets: the first step catches up.
   Vector initial_state;
@@ -107,6 +113,9 @@ struct TimeSteppingStats {
   long num_filter_rechecks = 0;
   /// Largest number of complementarity pairs in one step system.
   long max_working_pairs = 0;
+  /// Steps in which a free side falls below zero between the nodes and rises again, or whose
+  /// indicator bounds admit that without the search resolving it (each one a warning).
+  long num_inside_crossings = 0;
   /// CPU time of the run.
   double cpu_seconds = 0.0;
 
@@ -139,6 +148,11 @@ struct TimeSteppingResult {
   /// y0 (n_y), p (n_p), then u per segment (n_u each), as FesdSensitivities::lowered.
   Matrix sensitivities;
   std::vector<double> segment_starts;  ///< start time of every control segment
+  /// What the run suspects but does not resolve, one sentence each: a free side that falls
+  /// below zero between the nodes of a step and rises again (a pulse of a switching function,
+  /// a contact shorter than the step), which the stage complementarity never sees
+  /// (docs/fesd-formulation.md, section 11).
+  std::vector<std::string> warnings;
   /// With sensitivity_directions (k): dx(T)/dtheta V (n_x x k).
   Matrix directional;
   /// With sensitivity_directions (k): the lowered dy(T)/dtheta V (n_y x k).

@@ -438,6 +438,21 @@ class LoweredSystem {
   void EvaluateEventIndicators(const ConstVectorRef& y, const ConstVectorRef& v,
                                const std::vector<bool>& a_zero, Derivatives derivatives,
                                IndicatorEvaluation* out) const;
+  /// Enclosures of the event indicators over a box of states: for statuses a_zero, lower_k <=
+  /// (free side of pair k at y) <= upper_k for every y with y_lower <= y <= y_upper (the clock's
+  /// entries bound the time), by interval arithmetic on the model functions (core/interval.hpp).
+  /// Available for the free sides that are functions of the state through model functions:
+  /// inactive moving-set constraints c, Stewart's lambda and Heaviside's lambda_n, lambda_p
+  /// (switching functions), index-2 complementarity outputs g of inactive pairs, and the Voronoi
+  /// indicators of hysteresis relays (relay inputs). Every other entry is (-inf, +inf): jump free
+  /// sides (multipliers, theta, alpha), index-1 complementarity free sides (which involve the
+  /// consistent multipliers), and functions without interval evaluation (hand-written
+  /// Jacobians, comparisons that the box does not decide).
+  void BoundEventIndicators(const ConstVectorRef& y_lower, const ConstVectorRef& y_upper,
+                            const std::vector<bool>& a_zero, Vector* lower, Vector* upper) const;
+  /// Enclosures of MemorySwitchingFunctions over a box of states (as BoundEventIndicators).
+  void BoundMemorySwitchingFunctions(const ConstVectorRef& y_lower, const ConstVectorRef& y_upper,
+                                     Vector* lower, Vector* upper) const;
   /// Roles for fixed statuses (every pair decided).
   static std::vector<PairRole> RolesFor(const std::vector<bool>& a_zero);
   /// Solves the velocity-level problem for fixed statuses (smooth, square) from v0. Returns

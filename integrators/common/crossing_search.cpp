@@ -1,0 +1,230 @@
+#include "crossing_search.hpp"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "moreau/core/error.hpp"
+#include "moreau/core/interval.hpp"
+
+namespace moreau::internal {
+
+const Matrix& PolynomialPath::WeightCoefficients(const RadauTableau& tableau) {
+  const int s = tableau.stages;
+  if (weight_stages_ == s) return weight_coefficients_;
+  // w_j(c_i) = delta_ij and w_j(0) = 0 with w_j of degree s: the monomial coefficients M
+  // (w_j(theta) = sum_d M(j, d - 1) theta^d) solve M V^T = I, V(i, d - 1) = c_i^d.
+  Matrix v(s, s);
+  for (int i = 0; i < s; ++i) {
+    double power = 1.0;
+    for (int d = 0; d < s; ++d) {
+      power *= tableau.c[i];
+      v(i, d) = power;
+    }
+  }
+  weight_coefficients_ = v.transpose().fullPivLu().inverse();
+  weight_stages_ = s;
+  return weight_coefficients_;
+}
+
+void PolynomialPath::SetCollocation(const RadauTableau& tableau, const ConstVectorRef& y0,
+                                    const Matrix& increments) {
+  const Matrix& m = WeightCoefficients(tableau);
+  const int s = tableau.stages;
+  coefficients_.resize(y0.size(), s + 1);
+  coefficients_.col(0) = y0;
+  coefficients_.rightCols(s).noalias() = increments * m;
+}
+
+void PolynomialPath::Point(double theta, Vector* y) const {
+  const Eigen::Index q = coefficients_.cols() - 1;
+  *y = coefficients_.col(q);
+  for (Eigen::Index d = q - 1; d >= 0; --d) *y = *y * theta + coefficients_.col(d);
+}
+
+void PolynomialPath::Derivative(double theta, Vector* dy) const {
+  const Eigen::Index q = coefficients_.cols() - 1;
+  dy->setZero(coefficients_.rows());
+  for (Eigen::Index d = q; d >= 1; --d) {
+    *dy = *dy * theta + static_cast<double>(d) * coefficients_.col(d);
+  }
+}
+
+void PolynomialPath::Box(double a, double b, Vector* lower, Vector* upper) const {
+  const Eigen::Index n = coefficients_.rows(), q = coefficients_.cols() - 1;
+  const double m = 0.5 * (a + b), r = 0.5 * (b - a);
+  // Taylor coefficients at m: T_d = sum_{k >= d} binom(k, d) a_k m^(k - d), by repeated
+  // synthetic division (Horner's scheme for the shifted polynomial).
+  taylor_ = coefficients_;
+  for (Eigen::Index d = 0; d < q; ++d) {
+    for (Eigen::Index k = q - 1; k >= d; --k) taylor_.col(k) += m * taylor_.col(k + 1);
+  }
+  lower->resize(n);
+  upper->resize(n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    // The radius is rounded up term by term; the centre's rounding (a few ulps of the
+    // coefficients' size) is covered by a relative margin.
+    double radius = 0.0, scale = std::fabs(taylor_(i, 0)), power = 1.0;
+    for (Eigen::Index d = 1; d <= q; ++d) {
+      power *= r;
+      radius += std::fabs(taylor_(i, d)) * power;
+      scale = std::max(scale, std::fabs(coefficients_(i, d)));
+    }
+    const double margin = 8.0 * std::numeric_limits<double>::epsilon() * (scale + radius) *
+                          static_cast<double>(q + 1);
+    (*lower)[i] = RoundDown(taylor_(i, 0) - radius - margin);
+    (*upper)[i] = RoundUp(taylor_(i, 0) + radius + margin);
+  }
+}
+
+Crossing SearchCrossing(const std::vector<char>& watched, const Vector& thresholds,
+                        const CrossingFunctions& functions, const CrossingSearchLimits& limits) {
+  Crossing crossing;
+  const auto n = static_cast<Eigen::Index>(watched.size());
+  MOREAU_ASSERT(thresholds.size() == n, "SearchCrossing: one threshold per function");
+  Vector lower, upper, values;
+  // Functions the bound decides (a finite lower bound over the whole step); the others are
+  // checked by the samples the search takes for the rest.
+  std::vector<char> bounded(watched.size(), 0);
+  auto suspicious = [&](double a, double b) {
+    functions.bounds(a, b, &lower, &upper);
+    ++crossing.bound_evaluations;
+    bool any = false;
+    for (Eigen::Index k = 0; k < n; ++k) {
+      const auto i = static_cast<std::size_t>(k);
+      if (bounded[i] && !(lower[k] >= -thresholds[k])) any = true;
+    }
+    return any;
+  };
+  // The whole step first: which functions have a bound at all.
+  functions.bounds(0.0, 1.0, &lower, &upper);
+  ++crossing.bound_evaluations;
+  bool any = false;
+  for (Eigen::Index k = 0; k < n; ++k) {
+    const auto i = static_cast<std::size_t>(k);
+    bounded[i] = watched[i] && std::isfinite(lower[k]);
+    if (bounded[i] && !(lower[k] >= -thresholds[k])) any = true;
+  }
+  if (!any) return crossing;
+  // Depth-first, left half first, so that the first negative sample found lies in the
+  // leftmost suspicious interval.
+  struct Node {
+    double a, b;
+    int depth;
+  };
+  std::vector<Node> stack{{0.0, 1.0, 0}};
+  bool root = true;  // the whole step's bound is already known to be suspicious
+  bool unresolved = false;
+  double unresolved_at = 1.0;
+  int unresolved_function = -1;
+  while (!stack.empty()) {
+    const Node node = stack.back();
+    stack.pop_back();
+    if (!root) {
+      if (crossing.bound_evaluations >= limits.max_bounds) {
+        unresolved = true;
+        unresolved_at = std::min(unresolved_at, node.a);
+        break;
+      }
+      if (!suspicious(node.a, node.b)) continue;
+    }
+    root = false;
+    const double mid = 0.5 * (node.a + node.b);
+    if (functions.values(mid, &values)) {
+      for (Eigen::Index k = 0; k < n; ++k) {
+        if (watched[static_cast<std::size_t>(k)] && values[k] < -thresholds[k]) {
+          crossing.outcome = CrossingOutcome::kFound;
+          crossing.function = static_cast<int>(k);
+          crossing.sample = mid;
+          break;
+        }
+      }
+      if (crossing.outcome == CrossingOutcome::kFound) break;
+    }
+    if (node.depth >= limits.max_depth) {
+      // Next to the path's ends the values are known to be above the thresholds: a dip of
+      // this width there is a graze, not a crossing to resolve.
+      if (node.a > 0.0 && node.b < 1.0) {
+        unresolved = true;
+        if (node.a < unresolved_at) {
+          unresolved_at = node.a;
+          for (Eigen::Index k = 0; k < n; ++k) {
+            if (bounded[static_cast<std::size_t>(k)] && !(lower[k] >= -thresholds[k])) {
+              unresolved_function = static_cast<int>(k);
+            }
+          }
+        }
+      }
+      continue;
+    }
+    stack.push_back({mid, node.b, node.depth + 1});
+    stack.push_back({node.a, mid, node.depth + 1});
+  }
+  if (crossing.outcome == CrossingOutcome::kFound) {
+    // The first zero before the sample: bisection between the path's start (values above the
+    // thresholds) and the sample on the minimum of the watched functions.
+    // A function that starts at or below zero (within its threshold: a pair that has just
+    // switched) counts as below once it is below minus its threshold, others once negative.
+    Vector levels = Vector::Zero(n);
+    if (functions.values(0.0, &values)) {
+      for (Eigen::Index k = 0; k < n; ++k) levels[k] = values[k] <= 0.0 ? -thresholds[k] : 0.0;
+    }
+    double lo = 0.0, hi = crossing.sample;
+    for (int i = 0; i < limits.bisections; ++i) {
+      const double mid = 0.5 * (lo + hi);
+      bool below = false;
+      if (functions.values(mid, &values)) {
+        for (Eigen::Index k = 0; k < n && !below; ++k) {
+          below = watched[static_cast<std::size_t>(k)] && values[k] < levels[k];
+        }
+      }
+      (below ? hi : lo) = mid;
+    }
+    crossing.theta = hi;
+    return crossing;
+  }
+  if (unresolved) {
+    crossing.outcome = CrossingOutcome::kUnresolved;
+    crossing.sample = unresolved_at;
+    crossing.function = unresolved_function;
+  }
+  return crossing;
+}
+
+double HermiteMinimum(const std::vector<double>& nodes, const std::vector<double>& values,
+                      const std::vector<double>& slopes, int samples, double* theta) {
+  const std::size_t n = nodes.size();
+  MOREAU_ASSERT(n > 0 && values.size() == n && slopes.size() == n,
+                "HermiteMinimum: one value and slope per node");
+  // Divided differences on z = (x_0, x_0, x_1, x_1, ...): f[z_2i, z_2i+1] = f'(x_i).
+  const std::size_t m = 2 * n;
+  std::vector<double> z(m), table(m);
+  for (std::size_t i = 0; i < n; ++i) {
+    z[2 * i] = z[2 * i + 1] = nodes[i];
+    table[2 * i] = table[2 * i + 1] = values[i];
+  }
+  std::vector<double> coefficients(m);
+  coefficients[0] = table[0];
+  for (std::size_t level = 1; level < m; ++level) {
+    for (std::size_t i = m - 1; i >= level; --i) {
+      const double dz = z[i] - z[i - level];
+      table[i] = dz == 0.0 ? slopes[i / 2] : (table[i] - table[i - 1]) / dz;
+    }
+    coefficients[level] = table[level];
+  }
+  double best = std::numeric_limits<double>::infinity();
+  *theta = 0.5;
+  for (int k = 0; k < samples; ++k) {
+    const double x = (k + 0.5) / samples;
+    double value = coefficients[m - 1];
+    for (std::size_t i = m - 1; i-- > 0;) value = value * (x - z[i]) + coefficients[i];
+    if (value < best) {
+      best = value;
+      *theta = x;
+    }
+  }
+  return best;
+}
+
+}  // namespace moreau::internal
