@@ -262,7 +262,7 @@ TEST(AlphaDaiMethodTest, StiffLinearSystemStaysBounded) {
   for (double rho : kRhos) {
     AlphaDaiOptions options;
     options.rho = rho;
-    options.max_step_size = 1e-3;
+    options.step_size = 1e-3;
     const AlphaDaiResult result = SimulateAlphaDai(scene, options);
     ASSERT_EQ(result.status, AlphaDaiStatus::kSuccess) << result.message;
     ASSERT_EQ(result.stats.num_steps, 10000);
@@ -276,7 +276,7 @@ TEST(AlphaDaiMethodTest, StiffLinearSystemStaysBounded) {
     // Omega^2 y_0). Both accumulate round-off of a few ulps of the O(|Omega|) transient per step.
     constexpr double kRecursionAgreement = 1e-10;
     constexpr int kCompared = 50;
-    const std::complex<double> omega = -1e6 * options.max_step_size;
+    const std::complex<double> omega = -1e6 * options.step_size;
     const Eigen::Matrix2cd amplification = AlphaAmplificationMatrix(rho, omega);
     Eigen::Vector2cd state(1.0, omega * omega);
     for (int n = 1; n <= kCompared; ++n) {
@@ -302,7 +302,7 @@ TEST(AlphaDaiOrderTest, UnconstrainedSmoothProblemIsSecondOrder) {
     for (double h : steps) {
       AlphaDaiOptions options;
       options.rho = rho;
-      options.max_step_size = h;
+      options.step_size = h;
       const AlphaDaiResult result = SimulateAlphaDai(scene, options);
       ASSERT_EQ(result.status, AlphaDaiStatus::kSuccess) << result.message;
       EXPECT_LE(result.stats.max_dynamics_residual, kDefaults.dynamics_tolerance);
@@ -326,7 +326,7 @@ TEST(AlphaDaiOrderTest, Index2ActiveConstraintStateSecondAlgebraicFirstOrder) {
     for (double h : steps) {
       AlphaDaiOptions options;
       options.rho = rho;
-      options.max_step_size = h;
+      options.step_size = h;
       options.objective = AlphaDaiObjective::kLeastChange;
       const AlphaDaiResult result = SimulateAlphaDai(scene, options);
       ASSERT_EQ(result.status, AlphaDaiStatus::kSuccess) << result.message;
@@ -372,7 +372,7 @@ TEST(AlphaDaiOrderTest, Index2ActiveConstraintStateSecondAlgebraicFirstOrder) {
 AlphaDaiResult RunScene(const std::string& name, double rho, double h, int max_retries = 5) {
   AlphaDaiOptions options;
   options.rho = rho;
-  options.max_step_size = h;
+  options.step_size = h;
   options.max_retries = max_retries;
   return SimulateAlphaDai(MakeScene(name), options);
 }
@@ -565,7 +565,7 @@ Scene RunawayWall() {
 
 TEST(AlphaDaiStatusTest, FailuresGiveTheirDocumentedStatuses) {
   AlphaDaiOptions options;
-  options.max_step_size = 0.1;
+  options.step_size = 0.1;
   AlphaDaiResult result = SimulateAlphaDai(RunawayWall(), options);
   EXPECT_EQ(result.status, AlphaDaiStatus::kInfeasibleConstraints);
   EXPECT_EQ(result.final_time, 0.0);
@@ -576,7 +576,7 @@ TEST(AlphaDaiStatusTest, FailuresGiveTheirDocumentedStatuses) {
 
   // One SQP iteration cannot converge from x_n: every try fails, then the retries run out.
   options = {};
-  options.max_step_size = 0.25;
+  options.step_size = 0.25;
   options.max_sqp_iterations = 1;
   result = SimulateAlphaDai(MakeScene("D3"), options);
   EXPECT_EQ(result.status, AlphaDaiStatus::kRetriesExhausted);
@@ -585,6 +585,7 @@ TEST(AlphaDaiStatusTest, FailuresGiveTheirDocumentedStatuses) {
   EXPECT_NE(result.message.find("iteration limit"), std::string::npos) << result.message;
 
   options = {};
+  options.step_size = 0.1;
   options.error_tolerance = 1e-30;
   result = SimulateAlphaDai(MakeScene("hopf"), options);
   EXPECT_EQ(result.status, AlphaDaiStatus::kStepSizeTooSmall);
@@ -594,14 +595,15 @@ TEST(AlphaDaiStatusTest, FailuresGiveTheirDocumentedStatuses) {
   // The step rule shrinks the steps below h_max = tf: more than max_steps at run time.
   options = {};
   options.max_steps = 3;
-  options.max_step_size = 2.0;  // hopf's horizon: one step would do
+  options.step_size = 2.0;  // hopf's horizon: one step would do
   options.error_tolerance = 1e-6;
   result = SimulateAlphaDai(MakeScene("hopf"), options);
   EXPECT_EQ(result.status, AlphaDaiStatus::kMaxStepsReached);
   EXPECT_EQ(result.stats.num_steps, 3);
 
-  // Fixed steps h_max over the horizon need 20 steps: refused before any work.
+  // Fixed steps h = 0.1 over the horizon need 20 steps: refused before any work.
   options = {};
+  options.step_size = 0.1;
   options.max_steps = 3;
   try {
     SimulateAlphaDai(MakeScene("hopf"), options);
@@ -617,7 +619,7 @@ TEST(AlphaDaiStatusTest, FailuresGiveTheirDocumentedStatuses) {
 TEST(AlphaDaiStepSizeTest, FollowsTheErrtolRule) {
   const Scene scene = MakeScene("hopf");
   AlphaDaiOptions options;
-  options.max_step_size = 0.05;
+  options.step_size = 0.05;
   options.error_tolerance = 1e-4;
   const AlphaDaiResult result = SimulateAlphaDai(scene, options);
   ASSERT_EQ(result.status, AlphaDaiStatus::kSuccess) << result.message;
@@ -627,16 +629,16 @@ TEST(AlphaDaiStepSizeTest, FollowsTheErrtolRule) {
   scene.dynamics.Jacobian(scene.initial_state, Vector(), 0.0, scene.ParameterValues(), Wrt::X(), &f,
                           &jac);
   double largest = (jac * f).lpNorm<Eigen::Infinity>();
-  double previous = options.max_step_size;
+  double previous = options.step_size;
   bool limited = false;
   for (const AlphaDaiStep& step : result.steps) {
     const double rule =
-        std::sqrt(std::min({options.max_step_size * options.max_step_size, previous * previous,
+        std::sqrt(std::min({options.step_size * options.step_size, previous * previous,
                             options.error_tolerance / (2.25 * largest)}));
     // The same floating-point expression up to the order of the min: a few ulps.
     EXPECT_NEAR(step.h_rule, rule, 1e-15) << "t = " << step.t;
     EXPECT_LE(step.h, step.h_rule * (1.0 + 1e-12)) << "t = " << step.t;
-    if (rule < options.max_step_size) limited = true;
+    if (rule < options.step_size) limited = true;
     previous = step.h_rule;
     largest = std::max(largest, step.acceleration_norm);
   }
@@ -667,7 +669,7 @@ TEST(AlphaDaiObjectiveTest, ReferenceFollowsTheUserInputFunction) {
         out[0] = v[0] + v[1];
       });
   AlphaDaiOptions options;
-  options.max_step_size = 0.1;
+  options.step_size = 0.1;
   // u - w is the objective's gradient; the SQP stops once the KKT residual, which it bounds up
   // to the multipliers of the dynamics rows (of the size of the 1e-8 proximal weight on x), is
   // below the optimality tolerance.
@@ -711,7 +713,7 @@ TEST(AlphaDaiInputTest, BadOptionsAndScenesAreRejected) {
     };
   };
   ExpectInvalid(with([](AlphaDaiOptions* o) { o->rho = 1.0; }), "rho must be in [0, 1)");
-  ExpectInvalid(with([](AlphaDaiOptions* o) { o->max_step_size = 0.0; }), "max_step_size");
+  ExpectInvalid(with([](AlphaDaiOptions* o) { o->step_size = -1.0; }), "step_size");
   ExpectInvalid(with([](AlphaDaiOptions* o) { o->error_tolerance = 0.0; }), "error_tolerance");
   ExpectInvalid(with([](AlphaDaiOptions* o) { o->min_step_size = 1.0; }), "min_step_size");
   ExpectInvalid(with([](AlphaDaiOptions* o) { o->constraint_tolerance = 0.0; }),
