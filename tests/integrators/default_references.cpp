@@ -88,10 +88,16 @@ Reference AlphaReference(const Scene& scene) {
   std::string failures;
   for (double n : kAlphaDivisions) {
     const double h = horizon / n;
-    const SimulationResult coarse =
-        Run(scene, "alpha", {{"h", h}, {"max_steps", 10'000'000L}, {"record_trajectory", false}});
-    const SimulationResult fine = Run(
-        scene, "alpha", {{"h", 0.5 * h}, {"max_steps", 10'000'000L}, {"record_trajectory", true}});
+    const SimulationResult coarse = Run(scene, "alpha",
+                                        {{"h", h},
+                                         {"max_steps", 10'000'000L},
+                                         {"record_trajectory", false},
+                                         {"estimate_error", false}});
+    const SimulationResult fine = Run(scene, "alpha",
+                                      {{"h", 0.5 * h},
+                                       {"max_steps", 10'000'000L},
+                                       {"record_trajectory", true},
+                                       {"estimate_error", false}});
     if (!coarse.success || !fine.success) {
       failures += " n = " + std::to_string(static_cast<long>(n)) + ": " +
                   (coarse.success ? fine.status : coarse.status) + ";";
