@@ -423,7 +423,8 @@ TEST(AlphaDaiErrorControlTest, NoStepMeetsTheToleranceOnASmoothProblem) {
   const AlphaDaiOptions defaults;
   ASSERT_TRUE(defaults.ErrorControlled());
   std::vector<double> errors;
-  for (double rtol : {1e-6, 1e-7}) {
+  // The default and a looser tolerance (a tighter one costs sqrt(10) times the steps).
+  for (double rtol : {1e-6, 1e-5}) {
     AlphaDaiOptions options;
     options.relative_tolerance = rtol;
     const AlphaDaiResult result = SimulateAlphaDai(scene, options);
@@ -447,8 +448,8 @@ TEST(AlphaDaiErrorControlTest, NoStepMeetsTheToleranceOnASmoothProblem) {
     }
     EXPECT_EQ(result.final_time, scene.final_time);
   }
-  // The error follows the tolerance (a tenth of rtol: a smaller error).
-  EXPECT_LT(errors[1], errors[0]);
+  // The error follows the tolerance (ten times rtol: a larger error).
+  EXPECT_GT(errors[1], errors[0]);
 }
 
 // A given h keeps the paper's fixed steps, and their error is estimated and warned about.
@@ -480,9 +481,10 @@ TEST(AlphaDaiErrorControlTest, GivenStepIsFixedAndItsErrorEstimated) {
 
 // The DAI scenes whose SQP fails at the small steps the error control needs end with a
 // status that names the time and the reason, quickly (no crawl), never with success and a
-// wrong answer: hard_index3 (index 3), D2, D3 and dai_index2 (docs/accuracy.md).
+// wrong answer: hard_index3 (index 3) and dai_index2 (docs/accuracy.md; D2 and D3 are checked
+// by the default-accuracy test, kScenesWithStatus).
 TEST(AlphaDaiErrorControlTest, DaiScenesEndWithAnHonestStatus) {
-  for (const char* name : {"hard_index3", "dai_index2", "D2", "D3"}) {
+  for (const char* name : {"hard_index3", "dai_index2"}) {
     const AlphaDaiResult result = SimulateAlphaDai(MakeScene(name), AlphaDaiOptions{});
     EXPECT_NE(result.status, AlphaDaiStatus::kSuccess) << name << ": " << result.stats.Summary();
     EXPECT_NE(result.message.find(" at t = "), std::string::npos) << name << ": " << result.message;
