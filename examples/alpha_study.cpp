@@ -190,7 +190,7 @@ int main(int argc, char** argv) {
     const Scene scene = moreau::MakeScene(run.scene);
     AlphaDaiOptions options;
     options.rho = run.rho;
-    options.max_step_size = run.h;
+    options.step_size = run.h;
     options.max_retries = run.max_retries;
     run.result = moreau::SimulateAlphaDai(scene, options);
     run.label = run.scene + "_rho" + Format(run.rho) + "_h" + Format(run.h) +

@@ -27,10 +27,15 @@ Scene MakeDaiIndex2() {
   Scene scene;
   scene.name = "dai_index2";
   scene.description =
-      "index-2 DAI: x1' = 1, x2' = u, x3' = -x3 + u, x2 >= sin(x1) (active throughout: sin is "
-      "convex on [pi, 2pi]); exact x1 = x1(0) + t, x2 = sin(x1), u = cos(x1), x3 = (cos x1 + "
-      "sin x1)/2 + (x3(0) - (cos x1(0) + sin x1(0))/2) e^{-t}; x1(0) = 4 (a generic start: "
-      "du/dt(0) != 0), tf = 2 pi - 4";
+      "index-2 DAI: x1' = 1, x2' = u, x3' = -x3 + u, x2 >= sin(x1), u algebraic with user "
+      "input w = 0; x1(0) = 4, x2(0) = sin 4, x3(0) = 0, tf = 2 pi - 4. The solution depends "
+      "on the objective (a DAI's solution is not unique). Default (reference, u = w = 0 unless "
+      "the floor needs u): the floor falls away (cos 4 < 0), x2 = sin 4 and x3 = 0 until "
+      "t1 = 3 pi - 8, where sin x1 climbs back to x2; then x2 = sin x1, u = cos x1, x3 = "
+      "(cos x1 + sin x1)/2 + ((cos 4 - sin 4)/2) e^{-(t - t1)}, x3(T) = 1/2 + ((cos 4 - sin "
+      "4)/2) e^{-(4 - pi)} = 0.52186. Least change (u continuous): the floor is active "
+      "throughout (sin is convex on [pi, 2 pi]): x2 = sin x1, u = cos x1, x3 = (cos x1 + sin "
+      "x1)/2 + (x3(0) - (cos 4 + sin 4)/2) e^{-t}";
   scene.state_names = {"x1", "x2", "x3"};
   constexpr double kStart = 4.0;
   scene.initial_state = Vector{{kStart, std::sin(kStart), 0.0}};

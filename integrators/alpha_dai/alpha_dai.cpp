@@ -140,16 +140,34 @@ AlphaDaiObjective ParseAlphaDaiObjective(const std::string& name) {
 void AlphaDaiOptions::Validate() const {
   RequireArgument(std::isfinite(rho) && rho >= 0.0 && rho < 1.0,
                   "alpha option rho must be in [0, 1), got ", rho);
-  RequireArgument(std::isfinite(max_step_size) && max_step_size > 0.0,
-                  "alpha option max_step_size (h_max) must be positive and finite, got ",
+  RequireArgument(std::isfinite(step_size) && step_size >= 0.0,
+                  "alpha option step_size (h) must be >= 0 and finite (0: error-controlled "
+                  "steps), got ",
+                  step_size);
+  RequireArgument(std::isfinite(max_step_size) && max_step_size >= 0.0,
+                  "alpha option max_step_size (h_max) must be >= 0 and finite (0: no bound), got ",
                   max_step_size);
+  RequireArgument(std::isfinite(initial_step_size) && initial_step_size >= 0.0,
+                  "alpha option initial_step_size (h0) must be >= 0 and finite (0: automatic), "
+                  "got ",
+                  initial_step_size);
+  RequireArgument(std::isfinite(relative_tolerance) && relative_tolerance > 0.0,
+                  "alpha option relative_tolerance (rtol) must be positive, got ",
+                  relative_tolerance);
+  RequireArgument(std::isfinite(absolute_tolerance) && absolute_tolerance >= 0.0,
+                  "alpha option absolute_tolerance (atol) must be >= 0 (0: per state), got ",
+                  absolute_tolerance);
   RequireArgument(error_tolerance > 0.0,
                   "alpha option error_tolerance (ERRTOL) must be positive "
                   "(infinity for fixed steps), got ",
                   error_tolerance);
-  RequireArgument(
-      std::isfinite(min_step_size) && min_step_size > 0.0 && min_step_size <= max_step_size,
-      "alpha option min_step_size must be in (0, max_step_size], got ", min_step_size);
+  RequireArgument(!std::isfinite(error_tolerance) || (step_size > 0.0 && !adaptive),
+                  "alpha option error_tolerance (ERRTOL) is the paper's rule for fixed steps: "
+                  "it needs a fixed step h (step_size > 0) without adaptive");
+  RequireArgument(std::isfinite(min_step_size) && min_step_size > 0.0 &&
+                      (step_size == 0.0 || min_step_size <= step_size),
+                  "alpha option min_step_size must be positive and at most the step h, got ",
+                  min_step_size);
   RequireArgument(std::isfinite(constraint_tolerance) && constraint_tolerance > 0.0,
                   "alpha option constraint_tolerance (TOL) must be positive, got ",
                   constraint_tolerance);
@@ -205,6 +223,13 @@ AlphaDaiStats& AlphaDaiStats::operator+=(const AlphaDaiStats& other) {
   min_basis_sigma = std::min(min_basis_sigma, other.min_basis_sigma);
   min_rho = std::min(min_rho, other.min_rho);
   min_step = std::min(min_step, other.min_step);
+  num_rejected_steps += other.num_rejected_steps;
+  num_event_rejections += other.num_event_rejections;
+  num_failed_steps += other.num_failed_steps;
+  // Estimates of consecutive runs add up; -1 (not estimated) only if neither has one.
+  if (other.error_estimate >= 0.0)
+    error_estimate = std::max(error_estimate, 0.0) + other.error_estimate;
+  num_unestimated_steps += other.num_unestimated_steps;
   cpu_seconds += other.cpu_seconds;
   return *this;
 }
@@ -216,7 +241,9 @@ std::string AlphaDaiStats::Summary() const {
     << " rank deficient, " << num_infeasible << " infeasible), " << num_sqp_iterations
     << " SQP iterations, " << num_qp_iterations << " QP iterations, max phi+ "
     << max_constraint_violation << ", min sigma(B) " << min_basis_sigma << ", min rho " << min_rho
-    << ", " << cpu_seconds << " s";
+    << ", " << num_rejected_steps << " rejected (" << num_event_rejections << " at events, "
+    << num_failed_steps << " failed), error estimate " << error_estimate << ", " << cpu_seconds
+    << " s";
   return s.str();
 }
 
@@ -234,6 +261,25 @@ constexpr long kMaxEnumeratedBases = 64;
 constexpr double kStateProximalWeight = 1e-8;
 // A segment end closer than this fraction of the step counts as reached (round-off in t).
 constexpr double kLandingFraction = 1e-9;
+// Error control (Hairer, Norsett & Wanner, Solving ODEs I, Sec. II.4): the next step is
+// h min(kMaxGrowth, max(kMinShrink, kSafety err^{-1/2})) (the error per unit step of an
+// order-2 method is O(h^2)); a step whose SQP fails is retried with kFailureShrink h.
+constexpr double kSafety = 0.9;
+constexpr double kMaxGrowth = 5.0;
+constexpr double kMinShrink = 0.2;
+constexpr double kFailureShrink = 0.25;
+// Stall guard: steps below kStallFraction times the event resolution rtol (tf - t0) should pass
+// the error test easily when the solution is smooth and the SQP converges; more than
+// kMaxStalledAttempts rejected or failed ones in a run end it with a status naming the cause
+// instead of crawling on (the estimate of a non-smooth solution does not fall with h).
+constexpr double kStallFraction = 1e-2;
+constexpr long kMaxStalledAttempts = 50;
+// States whose scale is below this fraction of the largest state scale are weighted by that
+// fraction (a state that starts at zero has no scale of its own yet).
+constexpr double kScaleFloor = 1e-6;
+// Error control's rank test: a sensitivity row below this fraction of the size of its terms is
+// round-off (an index-3 row is O(h) of them, so this holds down to steps of about 1e-12).
+constexpr double kNegligibleSensitivity = 1e-12;
 
 long Binomial(long n, long k) {
   if (k < 0 || k > n) return 0;
@@ -261,6 +307,7 @@ class AlphaDaiRun {
  public:
   AlphaDaiRun(const Scene& scene, const AlphaDaiOptions& options, const ProgressCallback& progress)
       : scene_(scene), options_(options), progress_(progress) {
+    adaptive_ = options.ErrorControlled();
     nx_ = scene.num_states();
     dynamics_ = scene.dynamics;
     parameters_ = scene.ParameterValues();
@@ -309,15 +356,19 @@ class AlphaDaiRun {
     }
     const std::vector<double> ends =
         SegmentEnds(scene_.initial_time, scene_.final_time, scene_.ControlBreakpoints());
-    // Steps are at most h_max: fewer than FixedStepCount is impossible, so a horizon that
+    // Fixed steps are at most h: fewer than FixedStepCount is impossible, so a horizon that
     // needs more than max_steps is refused before any work.
-    RequireFixedStepsWithin(ends, options_.max_step_size, options_.max_steps);
+    if (!adaptive_) RequireFixedStepsWithin(ends, options_.step_size, options_.max_steps);
     t_ = scene_.initial_time;
     x_ = scene_.initial_state;
+    horizon_ = scene_.final_time - scene_.initial_time;
+    scale_ = x_.cwiseAbs();
     inputs_ = scene_.InputValues(t_);
     InitializeAlgebraic();  // Step 1: consistent u_0 (throws if none)
     result.trajectory.Append(t_, x_, u_, 0.0);
-    h_previous_ = options_.max_step_size;
+    h_previous_ = options_.step_size;
+    h_next_ = InitialStep();
+    if (adaptive_ || options_.estimate_error) stats_.error_estimate = 0.0;
     bool ok = true;
     for (std::size_t segment = 0; ok && segment + 1 < ends.size(); ++segment) {
       inputs_ = scene_.InputValues(ends[segment]);
@@ -327,6 +378,11 @@ class AlphaDaiRun {
         break;
       }
       ok = RunSegment(ends[segment + 1], &result);
+    }
+    if (!adaptive_ && ok) {
+      const std::string warning =
+          ErrorEstimateWarning(stats_.error_estimate, options_.relative_tolerance);
+      if (!warning.empty()) result.warnings.push_back(warning);
     }
     result.final_time = t_;
     result.final_state = x_;
@@ -477,14 +533,65 @@ class AlphaDaiRun {
   }
 
   // ------------------------------------------------------------------------------- stepping
+  // A solved step from (t_, x_, u_, f_, a_), not yet accepted.
+  struct Candidate {
+    double t1 = 0.0, h = 0.0, h_rule = 0.0, rho = 0.0;
+    int tries = 0;
+    internal::SqpResult sqp;
+    BasisInfo basis;
+    Vector x1, u1, f1, a1;
+    std::vector<int> active;
+    AlphaDaiStatus status = AlphaDaiStatus::kSuccess;  // why no step was found
+    std::string reason;
+  };
+
+  // The run's state at t_ (what a rejected or comparison step restores).
+  struct Snapshot {
+    double t = 0.0;
+    Vector x, u, f, a;
+    std::vector<int> active;
+    double max_acceleration = 0.0;
+  };
+  Snapshot Save() const { return {t_, x_, u_, f_, a_, active_, max_acceleration_}; }
+  void Restore(const Snapshot& snapshot) {
+    t_ = snapshot.t;
+    x_ = snapshot.x;
+    u_ = snapshot.u;
+    f_ = snapshot.f;
+    a_ = snapshot.a;
+    active_ = snapshot.active;
+    max_acceleration_ = snapshot.max_acceleration;
+  }
+  // Moves the state to a candidate's end without recording it (the first half step of a
+  // comparison).
+  void Advance(const Candidate& c) {
+    t_ = c.t1;
+    x_ = c.x1;
+    u_ = c.u1;
+    f_ = c.f1;
+    a_ = c.a1;
+    active_ = c.active;
+  }
+
+  double InitialStep() const {
+    double h = options_.initial_step_size > 0.0 ? options_.initial_step_size
+               : options_.step_size > 0.0       ? options_.step_size
+                                                : horizon_ * std::sqrt(options_.relative_tolerance);
+    if (options_.max_step_size > 0.0) h = std::min(h, options_.max_step_size);
+    return std::max(h, options_.min_step_size);
+  }
+
   bool RunSegment(double t_end, AlphaDaiResult* result) {
+    return adaptive_ ? RunAdaptiveSegment(t_end, result) : RunFixedSegment(t_end, result);
+  }
+
+  bool RunFixedSegment(double t_end, AlphaDaiResult* result) {
     while (t_ < t_end) {
       if (stats_.num_steps >= options_.max_steps) {
         return Fail(result, AlphaDaiStatus::kMaxStepsReached, "reached max_steps");
       }
-      // Step 2: h_i = sqrt(min{h_max^2, h_{i-1}^2, ERRTOL / (2.25 max_j ||a_j||_inf)}).
-      double h2 =
-          std::min(options_.max_step_size * options_.max_step_size, h_previous_ * h_previous_);
+      // Step 2: h_i = sqrt(min{h^2, h_{i-1}^2, ERRTOL / (2.25 max_j ||a_j||_inf)}).
+      double h2 = std::min(options_.step_size * options_.step_size, h_previous_ * h_previous_);
       if (std::isfinite(options_.error_tolerance) && max_acceleration_ > 0.0) {
         h2 = std::min(h2, options_.error_tolerance / (2.25 * max_acceleration_));
       }
@@ -497,51 +604,193 @@ class AlphaDaiRun {
           << ")";
         return Fail(result, AlphaDaiStatus::kStepSizeTooSmall, s.str());
       }
-      if (!Step(t_end, &h_nominal, result)) return false;
+      Candidate step;
+      if (!Solve(t_end, &h_nominal, &step)) return Fail(result, step.status, step.reason);
+      if (options_.estimate_error) EstimateFixedStep(step);
+      Commit(step, h_nominal, result);
       h_previous_ = h_nominal;
       if (progress_) progress_(t_);
     }
     return true;
   }
 
-  // End of the next step: equal steps of at most h_nominal over the rest of the segment; the
-  // last one lands exactly on t_end.
+  // Fixed steps: the step-doubling estimate of an accepted step (two half steps from the same
+  // start), accumulated into error_estimate; the state is left as it was.
+  void EstimateFixedStep(const Candidate& step) {
+    const Snapshot start = Save();
+    Candidate first, second;
+    bool ok = Solve(t_ + 0.5 * step.h, nullptr, &first);
+    if (ok) {
+      Advance(first);
+      ok = Solve(step.t1, nullptr, &second);
+    }
+    Restore(start);
+    if (!ok) {
+      ++stats_.num_unestimated_steps;
+      return;
+    }
+    const double err = ErrorPerUnitStep(start.x, step.x1, second.x1, step.h);
+    stats_.error_estimate += options_.relative_tolerance * step.h / horizon_ * err;
+  }
+
+  // Error control by step doubling (see the header): one step of h and two of h/2 from t_;
+  // the half steps are kept when the estimate passes (or, when the working set changes in
+  // the step, when h <= rtol (tf - t0)).
+  bool RunAdaptiveSegment(double t_end, AlphaDaiResult* result) {
+    const double rtol = options_.relative_tolerance;
+    const double event_step = std::max(rtol * horizon_, options_.min_step_size);
+    while (t_ < t_end) {
+      if (stats_.num_steps >= options_.max_steps) {
+        return Fail(result, AlphaDaiStatus::kMaxStepsReached, "reached max_steps");
+      }
+      const double remaining = t_end - t_;
+      double h = std::min(h_next_, remaining);
+      if (remaining - h <= kLandingFraction * h) h = remaining;
+      const double t1 = h == remaining ? t_end : t_ + h;
+      const Snapshot start = Save();
+      Candidate coarse, first, second;
+      const Candidate* failed = &coarse;
+      bool ok = Solve(t1, nullptr, &coarse);
+      if (ok) {
+        failed = &first;
+        ok = Solve(t_ + 0.5 * h, nullptr, &first);
+      }
+      if (ok) {
+        Advance(first);
+        failed = &second;
+        ok = Solve(t1, nullptr, &second);
+      }
+      Restore(start);
+      // Steps far below the event resolution pass the error test easily when the solution is
+      // smooth and the SQP converges: many rejections there mean neither holds.
+      const double err = ok ? ErrorPerUnitStep(start.x, coarse.x1, second.x1, h) : 0.0;
+      if ((!ok || err > 1.0) && h < kStallFraction * event_step &&
+          ++stalled_attempts_ > kMaxStalledAttempts) {
+        std::ostringstream s;
+        s << "the error control stalled: " << stalled_attempts_ << " steps shorter than "
+          << kStallFraction << " rtol (tf - t0) = " << kStallFraction * event_step
+          << " were rejected or failed (the last at h = " << h
+          << "): the SQP fails or the estimate does not fall with h (the solution is not "
+             "smooth at this resolution); last: ";
+        if (ok) {
+          s << "estimated error per unit step " << err << " of the tolerance";
+        } else {
+          s << failed->reason;
+        }
+        return Fail(result, ok ? AlphaDaiStatus::kStepSizeTooSmall : failed->status, s.str());
+      }
+      if (!ok) {
+        // Step 2c's retries did not help at this h: a shorter step (FESD and Radau do the same).
+        ++stats_.num_failed_steps;
+        h_next_ = kFailureShrink * h;
+        if (h_next_ < options_.min_step_size) {
+          std::ostringstream s;
+          s << failed->reason << "; the step was retried shorter down to h = " << h
+            << " (min_step_size = " << options_.min_step_size << ")";
+          return Fail(result, failed->status, s.str());
+        }
+        continue;
+      }
+      const bool event = first.active != start.active || second.active != first.active ||
+                         coarse.active != start.active;
+      if (event && h > event_step) {
+        ++stats_.num_rejected_steps;
+        ++stats_.num_event_rejections;
+        h_next_ = std::max(kFailureShrink * h, event_step);
+        continue;
+      }
+      if (!event && err > 1.0) {
+        ++stats_.num_rejected_steps;
+        h_next_ = h * std::max(kMinShrink, kSafety / std::sqrt(err));
+        if (h_next_ < options_.min_step_size) {
+          std::ostringstream s;
+          s << "the error control needs h = " << h_next_
+            << " < min_step_size = " << options_.min_step_size << " (estimated error per unit step "
+            << err << " of the tolerance)";
+          return Fail(result, AlphaDaiStatus::kStepSizeTooSmall, s.str());
+        }
+        continue;
+      }
+      Commit(first, h, result);
+      Commit(second, h, result);
+      stats_.error_estimate += rtol * h / horizon_ * err;
+      // At an event f jumps, and (2b) turns the jump into a ~ jump / (gamma h) that decays
+      // only by (1 - 1/gamma) per step: its h^2 a term in (2a) would be an O(h) local error
+      // in every following step. a restarts from df/dt as at a control breakpoint.
+      if (event && !RestartAcceleration()) {
+        return Fail(result, AlphaDaiStatus::kNonFinite, "f or df/dt is not finite");
+      }
+      // After an event the estimate (O(h) local error) says nothing about the smooth part.
+      const double growth =
+          event || err == 0.0
+              ? kMaxGrowth
+              : std::min(kMaxGrowth, std::max(kMinShrink, kSafety / std::sqrt(err)));
+      h_next_ = h * growth;
+      if (options_.max_step_size > 0.0) h_next_ = std::min(h_next_, options_.max_step_size);
+      if (progress_) progress_(t_);
+    }
+    return true;
+  }
+
+  // The step-doubling estimate (fine - coarse) / (2^2 - 1) of the order-2 method, in the
+  // tolerance weights atol_i + rtol max(|x_n,i|, |x_n+1,i|), per unit step: <= 1 passes.
+  double ErrorPerUnitStep(const Vector& x0, const Vector& coarse, const Vector& fine,
+                          double h) const {
+    const double rtol = options_.relative_tolerance;
+    const double floor =
+        rtol * kScaleFloor * std::max(scale_.maxCoeff(), std::numeric_limits<double>::min());
+    double worst = 0.0;
+    for (Eigen::Index i = 0; i < nx_; ++i) {
+      const double atol =
+          options_.absolute_tolerance > 0.0 ? options_.absolute_tolerance : rtol * scale_[i];
+      const double weight =
+          std::max(atol + rtol * std::max(std::fabs(x0[i]), std::fabs(fine[i])), floor);
+      worst = std::max(worst, std::fabs(fine[i] - coarse[i]) / 3.0 / weight);
+    }
+    return worst * horizon_ / h;
+  }
+
+  // End of the next fixed step: equal steps of at most h_nominal over the rest of the
+  // segment; the last one lands exactly on t_end.
   double StepEnd(double t_end, double h_nominal) const {
     const double remaining = t_end - t_;
     const double count = std::max(1.0, std::ceil(remaining / h_nominal - kLandingFraction));
     return count == 1.0 ? t_end : t_ + remaining / count;
   }
 
-  // One step with the retry logic of Sec. 7 (Steps 2, 2a-2c).
-  bool Step(double t_end, double* h_nominal, AlphaDaiResult* result) {
+  // One step with the retry logic of Sec. 7 (Steps 2, 2a-2c). Fixed steps (h_nominal given):
+  // the step ends at StepEnd(t_end, *h_nominal), and a regularization at rho = 0 retries with
+  // h = h (Step 2b); error control (h_nominal null): the step ends at t_end.
+  bool Solve(double t_end, double* h_nominal, Candidate* out) {
     double rho = options_.rho;
     int retries = 0;
     int guess_index = 0;
     std::ostringstream history;
     TryFailure failure = TryFailure::kNone;
     while (true) {
-      const double t1 = StepEnd(t_end, *h_nominal);
+      const double t1 = h_nominal != nullptr ? StepEnd(t_end, *h_nominal) : t_end;
       const double h = t1 - t_;
       const internal::SqpResult sqp = Try(t1, rho, guess_index, &failure);
       ++stats_.num_tries;
       if (failure == TryFailure::kNone) {
-        return Accept(t1, *h_nominal, rho, retries + 1, sqp, result);
+        return Finish(t1, h_nominal != nullptr ? *h_nominal : h, rho, retries + 1, sqp, out);
       }
       history << (retries == 0 ? "" : "; ") << "try " << retries + 1 << " (rho = " << rho
               << ", h = " << h << ", guess " << guess_index << "): " << Describe(failure, sqp);
       bool regularize = false;
       if (failure == TryFailure::kRankDeficient) {
         ++stats_.num_rank_deficient;
-        // Step 2b: lower rho by 0.1 (h = h_max once rho = 0) unless that is exhausted.
-        regularize =
-            retries < options_.max_retries && !(rho == 0.0 && *h_nominal == options_.max_step_size);
+        // Step 2b: lower rho by 0.1 (fixed steps: h = h_max once rho = 0) unless that is
+        // exhausted.
+        regularize = retries < options_.max_retries &&
+                     !(rho == 0.0 && (h_nominal == nullptr || *h_nominal == options_.step_size));
       } else if (failure == TryFailure::kInfeasible) {
         ++stats_.num_infeasible;
       }
       if (regularize) {
         // Repeated decrements leave round-off (0.5 - 5 x 0.1 = 2.8e-17): such values are 0.
         rho = rho - kRhoDecrement > kRhoRoundOff ? rho - kRhoDecrement : 0.0;
-        if (rho == 0.0) *h_nominal = options_.max_step_size;
+        if (rho == 0.0 && h_nominal != nullptr) *h_nominal = options_.step_size;
         ++stats_.num_rho_reductions;
         ++retries;
         continue;
@@ -553,13 +802,12 @@ class AlphaDaiRun {
         ++retries;
         continue;
       }
-      const AlphaDaiStatus status =
-          failure == TryFailure::kInfeasible      ? AlphaDaiStatus::kInfeasibleConstraints
-          : failure == TryFailure::kRankDeficient ? AlphaDaiStatus::kRegularizationFailed
-                                                  : AlphaDaiStatus::kRetriesExhausted;
-      return Fail(result, status,
-                  "no acceptable step after " + std::to_string(retries + 1) + " tries (" +
-                      std::to_string(options_.max_retries) + " retries allowed): " + history.str());
+      out->status = failure == TryFailure::kInfeasible      ? AlphaDaiStatus::kInfeasibleConstraints
+                    : failure == TryFailure::kRankDeficient ? AlphaDaiStatus::kRegularizationFailed
+                                                            : AlphaDaiStatus::kRetriesExhausted;
+      out->reason = "no acceptable step after " + std::to_string(retries + 1) + " tries (" +
+                    std::to_string(options_.max_retries) + " retries allowed): " + history.str();
+      return false;
     }
   }
 
@@ -816,81 +1064,126 @@ class AlphaDaiRun {
     basis_.basic = best;
     basis_.sigma_min = best_sigma[best_sigma.size() - 1];
     basis_.condition = best_condition;
+    if (adaptive_ && r > 0) {
+      // Error control picks h for accuracy, so the test must not depend on h: the active
+      // constraints' sensitivity to the basic inputs through one step (the Schur complement
+      // of B), S = C (I - c1 h A)^{-1} c1 h D_b + G_b, each row scaled to unit norm. Its
+      // singular values measure the linear independence of the active constraints (LICQ),
+      // O(1) for every index, where the scaled basis matrix's are O(h) for index 3.
+      const double c1 = co.beta / co.gamma;
+      Matrix d(nx_, r), g(r, r);
+      for (int k = 0; k < r; ++k) {
+        d.col(k) = d_matrix_.col(best[static_cast<std::size_t>(k)]);
+        g.col(k) = g_all.col(best[static_cast<std::size_t>(k)]);
+      }
+      const Matrix through =
+          (Matrix::Identity(nx_, nx_) - c1 * h * a_matrix_).partialPivLu().solve(c1 * h * d);
+      Matrix sensitivity = c * through + g;
+      const double through_norm = through.norm();
+      for (int i = 0; i < r; ++i) {
+        const double size = sensitivity.row(i).norm();
+        const double bound = c.row(i).norm() * through_norm + g.row(i).norm();
+        // A row at round-off level of its terms: the constraint does not see the inputs.
+        if (size <= kNegligibleSensitivity * bound) {
+          sensitivity.row(i).setZero();
+        } else {
+          sensitivity.row(i) /= size;
+        }
+      }
+      const Eigen::VectorXd sigma = Eigen::JacobiSVD<Matrix>(sensitivity).singularValues();
+      ++stats_.num_basis_factorizations;
+      basis_.sigma_min = sigma[sigma.size() - 1];
+      basis_.condition = sigma[0] / basis_.sigma_min;
+    }
     return basis_.sigma_min > options_.rank_tolerance;
   }
 
-  bool Accept(double t1, double h_rule, double rho, int tries, const internal::SqpResult& sqp,
-              AlphaDaiResult* result) {
+  // The converged SQP of a step as a candidate: x, u, f and a (2b) at t1.
+  bool Finish(double t1, double h_rule, double rho, int tries, const internal::SqpResult& sqp,
+              Candidate* c) {
     const AlphaCoefficients co = AlphaCoefficients::FromRho(rho);
-    const Vector x1 = sqp.z.head(nx_), u1 = sqp.z.tail(nq_);
-    const double h = t1 - t_;
-    const Vector f1 = EvaluateF(x1, u1, t1);
+    c->t1 = t1;
+    c->h = t1 - t_;
+    c->h_rule = h_rule;
+    c->rho = rho;
+    c->tries = tries;
+    c->sqp = sqp;
+    c->basis = basis_;
+    c->x1 = sqp.z.head(nx_);
+    c->u1 = sqp.z.tail(nq_);
+    c->f1 = EvaluateF(c->x1, c->u1, t1);
     // (2b)
-    const Vector a1 = (f1 - f_) / (h * co.gamma) + (1.0 - 1.0 / co.gamma) * a_;
-    if (!f1.allFinite() || !a1.allFinite() || !x1.allFinite()) {
-      return Fail(result, AlphaDaiStatus::kNonFinite, "f or a is not finite at the new point");
+    c->a1 = (c->f1 - f_) / (c->h * co.gamma) + (1.0 - 1.0 / co.gamma) * a_;
+    c->active = ActiveIndices(sqp.working_set);
+    if (!c->f1.allFinite() || !c->a1.allFinite() || !c->x1.allFinite()) {
+      c->status = AlphaDaiStatus::kNonFinite;
+      c->reason = "f or a is not finite at the new point";
+      return false;
     }
-    const double c = co.beta / co.gamma;
-    const Vector residual = x1 - x_ - (1.0 - c) * h * f_ - c * h * f1 - (0.5 - c) * h * h * a_;
+    return true;
+  }
+
+  // Accepts a candidate from the current state: certificates, events, statistics, trajectory.
+  void Commit(const Candidate& c, double h_rule, AlphaDaiResult* result) {
+    const AlphaCoefficients co = AlphaCoefficients::FromRho(c.rho);
+    const double h = c.h;
+    const double cc = co.beta / co.gamma;
+    const Vector residual =
+        c.x1 - x_ - (1.0 - cc) * h * f_ - cc * h * c.f1 - (0.5 - cc) * h * h * a_;
     AlphaDaiStep step;
-    step.t = t1;
+    step.t = c.t1;
     step.h = h;
     step.h_rule = h_rule;
-    step.rho = rho;
-    step.tries = tries;
-    step.sqp_iterations = sqp.iterations;
+    step.rho = c.rho;
+    step.tries = c.tries;
+    step.sqp_iterations = c.sqp.iterations;
     step.dynamics_residual = (residual.array().abs() / (1.0 + x_.array().abs())).maxCoeff();
-    step.acceleration_norm = a1.lpNorm<Eigen::Infinity>();
+    step.acceleration_norm = c.a1.lpNorm<Eigen::Infinity>();
     Vector phi;
-    EvaluatePhi(x1, u1, t1, &phi, nullptr, nullptr);
+    EvaluatePhi(c.x1, c.u1, c.t1, &phi, nullptr, nullptr);
     double violation = nphi_ > 0 ? std::max(0.0, phi.maxCoeff()) : 0.0;
-    violation = std::max(violation, (x_lower_ - x1).maxCoeff());
-    violation = std::max(violation, (x1 - x_upper_).maxCoeff());
+    violation = std::max(violation, (x_lower_ - c.x1).maxCoeff());
+    violation = std::max(violation, (c.x1 - x_upper_).maxCoeff());
     if (nq_ > 0) {
-      violation = std::max(violation, (u_lower_ - u1).maxCoeff());
-      violation = std::max(violation, (u1 - u_upper_).maxCoeff());
+      violation = std::max(violation, (u_lower_ - c.u1).maxCoeff());
+      violation = std::max(violation, (c.u1 - u_upper_).maxCoeff());
     }
     step.constraint_violation = violation;
-    step.kkt_residual = sqp.kkt_residual;
-    step.num_active = basis_.num_active;
-    step.num_active_input_bounds = basis_.num_input_bounds;
-    step.basis_sigma_min = basis_.sigma_min;
-    step.basis_condition = basis_.condition;
-    step.active = ActiveIndices(sqp.working_set);
+    step.kkt_residual = c.sqp.kkt_residual;
+    step.num_active = c.basis.num_active;
+    step.num_active_input_bounds = c.basis.num_input_bounds;
+    step.basis_sigma_min = c.basis.sigma_min;
+    step.basis_condition = c.basis.condition;
+    step.active = c.active;
     for (int k : step.active) {
       if (!std::binary_search(active_.begin(), active_.end(), k)) {
         result->events.push_back(
-            {t1, EventKind::kEnter, constraint_names_[static_cast<std::size_t>(k)], "active"});
+            {c.t1, EventKind::kEnter, constraint_names_[static_cast<std::size_t>(k)], "active"});
       }
     }
     for (int k : active_) {
       if (!std::binary_search(step.active.begin(), step.active.end(), k)) {
         result->events.push_back(
-            {t1, EventKind::kLeave, constraint_names_[static_cast<std::size_t>(k)], "inactive"});
+            {c.t1, EventKind::kLeave, constraint_names_[static_cast<std::size_t>(k)], "inactive"});
       }
     }
-    active_ = step.active;
 
     ++stats_.num_steps;
     stats_.max_constraint_violation = std::max(stats_.max_constraint_violation, violation);
     stats_.max_dynamics_residual = std::max(stats_.max_dynamics_residual, step.dynamics_residual);
     stats_.max_kkt_residual = std::max(stats_.max_kkt_residual, step.kkt_residual);
     stats_.min_basis_sigma = std::min(stats_.min_basis_sigma, step.basis_sigma_min);
-    stats_.min_rho = std::min(stats_.min_rho, rho);
+    stats_.min_rho = std::min(stats_.min_rho, c.rho);
     stats_.min_step = std::min(stats_.min_step, h);
 
-    t_ = t1;
-    x_ = x1;
-    u_ = u1;
-    f_ = f1;
-    a_ = a1;
+    Advance(c);
+    scale_ = scale_.cwiseMax(x_.cwiseAbs());
     max_acceleration_ = std::max(max_acceleration_, a_.lpNorm<Eigen::Infinity>());
     last_step_ = h;
     if (options_.record_trajectory) {
       result->trajectory.Append(t_, x_, u_, h);
       result->steps.push_back(std::move(step));
     }
-    return true;
   }
 
   bool Fail(AlphaDaiResult* result, AlphaDaiStatus status, const std::string& reason) {
@@ -917,8 +1210,13 @@ class AlphaDaiRun {
   double t_ = 0.0;
   Vector x_, u_, f_, a_;
   double max_acceleration_ = 0.0;
-  double h_previous_ = 0.0;
+  double h_previous_ = 0.0;  // fixed steps: the previous rule step
+  double h_next_ = 0.0;      // error control: the next step
   double last_step_ = 0.0;
+  bool adaptive_ = false;
+  long stalled_attempts_ = 0;  // rejected or failed error-controlled steps below kStallFraction
+  double horizon_ = 0.0;
+  Vector scale_;  // largest |x_i| so far (atol = 0)
   std::vector<int> active_;
 
   // Jacobians at the SQP's last linearization point (for the basis matrix).

@@ -17,10 +17,26 @@ IntegratorEntry AlphaDaiEntry() {
   spec.iteration_unit = "SQP";
   std::vector<OptionBinding<O>> options = {
       BindReal("rho", &O::rho, "regularization rho in [0, 1) (spectral radius at infinity)"),
-      BindReal("h", &O::max_step_size, "largest step h_max > 0 (the fixed step without errtol)"),
+      BindReal("h", &O::step_size,
+               "fixed step h > 0 (the paper's h_max with errtol); not given: error-controlled "
+               "steps (step doubling); with adaptive, rtol or atol the initial step"),
+      BindBool("adaptive", &O::adaptive,
+               "error-controlled steps even with h given (on whenever h is not given)"),
+      BindReal("rtol", &O::relative_tolerance,
+               "relative tolerance of the error-controlled steps, > 0 (with h: sets adaptive)"),
+      BindReal("atol", &O::absolute_tolerance,
+               "absolute tolerance of the error-controlled steps, > 0; 0: rtol times each "
+               "state's largest magnitude so far (with h: sets adaptive)"),
+      BindReal("h0", &O::initial_step_size,
+               "initial step of the error-controlled steps, > 0 (0: automatic)"),
+      BindReal("h_min", &O::min_step_size, "smallest error-controlled step, > 0"),
+      BindReal("h_max", &O::max_step_size, "largest error-controlled step, >= 0 (0: no bound)"),
       BindReal("errtol", &O::error_tolerance,
-               "ERRTOL > 0 of the step-size rule (inf: fixed steps h_max)"),
-      BindReal("h_min", &O::min_step_size, "smallest step the rule may produce, > 0"),
+               "ERRTOL > 0 of the paper's step-size rule with a fixed step h (inf: fixed steps "
+               "h)"),
+      BindBool("estimate_error", &O::estimate_error,
+               "fixed steps: estimate the error of every step by step doubling (error_estimate, "
+               "a warning far above rtol)"),
       BindReal("tol", &O::constraint_tolerance, "phi <= tol at every accepted step, > 0"),
       BindReal("dynamics_tol", &O::dynamics_tolerance,
                "discretized dynamics hold to dynamics_tol (1 + |x|), > 0"),
@@ -60,6 +76,18 @@ IntegratorEntry AlphaDaiEntry() {
       BindStat("min_basis_sigma", &S::min_basis_sigma, "over accepted steps (inf: none)"),
       BindStat("min_rho", &S::min_rho, "smallest rho used (inf: none)"),
       BindStat("min_step", &S::min_step, "smallest step taken (inf: none)"),
+      BindStat("num_rejected_steps", &S::num_rejected_steps,
+               "error-controlled steps rejected (error test or event rule)"),
+      BindStat("num_event_rejections", &S::num_event_rejections,
+               "steps rejected because the working set changed in a step longer than rtol "
+               "(tf - t0)"),
+      BindStat("num_failed_steps", &S::num_failed_steps,
+               "error-controlled steps whose SQP failed, retried shorter"),
+      BindStat("error_estimate", &S::error_estimate,
+               "accumulated local error estimates relative to the solution's scale (-1: not "
+               "estimated)"),
+      BindStat("num_unestimated_steps", &S::num_unestimated_steps,
+               "fixed steps whose error could not be estimated"),
       BindStat("cpu_seconds", &S::cpu_seconds, "thread CPU time"),
   };
   return MakeEntry<O, AlphaDaiResult>(
@@ -90,7 +118,9 @@ IntegratorEntry AlphaDaiEntry() {
                static_cast<double>(step.num_active_input_bounds), step.basis_sigma_min,
                step.basis_condition, step.acceleration_norm});
         }
-      });
+      },
+      // Without h error-controlled steps, with h fixed ones (see AdjustStepControl).
+      AdjustStepControl<O>);
 }
 
 }  // namespace moreau::internal

@@ -404,7 +404,8 @@ TEST(HardLongOrbit, NoDriftOffTheCircleOver1e5Elements) {
 TEST(HardIndex3, AlphaMethodFollowsTheFloor) {
   const Scene scene = MakeScene("hard_index3");
   const double tf = scene.final_time;
-  AlphaDaiOptions options;  // h = 0.1, rho = 0.5, TOL = 1e-8
+  AlphaDaiOptions options;  // rho = 0.5, TOL = 1e-8
+  options.step_size = 0.1;
   const AlphaDaiResult result = SimulateAlphaDai(scene, options);
   ASSERT_EQ(result.status, AlphaDaiStatus::kSuccess) << result.message;
   ASSERT_EQ(result.steps.size(), 30u);
@@ -432,7 +433,7 @@ TEST(HardIndex3, AlphaMethodFollowsTheFloor) {
   // Documented status: at h = 0.025 the scaled basis matrix has sigma_min ~ 3e-3 to 6e-3 for
   // every rho in {0.5, ..., 0}: regularization_failed at t = 0 with the tries in the message.
   AlphaDaiOptions small;
-  small.max_step_size = 0.025;
+  small.step_size = 0.025;
   const AlphaDaiResult failed = SimulateAlphaDai(scene, small);
   EXPECT_EQ(failed.status, AlphaDaiStatus::kRegularizationFailed) << failed.message;
   EXPECT_NE(failed.message.find("at t = 0"), std::string::npos) << failed.message;

@@ -266,8 +266,9 @@ TEST(ValidationMatrix, OptionsOutOfRange) {
     radau.step_size = h;
     if (h != 0.0) ExpectRefused([&] { radau.Validate(); }, "step size", "radau " + context);
     AlphaDaiOptions alpha;
-    alpha.max_step_size = h;
-    ExpectRefused([&] { alpha.Validate(); }, "max_step_size", "alpha " + context);
+    alpha.step_size = h;
+    // 0 means error-controlled steps.
+    if (h != 0.0) ExpectRefused([&] { alpha.Validate(); }, "step_size", "alpha " + context);
     IdaOptions ida;
     ida.max_step = h;
     if (h == 0.0) continue;  // 0 means no limit

@@ -37,10 +37,29 @@
 /// rho = 0 (Sec. 7, Step 2b). Other failures retry from new initial guesses (Step 2c) until
 /// max_retries is used up.
 ///
-/// Step size (Sec. 7, Step 2): h_i = sqrt(min{h_max^2, h_{i-1}^2,
-/// ERRTOL / (2.25 max_{j <= i} ||a_j||_inf)}); ERRTOL = infinity gives fixed steps h_max.
-/// Steps are shortened to end exactly on control breakpoints and on t_f (equal steps within
-/// each segment).
+/// Step size. Without a fixed step (AlphaDaiOptions::step_size = 0, the default, as through
+/// moreau::Simulate without h): error control by step doubling (Hairer, Norsett & Wanner,
+/// "Solving Ordinary Differential Equations I", 1993, Sec. II.4): every step of length h is
+/// also taken as two steps of h/2 from the same start, and the Richardson estimate
+/// (x_{h/2,h/2} - x_h) / (2^2 - 1) of the order-2 method is the local error of the two half
+/// steps, which are kept. Weighted per state by atol_i + rtol max(|x_n,i|, |x_{n+1},i|)
+/// (atol = 0: atol_i = rtol times the largest |x_i| so far), it must stay below h / (tf - t0)
+/// (error per unit step, as FESD and Radau IIA do, so that the error at tf is about rtol of
+/// the solution's scale). A step in which the working set changes (an event: a constraint or
+/// bound becomes active or inactive; its local error is only O(h)) is instead accepted only
+/// when h <= rtol (tf - t0), which locates the event time to rtol of the horizon. The next
+/// step is h min(5, max(0.2, 0.9 err^{-1/2})); a step whose SQP fails is retried with h/4
+/// down to min_step_size. Active index-3 constraints are tested for rank deficiency by the
+/// sensitivity of the active constraints to the basic algebraic inputs through one step,
+/// S = C (I - c1 h A)^{-1} c1 h D + G with unit rows (independent of h for every index), not
+/// by the scaled basis matrix, whose sigma_min is O(h) for index 3 (Sec. 6.1.1) and would
+/// refuse every step below about 0.1.
+/// With a fixed step h (step_size > 0): the paper's rule (Sec. 7, Step 2): h_i = sqrt(min{h^2,
+/// h_{i-1}^2, ERRTOL / (2.25 max_{j <= i} ||a_j||_inf)}); ERRTOL = infinity gives fixed steps
+/// h. Steps are shortened to end exactly on control breakpoints and on t_f (equal steps
+/// within each segment). With estimate_error (default), every fixed step's error is estimated
+/// by the same step doubling and summed into AlphaDaiStats::error_estimate, with a warning
+/// when it exceeds kErrorWarningFactor rtol: a fixed-step answer is never silently wrong.
 ///
 /// Assumptions: scaled units (states and algebraic inputs of order one; the rank test
 /// compares singular values of the scaled basis matrix with an absolute tolerance);
@@ -114,14 +133,33 @@ struct AlphaDaiOptions {
   /// Regularization parameter rho in [0, 1) (paper eq. 3): spectral radius at infinity;
   /// lowered by 0.1 per retry when the basis matrix is rank deficient.
   double rho = 0.5;
-  /// Largest step h_max > 0 (time units); the fixed step when error_tolerance is infinite.
-  /// The paper's examples use 0.1 to 0.5; with the default rank_tolerance, active index-3
-  /// constraints are numerically rank deficient for every rho at much smaller steps.
-  double max_step_size = 0.1;
-  /// ERRTOL > 0 of the step-size rule (units of x): h^2 <= ERRTOL / (2.25 max ||a_j||_inf).
-  /// +infinity (default) disables the rule: fixed steps h_max, as in the paper's examples.
+  /// Fixed step h > 0 (time units; the paper's h_max of the ERRTOL rule); 0 (the default): no
+  /// fixed step, error-controlled steps (ErrorControlled()). The paper's examples use 0.1 to
+  /// 0.5; with the default rank_tolerance, active index-3 constraints are numerically rank
+  /// deficient in the scaled basis matrix for every rho at much smaller fixed steps.
+  double step_size = 0.0;
+  /// Error-controlled steps even with a step_size given (it is then the initial step).
+  bool adaptive = false;
+  /// Initial step of error-controlled runs, > 0; 0: step_size if positive, else automatic:
+  /// (tf - t0) sqrt(rtol) (the order-2 error per unit step is then about rtol), at most h_max.
+  double initial_step_size = 0.0;
+  /// Tolerances of the error-controlled steps (see the file comment): rtol > 0; atol > 0 one
+  /// absolute tolerance for every state, or 0 (the default): atol_i = rtol times the largest
+  /// |x_i| of the run so far (initial value included), each state relative to its own scale.
+  double relative_tolerance = kDefaultRelativeTolerance;
+  double absolute_tolerance = 0.0;  ///< atol: > 0 for every state, 0 per state (see above)
+  /// Largest error-controlled step, >= 0 (0: no bound but the segment).
+  double max_step_size = 0.0;
+  /// ERRTOL > 0 of the paper's step-size rule with a fixed step (units of x): h^2 <= ERRTOL /
+  /// (2.25 max ||a_j||_inf). +infinity (default) disables the rule: fixed steps h, as in the
+  /// paper's examples. Needs step_size > 0.
   double error_tolerance = std::numeric_limits<double>::infinity();
-  /// Smallest step the rule may produce, > 0; below it: AlphaDaiStatus::kStepSizeTooSmall.
+  /// Fixed steps: estimate every step's local error by step doubling (two more SQP solves per
+  /// step) into AlphaDaiStats::error_estimate, with a warning in AlphaDaiResult::warnings
+  /// above kErrorWarningFactor times relative_tolerance.
+  bool estimate_error = true;
+  /// Smallest step of the ERRTOL rule and of the error control, > 0; below it:
+  /// AlphaDaiStatus::kStepSizeTooSmall (or the status of the failed step).
   double min_step_size = 1e-12;
   /// TOL of the paper: the path constraints must satisfy phi <= constraint_tolerance at every
   /// accepted step (units of phi), > 0. Bounds are enforced exactly.
@@ -152,6 +190,8 @@ struct AlphaDaiOptions {
   /// the initial and final points in the trajectory, no step records).
   bool record_trajectory = true;
 
+  /// Whether the steps are error-controlled: adaptive, or no fixed step (step_size == 0).
+  bool ErrorControlled() const { return adaptive || step_size == 0.0; }
   /// Throws std::invalid_argument naming the first out-of-range option.
   void Validate() const;
 };
@@ -168,7 +208,7 @@ enum class AlphaDaiStatus {
                            ///< max_retries allowed (or to 0 with h = h_max)
   kRetriesExhausted,       ///< max_retries retries used and the SQP of the last try did not
                            ///< converge within max_sqp_iterations (or its line search failed)
-  kStepSizeTooSmall,       ///< the step-size rule gave h < min_step_size
+  kStepSizeTooSmall,       ///< the ERRTOL rule or the error control needed h < min_step_size
   kMaxStepsReached,        ///< max_steps accepted steps before the final time
   kNonFinite,              ///< NaN or infinity in f or a at an accepted point
 };
@@ -217,6 +257,19 @@ struct AlphaDaiStats {
   double min_basis_sigma = std::numeric_limits<double>::infinity();  ///< over accepted steps
   double min_rho = std::numeric_limits<double>::infinity();          ///< smallest rho used
   double min_step = std::numeric_limits<double>::infinity();         ///< smallest step taken
+  /// Error control: steps rejected by the error test (per unit step), by the event rule
+  /// (working set changed in a step longer than rtol (tf - t0)), and retried shorter because
+  /// their SQP failed.
+  long num_rejected_steps = 0;
+  long num_event_rejections = 0;  ///< see num_rejected_steps
+  long num_failed_steps = 0;      ///< see num_rejected_steps
+  /// Estimated error of the run relative to the solution's scale: rtol sum_k (h_k / (tf - t0))
+  /// err_k over the accepted (pairs of) steps, err_k the step-doubling estimate per unit step
+  /// in the tolerance weights. -1 where not estimated (fixed steps without estimate_error).
+  double error_estimate = -1.0;
+  /// Fixed steps whose error could not be estimated (a half step failed); not in
+  /// error_estimate.
+  long num_unestimated_steps = 0;
   /// CPU time of the run.
   double cpu_seconds = 0.0;
 
@@ -245,6 +298,9 @@ struct AlphaDaiResult {
   std::vector<Event> events;        ///< kEnter/kLeave when constraints join/leave the working set
   /// Counters and extreme certificates.
   AlphaDaiStats stats;
+  /// What the caller should know although the run succeeded (a fixed-step run whose estimated
+  /// error exceeds kErrorWarningFactor rtol), one sentence each.
+  std::vector<std::string> warnings;
 };
 
 /// Simulates `scene` over [t0, tf]. Throws std::invalid_argument for invalid options, an
