@@ -64,8 +64,8 @@ void GroupSystem::Configure(const GroupSetup& setup) {
                                    &guessed);
     const Eigen::Index rows = std::min<Eigen::Index>(nz_, free.equations.size());
     for (Eigen::Index r = 0; r < rows; ++r) {
-      const double size = std::fabs(free.equations[r]) +
-                          std::fabs(guessed.equations[r] - free.equations[r]);
+      const double size =
+          std::fabs(free.equations[r]) + std::fabs(guessed.equations[r] - free.equations[r]);
       if (std::isfinite(size)) velocity_scale_[r] = 1.0 / std::max(1.0, size);
     }
   }

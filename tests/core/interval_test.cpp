@@ -103,14 +103,14 @@ TEST(IntervalTest, ElementaryFunctionsEncloseTheirValues) {
       [](const Interval& x) { return hypot(x, Interval(0.5)); }, -3.0, 3.0);
   // The other functions of the model language, written with std:: as model code may.
   ExpectEncloses(
-      "exp2", [](double x) { return std::exp2(x); },
-      [](const Interval& x) { return std::exp2(x); }, -20.0, 20.0);
+      "exp2", [](double x) { return std::exp2(x); }, [](const Interval& x) { return std::exp2(x); },
+      -20.0, 20.0);
   ExpectEncloses(
       "expm1", [](double x) { return std::expm1(x); },
       [](const Interval& x) { return std::expm1(x); }, -20.0, 5.0);
   ExpectEncloses(
-      "log2", [](double x) { return std::log2(x); },
-      [](const Interval& x) { return std::log2(x); }, 1e-3, 10.0);
+      "log2", [](double x) { return std::log2(x); }, [](const Interval& x) { return std::log2(x); },
+      1e-3, 10.0);
   ExpectEncloses(
       "log10", [](double x) { return std::log10(x); },
       [](const Interval& x) { return std::log10(x); }, 1e-3, 10.0);
@@ -118,8 +118,8 @@ TEST(IntervalTest, ElementaryFunctionsEncloseTheirValues) {
       "log1p", [](double x) { return std::log1p(x); },
       [](const Interval& x) { return std::log1p(x); }, -0.999, 10.0);
   ExpectEncloses(
-      "cbrt", [](double x) { return std::cbrt(x); },
-      [](const Interval& x) { return std::cbrt(x); }, -8.0, 8.0);
+      "cbrt", [](double x) { return std::cbrt(x); }, [](const Interval& x) { return std::cbrt(x); },
+      -8.0, 8.0);
   ExpectEncloses(
       "asinh", [](double x) { return std::asinh(x); },
       [](const Interval& x) { return std::asinh(x); }, -5.0, 5.0);
@@ -133,8 +133,8 @@ TEST(IntervalTest, ElementaryFunctionsEncloseTheirValues) {
       "erf", [](double x) { return std::erf(x); }, [](const Interval& x) { return std::erf(x); },
       -4.0, 4.0);
   ExpectEncloses(
-      "erfc", [](double x) { return std::erfc(x); },
-      [](const Interval& x) { return std::erfc(x); }, -4.0, 4.0);
+      "erfc", [](double x) { return std::erfc(x); }, [](const Interval& x) { return std::erfc(x); },
+      -4.0, 4.0);
 }
 
 TEST(IntervalTest, ArithmeticIsOutwardRoundedAndSquaresAreSquares) {

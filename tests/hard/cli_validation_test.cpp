@@ -82,8 +82,7 @@ TEST(CliValidationMatrix, NumericalFailureIsAStatus) {
   // The time (t = 0 or the first switch 0.001, see HardFastSwitching) and the reason.
   EXPECT_NE(outcome.output.find("event_location_failure at t = 0"), std::string::npos)
       << outcome.output;
-  EXPECT_NE(outcome.output.find("no group of equal elements"), std::string::npos)
-      << outcome.output;
+  EXPECT_NE(outcome.output.find("no group of equal elements"), std::string::npos) << outcome.output;
 }
 
 }  // namespace
