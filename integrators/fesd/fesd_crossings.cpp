@@ -69,9 +69,9 @@ Violation FesdRun::InsideViolation(const CollocationStages& stages, const Vector
   // it, and a return below zero shows at the stages and the end, which are checked.
   bool watched_any = false;
   for (double end : {0.0, 1.0}) {
-    if (!functions.values(end, &b.box_lower)) continue;
+    if (!functions.values(end, &b.end_values)) continue;
     for (int k = 0; k < np_; ++k) {
-      if (b.box_lower[k] <= kGrazeBand * b.thresholds[k]) {
+      if (b.end_values[k] <= kGrazeBand * b.thresholds[k]) {
         b.watched[static_cast<std::size_t>(k)] = 0;
       }
     }
@@ -84,10 +84,10 @@ Violation FesdRun::InsideViolation(const CollocationStages& stages, const Vector
     // Free sides without a bound (index-1 complementarity, functions without interval
     // evaluation): the extremum of their Hermite interpolant from the values and exact
     // derivatives at the element start and the stages, evaluated on the polynomial.
-    functions.bounds(0.0, 1.0, &b.box_lower, &b.box_upper);  // (-inf: no bound)
+    functions.bounds(0.0, 1.0, &b.bound_lower, &b.bound_upper);  // (-inf: no bound)
     const std::vector<double>& nodes = Resolution().nodes;
     for (int k = 0; k < np_; ++k) {
-      if (!b.watched[static_cast<std::size_t>(k)] || std::isfinite(b.box_lower[k])) continue;
+      if (!b.watched[static_cast<std::size_t>(k)] || std::isfinite(b.bound_lower[k])) continue;
       if (b.node_values.empty()) {
         // Values and d/dtheta = d_y . y'(theta) at every node, for all pairs at once.
         b.node_values.assign(nodes.size(), Vector());
