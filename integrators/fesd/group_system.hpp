@@ -114,7 +114,7 @@ class GroupSystem final : public MixedComplementaritySystem {
   // Scales of the velocity-level rows: 1 / max(1, |row at v = 0|) at y_start (Configure says
   // why).
   Vector velocity_scale_;
-  Vector scale_guess_;  // scratch: the consistent guess the scales are taken at
+  Vector scale_guess_;                    // scratch: the consistent guess the scales are taken at
   std::vector<PairRole> velocity_roles_;  // RolesFor(setup_.a_zero), made by Configure
   Vector start_scratch_;                  // scratch: element start state
   Vector end_scratch_;                    // scratch: the group's end state (with the event)

@@ -420,9 +420,8 @@ inline Interval asinh(const Interval& a) {
   return internal::Increasing(a, [](double v) { return std::asinh(v); });
 }
 inline Interval acosh(const Interval& a) {
-  const Interval r =
-      internal::IncreasingOn(a, 1.0, std::numeric_limits<double>::infinity(),
-                             [](double v) { return std::acosh(v); });
+  const Interval r = internal::IncreasingOn(a, 1.0, std::numeric_limits<double>::infinity(),
+                                            [](double v) { return std::acosh(v); });
   return Interval(std::max(r.lower(), 0.0), r.upper());
 }
 inline Interval atanh(const Interval& a) {

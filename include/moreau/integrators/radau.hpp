@@ -11,12 +11,12 @@
 /// Step size: controlled by the embedded estimate err = (I - h gamma0 J)^{-1}(gamma0 h F(y_n) +
 /// sum_j e_j Z_j) of local order s + 1 (Hairer & Wanner II, Sec. IV.8) in the weighted RMS norm
 /// with weights atol_i + rtol max(|y_n,i|, |y_{n+1},i|), h_new = h min(5, max(0.2, 0.9
-/// err^{-1/(s+1)})), a step growing by at most 5 (the default: no step given), or fixed (a uniform grid between control
-/// breakpoints), whose steps get the same estimate, accumulated into RadauStats::
-/// error_estimate (docs/accuracy.md). A step below max(min_step_size, 10 eps |t|) ends the
-/// run (kStepSizeTooSmall); a non-finite model value is named (kNonFinite).
-/// Steps never cross control breakpoints or the stop times (RadauOptions::stop_times). Scenes with effects are refused (use the
-/// time-stepping, FESD, IDA or alpha-method integrators).
+/// err^{-1/(s+1)})), a step growing by at most 5 (the default: no step given), or fixed (a uniform
+/// grid between control breakpoints), whose steps get the same estimate, accumulated into
+/// RadauStats:: error_estimate (docs/accuracy.md). A step below max(min_step_size, 10 eps |t|) ends
+/// the run (kStepSizeTooSmall); a non-finite model value is named (kNonFinite). Steps never cross
+/// control breakpoints or the stop times (RadauOptions::stop_times). Scenes with effects are
+/// refused (use the time-stepping, FESD, IDA or alpha-method integrators).
 
 #include <string>
 #include <vector>
