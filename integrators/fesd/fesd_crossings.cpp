@@ -68,16 +68,55 @@ Violation FesdRun::InsideViolation(const CollocationStages& stages, const Vector
   // its bound over any piece next to that end admits zero, so the search could not decide
   // it, and a return below zero shows at the stages and the end, which are checked.
   bool watched_any = false;
+  b.end_grazes.assign(static_cast<std::size_t>(np_), 0);
   for (double end : {0.0, 1.0}) {
     if (!functions.values(end, &b.end_values)) continue;
     for (int k = 0; k < np_; ++k) {
       if (b.end_values[k] <= kGrazeBand * b.thresholds[k]) {
+        if (end == 1.0 && b.watched[static_cast<std::size_t>(k)]) {
+          b.end_grazes[static_cast<std::size_t>(k)] = 1;
+        }
         b.watched[static_cast<std::size_t>(k)] = 0;
       }
     }
   }
+  // ... but a side at zero at the end may have reached it from below: the group solve can
+  // land on the far zero of a contact shorter than the element's nodes are apart (a disc
+  // brushing a point for a hundredth of the element: the side is positive at the stages and
+  // zero at the end, and the dip before the end is never looked at). A side rising into the
+  // end is probed where its tangent there is two tolerances below zero; a value below minus
+  // one tolerance is a crossing, located between the start and the probe.
+  Violation end_dip;
+  if (std::find(b.end_grazes.begin(), b.end_grazes.end(), 1) != b.end_grazes.end()) {
+    b.path.Point(1.0, &b.y);
+    b.path.Derivative(1.0, &b.dy);
+    system_.EvaluateEventIndicators(b.y, v, a_zero_, Derivatives::kStates, &b.at);
+    for (int p = 0; p < np_; ++p) {
+      if (!b.end_grazes[static_cast<std::size_t>(p)]) continue;
+      const double slope = b.at.d_y.Row(p).dot(b.dy);
+      if (!(slope > 0.0)) continue;
+      const double end_value = b.at.values[p];
+      const double step = (std::fabs(end_value) + 2.0 * b.thresholds[p]) / slope;
+      if (!(step < 0.5)) continue;  // a rise too slow to dip beyond the tolerance
+      Vector values;
+      if (!functions.values(1.0 - step, &values) || !(values[p] < -b.thresholds[p])) continue;
+      double lo = 0.0, hi = 1.0 - step;
+      for (int i = 0; i < CrossingSearchLimits{}.bisections; ++i) {
+        const double mid = 0.5 * (lo + hi);
+        (functions.values(mid, &values) && values[p] < 0.0 ? hi : lo) = mid;
+      }
+      if (!end_dip.found || hi < end_dip.fraction) {
+        end_dip = {true, element, std::clamp(hi, 1e-3, 1.0), p};
+      }
+    }
+  }
+  auto with_end_dip = [&](const Violation& found) {
+    if (!end_dip.found || (found.found && found.fraction <= end_dip.fraction)) return found;
+    if (!found.found) ++result_.stats.num_inside_crossings;
+    return end_dip;
+  };
   for (int k = 0; k < np_; ++k) watched_any |= b.watched[static_cast<std::size_t>(k)] != 0;
-  if (!watched_any) return JumpDipViolation(stages, element);
+  if (!watched_any) return with_end_dip(JumpDipViolation(stages, element));
   Crossing crossing = SearchCrossing(b.watched, b.thresholds, functions);
   result_.stats.num_bound_evaluations += crossing.bound_evaluations;
   if (crossing.outcome == CrossingOutcome::kNone) {
@@ -133,12 +172,14 @@ Violation FesdRun::InsideViolation(const CollocationStages& stages, const Vector
     if (!std::isfinite(first_unresolved_time_)) {
       first_unresolved_time_ = y0[system_.clock_index()];
     }
-    return violation;
+    return with_end_dip(violation);
   }
-  if (crossing.outcome != CrossingOutcome::kFound) return JumpDipViolation(stages, element);
+  if (crossing.outcome != CrossingOutcome::kFound) {
+    return with_end_dip(JumpDipViolation(stages, element));
+  }
   ++result_.stats.num_inside_crossings;
   violation = {true, element, std::clamp(crossing.theta, 1e-3, 1.0), crossing.function};
-  return violation;
+  return with_end_dip(violation);
 }
 
 Violation FesdRun::JumpDipViolation(const CollocationStages& stages, int element) {

@@ -621,7 +621,7 @@ class FesdRun {
   struct InsideBuffers {
     PolynomialPath path;
     Matrix increments;
-    std::vector<char> watched;
+    std::vector<char> watched, end_grazes;
     // bound_lower/upper: the indicators' bounds over the whole element, apart from the box
     // (box_lower/upper) they are computed from, which BoundEventIndicators reads.
     Vector thresholds, y, dy, box_lower, box_upper, bound_lower, bound_upper, end_values;
