@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <random>
 
 namespace moreau {
@@ -163,6 +164,43 @@ TEST(LinearSolverTest, SingularAndNonFiniteMatricesAreReported) {
     b.AddEntry(1, 1, 1.0);
     b.Finalize();
     EXPECT_EQ(solver->Factorize(b), FactorizationStatus::kNonFinite) << ToString(kind);
+  }
+}
+
+// Unknowns in different units: a well-conditioned matrix with its columns scaled by powers of
+// two from 2^-40 to 2^40 (1e-12 to 1e12, as an element length of 1e-6 s beside multipliers of
+// 1e6) is not singular for the dense LU, and its solution is the unscaled one scaled back
+// (partial pivoting is exact under power-of-two column scaling: the same pivots, the same
+// rounding); with a column that repeats another (times 2^30) the matrix stays singular. Sizes
+// 10 and 40 take the small-system loops, 70 Eigen's blocked LU (above 64 unknowns).
+TEST(LinearSolverTest, DenseColumnScalesAreNotSingularity) {
+  for (int n : {10, 40, 70}) {
+    const SystemMatrix base = RandomSparse(n, /*sparse=*/false, 7);
+    Vector scales(n);
+    for (int j = 0; j < n; ++j) scales[j] = std::ldexp(1.0, -40 + (80 * j) / (n - 1));
+    const Matrix& dense = base.dense();
+    SystemMatrix scaled, singular;
+    scaled.Reset(n, false);
+    singular.Reset(n, false);
+    for (int j = 0; j < n; ++j) {
+      for (int i = 0; i < n; ++i) {
+        if (dense(i, j) == 0.0) continue;
+        scaled.AddEntry(i, j, dense(i, j) * scales[j]);
+        // Column n - 1 becomes 2^30 times column 0 (scaled): rank n - 1.
+        if (j != n - 1) singular.AddEntry(i, j, dense(i, j) * scales[j]);
+        if (j == 0) singular.AddEntry(i, n - 1, dense(i, 0) * scales[0] * std::ldexp(1.0, 30));
+      }
+    }
+    scaled.Finalize();
+    singular.Finalize();
+    auto solver = MakeLinearSolver(LinearSolverKind::kDenseLu, n, 5.0 * n);
+    ASSERT_EQ(solver->Factorize(scaled), FactorizationStatus::kSuccess) << "n = " << n;
+    Vector x = Vector::LinSpaced(n, -1.0, 1.0);
+    Vector rhs = dense * x;
+    solver->Solve(rhs);
+    EXPECT_LE((rhs.cwiseProduct(scales) - x).lpNorm<Eigen::Infinity>(), kAgreement)
+        << "n = " << n;
+    EXPECT_EQ(solver->Factorize(singular), FactorizationStatus::kSingular) << "n = " << n;
   }
 }
 

@@ -29,12 +29,13 @@ TEST(RandomScenesTest, DefaultsAgreeWithTheReferenceOrSaySo) {
         << scene.toml;
   }
   // The scenes are well posed with unique solutions: every one should agree, and a status is
-  // honest but still a defect of the defaults. Measured with seeds 1..100: 78 agree, 22 end
-  // with event_location_failure, all but two of them scenes on time scales below 1e-3 s (the
-  // default step bounds, h_min = 1e-12 absolute, do not scale with the scene yet: the switch
-  // location halves the step down to h_min, or a Newton solve stalls). Their number must not
-  // grow (the sanitizer run takes seeds 1..20, 5 of them honest failures).
-  constexpr int kMeasuredHonestFailures = MOREAU_SANITIZED ? 5 : 22;
+  // honest but still a defect of the defaults. Measured with seeds 1..100: 97 agree, 3 end
+  // with a status (seed 12: a switch not located, 69: step_size_too_small, 91: a model value
+  // not finite at the guess of an element), all on time scales below 1e-4 s. Before the dense
+  // LU's singularity test took the columns' units into account, 22 ended with a status: FESD's
+  // switch groups on microsecond scales were declared singular. Their number must not grow
+  // (the sanitizer run takes seeds 1..20, 1 of them an honest failure).
+  constexpr int kMeasuredHonestFailures = MOREAU_SANITIZED ? 1 : 3;
   EXPECT_LE(counts[Verdict::kHonestFailure], kMeasuredHonestFailures)
       << counts[Verdict::kAgree] << " of " << kScenes << " agree";
 }
