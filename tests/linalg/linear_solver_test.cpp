@@ -198,8 +198,7 @@ TEST(LinearSolverTest, DenseColumnScalesAreNotSingularity) {
     Vector x = Vector::LinSpaced(n, -1.0, 1.0);
     Vector rhs = dense * x;
     solver->Solve(rhs);
-    EXPECT_LE((rhs.cwiseProduct(scales) - x).lpNorm<Eigen::Infinity>(), kAgreement)
-        << "n = " << n;
+    EXPECT_LE((rhs.cwiseProduct(scales) - x).lpNorm<Eigen::Infinity>(), kAgreement) << "n = " << n;
     EXPECT_EQ(solver->Factorize(singular), FactorizationStatus::kSingular) << "n = " << n;
   }
 }
