@@ -22,6 +22,7 @@
 #include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
+#include <variant>
 
 #include "moreau/core/error.hpp"
 #include "output.hpp"
@@ -151,6 +152,78 @@ std::vector<std::string> ShownAlgebraicNames(const Scene& scene, const Trajector
   return shown;
 }
 
+// The states as drawn (against time and in the phase portrait): FESD's collocation polynomials
+// between the recorded points, as smooth as the run's own dense output. Error-controlled steps
+// are long, and a polygon through the step points shows corners the solution does not have.
+// On each element the polynomial of degree s through its start and its s Radau IIA stage points
+// (c_s = 1: the last one is its end) is the collocation solution itself. Elements whose
+// physical time stands still (frozen by time-freezing) and runs of other integrators keep
+// their recorded points.
+constexpr std::size_t kMaxCurveSamples = 4000;  // points added over the whole run, at most
+constexpr std::size_t kMaxSamplesPerElement = 12;
+
+// FESD's stages per element s if the run's stage points are whole elements of s each, else 0.
+std::size_t StagesPerElement(const SimulationResult& report) {
+  std::size_t s = 0;
+  for (const auto& [name, value] : report.options) {
+    if (name == "stages" && std::holds_alternative<long>(value)) {
+      s = static_cast<std::size_t>(std::max(0L, std::get<long>(value)));
+    }
+  }
+  const std::size_t points = report.stage_trajectory.size();
+  return report.integrator == "fesd" && s > 0 && points > 0 && points % s == 0 ? s : 0;
+}
+
+Trajectory CurvePoints(const SimulationResult& report, const Trajectory& trajectory) {
+  const Trajectory& stages = report.stage_trajectory;
+  const std::size_t s = StagesPerElement(report);
+  if (s == 0 || trajectory.size() == 0) return trajectory;
+  const std::size_t elements = stages.size() / s;
+  const std::size_t per_element = std::min(kMaxSamplesPerElement, kMaxCurveSamples / elements);
+  Trajectory curve;
+  curve.state_names = trajectory.state_names;
+  double t_start = trajectory.t.front();
+  Vector x_start = trajectory.x.front();
+  curve.Append(t_start, x_start, Vector(), 0.0);
+  std::vector<double> nodes(s + 1);  // theta of the start and the stages in [0, 1]
+  for (std::size_t e = 0; e < elements; ++e) {
+    const std::size_t first = e * s, last = first + s - 1;
+    const double span = stages.t[last] - t_start;
+    if (per_element > 0 && span > 0.5 * stages.step[last]) {
+      nodes[0] = 0.0;
+      for (std::size_t i = 0; i < s; ++i) nodes[i + 1] = (stages.t[first + i] - t_start) / span;
+      auto node_state = [&](std::size_t i) -> const Vector& {
+        return i == 0 ? x_start : stages.x[first + i - 1];
+      };
+      std::size_t next_stage = 0;
+      for (std::size_t j = 1; j <= per_element; ++j) {
+        const double theta = static_cast<double>(j) / static_cast<double>(per_element + 1);
+        for (; next_stage < s && nodes[next_stage + 1] < theta; ++next_stage) {
+          curve.Append(stages.t[first + next_stage], stages.x[first + next_stage], Vector(), 0.0);
+        }
+        Vector x = Vector::Zero(x_start.size());
+        for (std::size_t i = 0; i <= s; ++i) {  // Lagrange basis L_i(theta)
+          double basis = 1.0;
+          for (std::size_t k = 0; k <= s; ++k) {
+            if (k != i) basis *= (theta - nodes[k]) / (nodes[i] - nodes[k]);
+          }
+          x += basis * node_state(i);
+        }
+        curve.Append(t_start + theta * span, std::move(x), Vector(), 0.0);
+      }
+      for (; next_stage < s; ++next_stage) {
+        curve.Append(stages.t[first + next_stage], stages.x[first + next_stage], Vector(), 0.0);
+      }
+    } else {
+      for (std::size_t i = first; i <= last; ++i)
+        curve.Append(stages.t[i], stages.x[i], Vector(), 0.0);
+    }
+    t_start = stages.t[last];
+    x_start = stages.x[last];
+  }
+  return curve;
+}
+
 std::string WritePlot(const Scene& scene, const SimulationResult& report,
                       const Trajectory& trajectory, const std::string& directory,
                       bool numerical_time_axis, bool internal) {
@@ -163,8 +236,8 @@ std::string WritePlot(const Scene& scene, const SimulationResult& report,
   const std::size_t shown = std::min<std::size_t>(names.size(), kMaxPlottedStates);
 
   // ---- what the effects did -------------------------------------------------------------
-  // Multipliers: the stage points are the finest record (each value holds on the interval
-  // ending at its time); the trajectory otherwise.
+  // Multipliers: the stage points are the finest record; the trajectory otherwise (where each
+  // value holds on the interval ending at its time).
   const Trajectory& dense = !numerical_time_axis && report.stage_trajectory.size() > 0
                                 ? report.stage_trajectory
                                 : trajectory;
@@ -267,6 +340,20 @@ std::string WritePlot(const Scene& scene, const SimulationResult& report,
     for (std::size_t k = 0; k < trajectory.size(); ++k) {
       out << trajectory.t[k];
       for (const auto& [name, count] : counts) out << " " << count[k];
+      out << "\n";
+    }
+  }
+
+  // ---- the states as drawn (CurvePoints) ------------------------------------------------------
+  const Trajectory curve = numerical_time_axis ? trajectory : CurvePoints(report, trajectory);
+  {
+    std::ofstream out(directory + "/curves.dat");
+    out << std::setprecision(17);
+    for (std::size_t k = 0; k < curve.size(); ++k) {
+      out << curve.t[k];
+      // (comma-separated: the time panels read CSV)
+      for (std::size_t i = 0; i < shown; ++i)
+        out << "," << curve.x[k][static_cast<Eigen::Index>(i)];
       out << "\n";
     }
   }
@@ -398,6 +485,9 @@ std::string WritePlot(const Scene& scene, const SimulationResult& report,
     const auto unit = scene.view.units.find(names[i]);
     units.insert(unit == scene.view.units.end() ? "" : unit->second);
   }
+  // Headroom above the curves for the key (a row of about a tenth of the panel per state),
+  // so that it covers no maximum.
+  s << "set offsets 0, 0, graph " << 0.12 * static_cast<double>(shown) << ", 0\n";
   s << "set ylabel "
     << Quote(units.size() == 1 && !units.begin()->empty() ? "state [" + *units.begin() + "]"
                                                           : "state")
@@ -407,10 +497,10 @@ std::string WritePlot(const Scene& scene, const SimulationResult& report,
     if (i + 1 == shown && shown < names.size()) {
       title += " (first " + std::to_string(shown) + " of " + std::to_string(names.size()) + ")";
     }
-    s << (i ? ", " : "") << Quote(directory + "/trajectory.csv") << " using 1:" << i + 2
+    s << (i ? ", " : "") << Quote(directory + "/curves.dat") << " using 1:" << i + 2
       << " with lines lw 2 title " << Quote(title);
   }
-  s << "\n";
+  s << "\nset offsets 0, 0, 0, 0\n";
   // Multipliers (piecewise constant on the intervals that end at their times), or counts.
   if (effects_panel) {
     open_panel(panel + 1 == time_panels);
@@ -418,6 +508,43 @@ std::string WritePlot(const Scene& scene, const SimulationResult& report,
     if (counts.empty()) {
       // The first kMaxMultiplierLines multipliers, named (more would not be readable).
       const std::size_t drawn = std::min(multiplier_columns.size(), kMaxMultiplierLines);
+      // FESD: lines through the stage values, so that a value varying within an element is
+      // drawn as it varies. A jump happens only at a switch (switches end elements): at an
+      // event time the line jumps to the next element's first stage value and holds it up to
+      // that stage.
+      std::string source = dense_csv, style = "fsteps";
+      const std::size_t stages_per_element = StagesPerElement(report);
+      if (&dense == &report.stage_trajectory && stages_per_element > 0) {
+        source = directory + "/multipliers.csv";
+        style = "lines";
+        std::ofstream out(source);
+        out << std::setprecision(17);
+        const std::size_t offset = 2 + names.size();  // first algebraic CSV column (1-based)
+        auto row = [&](double t, std::size_t k) {
+          out << t;
+          for (std::size_t i = 0; i < drawn; ++i) {
+            out << ","
+                << dense.algebraic[k][static_cast<Eigen::Index>(
+                       static_cast<std::size_t>(multiplier_columns[i].second) - offset)];
+          }
+          out << "\n";
+        };
+        std::vector<double> event_times;
+        for (const Event& e : events) event_times.push_back(e.t);
+        std::sort(event_times.begin(), event_times.end());
+        auto at_event = [&](double t) {
+          const auto it = std::lower_bound(event_times.begin(), event_times.end(),
+                                           t - 1e-12 * std::max(1.0, std::fabs(t)));
+          return it != event_times.end() &&
+                 std::fabs(*it - t) <= 1e-12 * std::max(1.0, std::fabs(t));
+        };
+        double start = t0;
+        for (std::size_t k = 0; k < dense.size(); ++k) {
+          if (k % stages_per_element == 0 && (k == 0 || at_event(start))) row(start, k);
+          row(dense.t[k], k);
+          if ((k + 1) % stages_per_element == 0) start = dense.t[k];
+        }
+      }
       s << "set ylabel 'multiplier'\nplot ";
       for (std::size_t i = 0; i < drawn; ++i) {
         std::string title = multiplier_columns[i].first;
@@ -425,8 +552,10 @@ std::string WritePlot(const Scene& scene, const SimulationResult& report,
           title += " (first " + std::to_string(drawn) + " of " +
                    std::to_string(multiplier_columns.size()) + ")";
         }
-        s << (i ? ", " : "") << Quote(dense_csv) << " using 1:" << multiplier_columns[i].second
-          << " with fsteps lw 1.6 title " << Quote(title);
+        const int column =
+            style == "lines" ? static_cast<int>(i) + 2 : multiplier_columns[i].second;
+        s << (i ? ", " : "") << Quote(source) << " using 1:" << column << " with " << style
+          << " lw 1.6 title " << Quote(title);
       }
       s << "\n";
     } else {
@@ -515,7 +644,7 @@ std::string WritePlot(const Scene& scene, const SimulationResult& report,
         << std::setprecision(17) << trajectory.x[0][0] << " " << trajectory.x[0][1] << "\n";
     std::ofstream path(directory + "/phase_path.dat");
     path << std::setprecision(17);
-    for (const Vector& x : trajectory.x) path << x[0] << " " << x[1] << "\n";
+    for (const Vector& x : curve.x) path << x[0] << " " << x[1] << "\n";
     geometry["phase"] = {
         {"left", kPhaseLeft * kFigureWidth}, {"right", kPhaseRight * kFigureWidth},
         {"top", (1.0 - phase_top) * height}, {"bottom", (1.0 - phase_bottom) * height},
