@@ -1,9 +1,11 @@
 """Figures of a run and of a sweep with matplotlib (Result.plot, plot_sweep).
 
 A run's figure is built from what the scene contains (the same figure as ``moreau run``'s
-trajectory.png): the states with their labels and units; the multipliers of moving sets and
-complementarity pairs, each value held on the interval that ends at its time so that a jump is
-drawn as a jump; active constraints, Filippov modes and relay memories as bands; the events as
+trajectory.png): the states with their labels and units (along FESD's collocation polynomials
+when the run recorded its stages, ``record_stages=True``, as ``moreau run`` does); the
+multipliers of moving sets and complementarity pairs (with recorded stages, lines through the
+stage values that jump at switches; otherwise each value held on the interval that ends at its
+time, so that a jump is drawn as a jump); active constraints, Filippov modes and relay memories as bands; the events as
 marks in rows named by constraint, surface or relay (by kind when there are too many), shaped
 by kind. Scenes with two states get their phase portrait with the set boundaries C(t) at the
 event times and the switching surfaces. The lowering's internal variables (Filippov theta,
@@ -32,6 +34,70 @@ _KIND_STYLE = {
     "relay_switch": ("d", "#B279A2"), "ambiguous": ("x", "#000000"),
 }
 _BOUNDARY_COLOR = "#D62728"
+
+
+def _stages_per_element(result):
+    """FESD's s if the run recorded its stages (``record_stages=True``) as whole elements."""
+    stage = result.stage_trajectory
+    s = int(result.options.get("stages", 0) or 0) if result.integrator == "fesd" else 0
+    points = len(stage["t"]) if stage else 0
+    return s if s > 0 and points > 0 and points % s == 0 else 0
+
+
+def _curve(result):
+    """The states as drawn: with FESD's recorded stages, the collocation polynomial of each
+    element (degree s through its start and its s Radau IIA stages; c_s = 1 is its end) at
+    up to twelve points inside it, so that long error-controlled steps are not drawn as a
+    polygon; elements whose physical time stands still (time-freezing) keep their points.
+    Otherwise the recorded trajectory."""
+    s = _stages_per_element(result)
+    if s == 0:
+        return np.asarray(result.t), np.asarray(result.x)
+    stage = result.stage_trajectory
+    st, sx, step = np.asarray(stage["t"]), np.asarray(stage["x"]), np.asarray(stage["step"])
+    elements = len(st) // s
+    inside = min(12, 4000 // elements)
+    t_out, x_out = [result.t[0]], [np.asarray(result.x[0])]
+    t_start, x_start = result.t[0], np.asarray(result.x[0])
+    for e in range(elements):
+        rows = slice(e * s, (e + 1) * s)
+        span = st[rows][-1] - t_start
+        if inside > 0 and span > 0.5 * step[rows][-1]:
+            nodes = np.concatenate([[0.0], (st[rows] - t_start) / span])
+            values = np.vstack([x_start, sx[rows]])
+            theta = np.union1d(np.arange(1, inside + 1) / (inside + 1), nodes[1:])
+            basis = np.ones((len(theta), s + 1))
+            for i in range(s + 1):
+                for k in range(s + 1):
+                    if k != i:
+                        basis[:, i] *= (theta - nodes[k]) / (nodes[i] - nodes[k])
+            t_out.extend(t_start + theta * span)
+            x_out.extend(basis @ values)
+        else:
+            t_out.extend(st[rows])
+            x_out.extend(sx[rows])
+        t_start, x_start = st[rows][-1], sx[rows][-1]
+    return np.asarray(t_out), np.vstack(x_out)
+
+
+def _multiplier_lines(result, times, column):
+    """FESD with recorded stages: lines through the stage values; at a switch (switches end
+    elements) a jump to the next element's first stage value, held up to that stage."""
+    s = _stages_per_element(result)
+    events = np.sort([e.t for e in result.events])
+    t_out, v_out = [], []
+    start = result.t[0]
+    for k in range(len(times)):
+        if k % s == 0:
+            near = np.abs(events - start) <= 1e-12 * max(1.0, abs(start)) if len(events) else []
+            if k == 0 or np.any(near):
+                t_out.append(start)
+                v_out.append(column[k])
+        t_out.append(times[k])
+        v_out.append(column[k])
+        if (k + 1) % s == 0:
+            start = times[k]
+    return np.asarray(t_out), np.asarray(v_out)
 
 
 def _label(view, name):
@@ -130,8 +196,9 @@ def plot_result(result, states=None, multipliers=True, events=True, ax=None, int
         phase_ax = None
     panel = 0
     top = axes[panel]
+    curve_t, curve_x = _curve(result)
     for name in chosen:
-        top.plot(result.t, result.x[:, names.index(name)], lw=1.8, label=_label(view, name))
+        top.plot(curve_t, curve_x[:, names.index(name)], lw=1.8, label=_label(view, name))
     units = {view["units"].get(name, "") for name in chosen}
     top.set_ylabel(f"state [{units.pop()}]" if len(units) == 1 and "" not in units else "state")
     top.set_title(f"{result.scene} ({result.integrator}, {result.status})")
@@ -144,8 +211,13 @@ def plot_result(result, states=None, multipliers=True, events=True, ax=None, int
             mult.step(dense_t, counts, where="pre", lw=1.4, label="active constraints")
             mult.set_ylabel("active constraints")
         else:
+            lines = stage and len(stage["t"]) and _stages_per_element(result) > 0
             for i in shown[:_MAX_MULTIPLIER_LINES]:
                 column = dense_a[:, i]
+                if lines:
+                    mult.plot(*_multiplier_lines(result, dense_t, column), lw=1.4,
+                              label=dense_names[i])
+                    continue
                 keep = np.isfinite(column)
                 # The value at t_k holds on (t_{k-1}, t_k]: steps, so jumps stay jumps.
                 mult.step(dense_t[keep], column[keep], where="pre", lw=1.4,
@@ -194,7 +266,7 @@ def plot_result(result, states=None, multipliers=True, events=True, ax=None, int
 
 
 def _phase_portrait(ax, result, scene, view):
-    x = result.x
+    x = _curve(result)[1]
     lo, hi = np.min(x, axis=0), np.max(x, axis=0)
     pad = np.where(hi > lo, 0.12 * (hi - lo), 0.5 * np.maximum(1.0, np.abs(lo)))
     lo, hi = lo - pad, hi + pad
