@@ -48,7 +48,8 @@ constexpr int kColourTolerance = 8;
 
 bool Matches(std::uint32_t a, std::uint32_t b) {
   for (int shift : {0, 8, 16}) {
-    const int ca = static_cast<int>((a >> shift) & 0xFF), cb = static_cast<int>((b >> shift) & 0xFF);
+    const int ca = static_cast<int>((a >> shift) & 0xFF),
+              cb = static_cast<int>((b >> shift) & 0xFF);
     if (std::abs(ca - cb) > kColourTolerance) return false;
   }
   return true;
