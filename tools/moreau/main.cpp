@@ -9,8 +9,10 @@
 // input (unknown scene, option or parameter, bad value).
 
 #include <CLI/CLI.hpp>
+#include <dlfcn.h>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <iostream>
 #include <map>
@@ -249,7 +251,25 @@ int Run(Scene scene, const moreau::SimulationSettings& settings,
 
 }  // namespace
 
+namespace {
+
+// OpenBLAS (Debian's libblas.so.3 alternative, called by UMFPACK on its frontal matrices)
+// keeps its idle threads spinning on sched_yield after each call: the crowd's default run
+// took 244 s of CPU with the default threads and 150 to 163 s with one, in the same wall time.
+// The BLAS calls of a run are small, so the command line runs OpenBLAS on one thread unless
+// the user set OPENBLAS_NUM_THREADS (docs/cli.md). Looked up at run time: another BLAS is
+// left as it is.
+void UseSingleThreadedOpenBlas() {
+  if (std::getenv("OPENBLAS_NUM_THREADS") != nullptr) return;
+  if (void* symbol = dlsym(RTLD_DEFAULT, "openblas_set_num_threads")) {
+    reinterpret_cast<void (*)(int)>(symbol)(1);
+  }
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
+  UseSingleThreadedOpenBlas();
   CLI::App app{"moreau: simulate nonsmooth dynamical systems with measured accuracy"};
   app.require_subcommand(1);
   app.set_help_all_flag("--help-all", "help for all subcommands");
