@@ -8,8 +8,9 @@
 // Exit codes: 0 success; 1 the simulation ended with a non-success status; 2 bad usage or
 // input (unknown scene, option or parameter, bad value).
 
-#include <CLI/CLI.hpp>
 #include <dlfcn.h>
+
+#include <CLI/CLI.hpp>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
