@@ -67,6 +67,11 @@ class StepController {
       previous_error_ = e;
     }
     last_rejected_ = false;
+    // A piece of zero length (a switch decided at the very start of the step) says nothing
+    // about the step: the attempted length is tried again with the new statuses. Its zero
+    // proposal made every later attempt an element of length zero, whose residual is not
+    // finite, down to min_step_size (random brush scenes on microsecond scales).
+    if (!(next > 0.0)) return attempted;
     return next;
   }
 

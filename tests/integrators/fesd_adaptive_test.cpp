@@ -457,6 +457,10 @@ TEST(StepControllerTest, ProposalsFollowTheDocumentedFactors) {
   const double from_piece = StepController::kSafety * std::pow(StepController::kMinError, -0.2);
   EXPECT_NEAR(switching.Accept(1e-6, 0.1, 0.0, true), 1e-6 * from_piece, 1e-12);
   EXPECT_NEAR(switching.Accept(0.1, 0.1, 0.0, true), 0.1 * StepController::kMaxFactor, kExact);
+  // A piece of zero length (a switch decided at the step's start): the attempted step again,
+  // not a step of zero (random seed 136 failed so).
+  StepController at_start(5);
+  EXPECT_EQ(at_start.Accept(0.0, 2e-7, 0.0, true), 2e-7);
 }
 
 }  // namespace
