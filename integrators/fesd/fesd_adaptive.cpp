@@ -24,6 +24,10 @@ constexpr double kFailureFactor = 0.5;
 // inside one long element): the step counts as failed and is retried shorter. Correct
 // elements have certificates at the Newton tolerance (tests: <= 1e-10).
 constexpr double kMissedSwitchCertificate = 10.0;
+// Consecutive steps of zero length (switches decided at the step's start) allowed before the
+// run ends with kStatusDecisionFailure: one is a switch that the next step then passes; more
+// in a row is a decision that keeps changing without progress.
+constexpr int kMaxZeroLengthPieces = 2;
 // The solutions compared by the error estimate are rounded to eps (1 + |y|) and converged to
 // their Newton residuals r (scaled by 1 + |y|), so their difference is known to about
 // kNewtonNoise eps (1 + |y|) at best and kNewtonNoise r (1 + |y|) for the solves at hand. The
@@ -225,6 +229,7 @@ void FesdRun::IntegrateAdaptive(bool clock_targets) {
   if (full_) d_step_end_ = Eigen::RowVectorXd::Zero(sensitivity_.cols());
   Snapshot before;             // the state before the current attempt (kept across attempts)
   int unresolved_retries = 0;  // consecutive attempts retried for an unresolved crossing
+  int zero_pieces = 0;         // consecutive accepted steps that did not move the time
   for (std::size_t segment = 0; segment + 1 < segment_ends_.size() && !failed(); ++segment) {
     segment_ = segment_control_[segment];
     system_.SetInputs(scene.InputValues(segment_ends_[segment]));
@@ -370,6 +375,17 @@ void FesdRun::IntegrateAdaptive(bool clock_targets) {
           options_.relative_tolerance * (piece_length / horizon) * estimate.proposal;
       scale_.Update(y_);
       step = controller.Accept(piece_length, length, proposal, switched);
+      // A switch decided at a step's start leaves a piece of zero length, and the controller
+      // then tries the attempted step again (StepController::Accept). Switches decided there
+      // again and again without the time moving have no consistent continuation: the run
+      // stops at once instead of taking max_steps steps of zero length.
+      zero_pieces = piece_length > 0.0 ? 0 : zero_pieces + 1;
+      if (zero_pieces > kMaxZeroLengthPieces) {
+        Fail(FesdStatus::kStatusDecisionFailure, position,
+             "switches were decided at this time " + std::to_string(zero_pieces) +
+                 " times in a row without the time moving: no consistent continuation");
+        return;
+      }
       // The retries start again after a step without an unresolved crossing: next to an
       // undecidable graze every step is unresolved, and retrying each of them again would
       // cost 2^kMaxUnresolvedRetries steps per step without ever deciding it.
