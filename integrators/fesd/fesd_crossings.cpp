@@ -63,6 +63,19 @@ Violation FesdRun::InsideViolation(const CollocationStages& stages, const Vector
     b.path.Box(a, c, &b.box_lower, &b.box_upper);
     system_.BoundEventIndicators(b.box_lower, b.box_upper, a_zero_, lower, upper);
   };
+  // Side k below minus its tolerance at theta (a crossing, then located between the start and
+  // theta by bisection on the polynomial, as the bounded search would locate it).
+  auto negative_at = [&](int k, double theta) {
+    return functions.values(theta, &b.probe) && b.probe[k] < -b.thresholds[k];
+  };
+  auto zero_before = [&](int k, double theta) {
+    double lo = 0.0, hi = theta;
+    for (int i = 0; i < CrossingSearchLimits{}.bisections; ++i) {
+      const double mid = 0.5 * (lo + hi);
+      (functions.values(mid, &b.probe) && b.probe[k] < 0.0 ? hi : lo) = mid;
+    }
+    return hi;
+  };
   // A side at zero at the element's start or end (within kGrazeBand tolerances: a contact
   // just released, a switch the element ends on, a graze along the boundary) is not watched:
   // its bound over any piece next to that end admits zero, so the search could not decide
@@ -98,15 +111,10 @@ Violation FesdRun::InsideViolation(const CollocationStages& stages, const Vector
       const double end_value = b.at.values[p];
       const double step = (std::fabs(end_value) + 2.0 * b.thresholds[p]) / slope;
       if (!(step < 0.5)) continue;  // a rise too slow to dip beyond the tolerance
-      Vector values;
-      if (!functions.values(1.0 - step, &values) || !(values[p] < -b.thresholds[p])) continue;
-      double lo = 0.0, hi = 1.0 - step;
-      for (int i = 0; i < CrossingSearchLimits{}.bisections; ++i) {
-        const double mid = 0.5 * (lo + hi);
-        (functions.values(mid, &values) && values[p] < 0.0 ? hi : lo) = mid;
-      }
-      if (!end_dip.found || hi < end_dip.fraction) {
-        end_dip = {true, element, std::clamp(hi, 1e-3, 1.0), p};
+      if (!negative_at(p, 1.0 - step)) continue;
+      const double zero = zero_before(p, 1.0 - step);
+      if (!end_dip.found || zero < end_dip.fraction) {
+        end_dip = {true, element, std::clamp(zero, 1e-3, 1.0), p};
       }
     }
   }
@@ -151,17 +159,10 @@ Violation FesdRun::InsideViolation(const CollocationStages& stages, const Vector
             -b.thresholds[k])) {
         continue;
       }
-      Vector values;
-      if (functions.values(theta, &values) && values[k] < -b.thresholds[k]) {
-        // A crossing: its first zero before theta, as the bounded search would locate it.
-        double lo = 0.0, hi = theta;
-        for (int i = 0; i < CrossingSearchLimits{}.bisections; ++i) {
-          const double mid = 0.5 * (lo + hi);
-          (functions.values(mid, &values) && values[k] < 0.0 ? hi : lo) = mid;
-        }
+      if (negative_at(k, theta)) {
         crossing.outcome = CrossingOutcome::kFound;
         crossing.function = k;
-        crossing.theta = hi;
+        crossing.theta = zero_before(k, theta);
         break;
       }
     }

@@ -624,7 +624,7 @@ class FesdRun {
     std::vector<char> watched, end_grazes;
     // bound_lower/upper: the indicators' bounds over the whole element, apart from the box
     // (box_lower/upper) they are computed from, which BoundEventIndicators reads.
-    Vector thresholds, y, dy, box_lower, box_upper, bound_lower, bound_upper, end_values;
+    Vector thresholds, y, dy, box_lower, box_upper, bound_lower, bound_upper, end_values, probe;
     IndicatorEvaluation at;
     std::vector<Vector> node_values, node_slopes;
     std::vector<double> values, slopes;
