@@ -216,6 +216,42 @@ StatBinding<Stats> BindStat(std::string name, Field Stats::*member, std::string 
           [member](const Stats& s) { return static_cast<double>(s.*member); }};
 }
 
+// Directional and adjoint sensitivities of FESD and time-stepping (docs/sensitivities.md): the
+// options of the same names in both, `sample_times` described by the integrator (where its
+// sample times may lie).
+template <class Options>
+std::vector<OptionBinding<Options>> BindDirectionalAndAdjoint(std::string sample_times_meaning) {
+  using O = Options;
+  return {
+      BindMatrixList("directions", &O::sensitivity_directions,
+                     "directional sensitivities dx(T)/dtheta V: V column by column, n_theta = "
+                     "n_x + n_p + n_u S entries per direction (theta = x0, p, u per segment)"),
+      BindMatrixList("adjoint_weights", &O::adjoint_weights,
+                     "adjoint sensitivities W^T dx(T)/dtheta by a reverse sweep: W (n_x x q) "
+                     "column by column"),
+      BindRealList("sample_times", &O::sample_times, std::move(sample_times_meaning)),
+      BindMatrixList("adjoint_sample_weights", &O::adjoint_sample_weights,
+                     "adjoint weights of the sample states: n_x x q per sample time, column by "
+                     "column"),
+      BindReal("adjoint_memory_limit_mb", &O::adjoint_memory_limit_mb,
+               "memory bound of the adjoint's checkpoints in MB (0: none); beyond it they go to "
+               "a temporary file"),
+      BindBool("keep_adjoint", &O::keep_adjoint,
+               "keep the reverse sweep in the result: gradients for weights chosen after the "
+               "run"),
+  };
+}
+// The adjoint's statistics (FESD and time-stepping).
+template <class Stats>
+std::vector<StatBinding<Stats>> BindAdjointStats() {
+  using S = Stats;
+  return {BindStat("adjoint_memory_bytes", &S::adjoint_memory_bytes,
+                   "bytes kept in memory for the adjoint sweep"),
+          BindStat("adjoint_file_bytes", &S::adjoint_file_bytes,
+                   "bytes of adjoint checkpoints written to a file (beyond the memory limit)"),
+          BindStat("adjoint_cpu_seconds", &S::adjoint_cpu_seconds, "time of the adjoint sweep")};
+}
+
 // The type-erased entry Simulate() dispatches to; `check` builds and validates the options
 // without running.
 struct IntegratorEntry {

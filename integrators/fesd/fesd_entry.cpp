@@ -1,4 +1,6 @@
 // FESD Radau IIA as Simulate() sees it (integrators/common/integrator_entry.hpp).
+#include <algorithm>
+
 #include "../common/integrator_entry.hpp"
 #include "moreau/integrators/fesd.hpp"
 #include "moreau/linalg/linear_solver.hpp"
@@ -83,24 +85,6 @@ IntegratorEntry FesdEntry() {
                "a switch right after a step's start does not use up an element (shooting)"),
       BindBool("sensitivities", &O::sensitivities,
                "dx(T)/dx(0), dx(T)/dp, dx(T)/du through switches (IFT on every group)"),
-      BindMatrixList("directions", &O::sensitivity_directions,
-                     "directional sensitivities dx(T)/dtheta V: V column by column, n_theta = "
-                     "n_x + n_p + n_u S entries per direction (theta = x0, p, u per segment)"),
-      BindMatrixList("adjoint_weights", &O::adjoint_weights,
-                     "adjoint sensitivities W^T dx(T)/dtheta by a reverse sweep: W (n_x x q) "
-                     "column by column"),
-      BindRealList("sample_times", &O::sample_times,
-                   "times in (t0, tf] whose states the sensitivities also cover (element ends "
-                   "of the run: multiples of h from a control breakpoint)"),
-      BindMatrixList("adjoint_sample_weights", &O::adjoint_sample_weights,
-                     "adjoint weights of the sample states: n_x x q per sample time, column by "
-                     "column"),
-      BindReal("adjoint_memory_limit_mb", &O::adjoint_memory_limit_mb,
-               "memory bound of the adjoint's checkpoints in MB (0: none); beyond it they go to "
-               "a temporary file"),
-      BindBool("keep_adjoint", &O::keep_adjoint,
-               "keep the reverse sweep in the result: gradients for weights chosen after the "
-               "run"),
       BindBool("reduce_smooth_elements", &O::reduce_smooth_elements,
                "elements whose statuses leave a smooth field (one Stewart mode, no active "
                "constraint) solved as Radau IIA steps of it, then checked on the full system"),
@@ -108,6 +92,14 @@ IntegratorEntry FesdEntry() {
       BindBool("record_trajectory", &O::record_trajectory,
                "record element ends (false: initial and final points only)"),
   };
+  // Directional and adjoint sensitivities, listed after `sensitivities`.
+  const auto adjoint = BindDirectionalAndAdjoint<O>(
+      "times in (t0, tf] whose states the sensitivities also cover (element ends of the run: "
+      "multiples of h from a control breakpoint)");
+  options.insert(std::find_if(options.begin(), options.end(),
+                              [](const auto& b) { return b.spec.name == "sensitivities"; }) +
+                     1,
+                 adjoint.begin(), adjoint.end());
   for (auto& binding : BindConstraintFilter(&O::constraint_filter, &O::filter_safety)) {
     options.push_back(binding);
   }
@@ -148,13 +140,9 @@ IntegratorEntry FesdEntry() {
                "estimated)"),
       BindStat("num_unestimated_steps", &S::num_unestimated_steps,
                "fixed steps whose error could not be estimated"),
-      BindStat("adjoint_memory_bytes", &S::adjoint_memory_bytes,
-               "bytes kept for the adjoint sweep (converged unknowns of every group)"),
-      BindStat("adjoint_file_bytes", &S::adjoint_file_bytes,
-               "bytes of adjoint checkpoints written to a file (beyond the memory limit)"),
-      BindStat("adjoint_cpu_seconds", &S::adjoint_cpu_seconds, "time of the adjoint sweep"),
-      BindStat("cpu_seconds", &S::cpu_seconds, "thread CPU time"),
   };
+  for (auto& binding : BindAdjointStats<S>()) stats.push_back(binding);
+  stats.push_back(BindStat("cpu_seconds", &S::cpu_seconds, "thread CPU time"));
   return MakeEntry<O, FesdResult>(
       spec, options, stats, SimulateFesd,
       [](const Scene& scene, const FesdResult& result, SimulationResult* out) {

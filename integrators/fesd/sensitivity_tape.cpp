@@ -7,48 +7,24 @@
 
 namespace moreau::internal {
 
-CheckpointFile::~CheckpointFile() {
-  if (file_ != nullptr) std::fclose(file_);
-}
-
 long CheckpointFile::Write(long offset, GroupStep* step) {
-  if (file_ == nullptr) {
-    file_ = std::tmpfile();
-    if (file_ == nullptr) throw std::runtime_error("adjoint: cannot create a checkpoint file");
-  }
-  const auto write = [&](const Vector& v) {
-    if (std::fwrite(v.data(), sizeof(double), static_cast<std::size_t>(v.size()), file_) !=
-        static_cast<std::size_t>(v.size())) {
-      throw std::runtime_error("adjoint: cannot write the checkpoint file (disk full?)");
-    }
-  };
-  if (std::fseek(file_, offset, SEEK_SET) != 0) {
-    throw std::runtime_error("adjoint: cannot seek in the checkpoint file");
-  }
   step->file_offset = offset;
   step->w_size = step->w.size();
   step->y_size = step->setup.y_start.size();
-  write(step->w);
-  write(step->setup.y_start);
+  offset = file_.Write(offset, step->w.data(), static_cast<std::size_t>(step->w_size));
+  offset = file_.Write(offset, step->setup.y_start.data(), static_cast<std::size_t>(step->y_size));
   step->w = Vector();
   step->setup.y_start = Vector();
-  return offset +
-         static_cast<long>(sizeof(double)) * static_cast<long>(step->w_size + step->y_size);
+  return offset;
 }
 
 void CheckpointFile::Read(GroupStep* step) {
-  const auto read = [&](Vector* v, Eigen::Index n) {
-    v->resize(n);
-    if (std::fread(v->data(), sizeof(double), static_cast<std::size_t>(n), file_) !=
-        static_cast<std::size_t>(n)) {
-      throw std::runtime_error("adjoint: cannot read the checkpoint file");
-    }
-  };
-  if (file_ == nullptr || std::fseek(file_, step->file_offset, SEEK_SET) != 0) {
-    throw std::runtime_error("adjoint: cannot seek in the checkpoint file");
-  }
-  read(&step->w, step->w_size);
-  read(&step->setup.y_start, step->y_size);
+  step->w.resize(step->w_size);
+  step->setup.y_start.resize(step->y_size);
+  const long offset = step->file_offset;
+  file_.Read(offset, step->w.data(), static_cast<std::size_t>(step->w_size));
+  file_.Read(offset + static_cast<long>(sizeof(double)) * static_cast<long>(step->w_size),
+             step->setup.y_start.data(), static_cast<std::size_t>(step->y_size));
 }
 
 void ApplyForward(const SaltationStep& step, int np, int nu, const Matrix& theta, Matrix* d) {

@@ -17,11 +17,11 @@
 // goes; the adjoint records them (the tape) and applies their transposes in reverse order.
 
 #include <cstddef>
-#include <cstdio>
 #include <memory>
 #include <variant>
 #include <vector>
 
+#include "../common/spill_file.hpp"
 #include "group_system.hpp"
 
 namespace moreau::internal {
@@ -39,14 +39,10 @@ struct GroupStep {
   Eigen::Index w_size = 0, y_size = 0;
 };
 
-// Checkpoints beyond the memory limit: an anonymous temporary file (std::tmpfile, removed
-// when closed), written forward and read back by the sweep.
+// Checkpoints beyond the memory limit, in a temporary file (common/spill_file.hpp), written
+// forward and read back by the sweep.
 class CheckpointFile {
  public:
-  CheckpointFile() = default;
-  ~CheckpointFile();
-  CheckpointFile(const CheckpointFile&) = delete;
-  CheckpointFile& operator=(const CheckpointFile&) = delete;
   // Writes w and step->setup.y_start at `offset` (the end of the kept checkpoints), empties
   // them in *step and returns the next offset. Throws std::runtime_error if the file cannot
   // be written.
@@ -55,7 +51,7 @@ class CheckpointFile {
   void Read(GroupStep* step);
 
  private:
-  std::FILE* file_ = nullptr;
+  SpillFile file_;
 };
 
 // s_y -= jump (g_y s_y + g_p dp + g_u du_segment) / rate, jump = F_- - F_+.

@@ -12,6 +12,7 @@
 #include "../common/sensitivity_arguments.hpp"
 #include "moreau/core/error.hpp"
 #include "moreau/integrators/simulate.hpp"
+#include "timestepping_tape.hpp"
 
 namespace moreau {
 
@@ -34,8 +35,24 @@ void TimeSteppingOptions::Validate() const {
     RequireArgument(std::isfinite(t), "stop times (tstops) must be finite, got ", t);
   }
   RequireArgument(max_steps >= 1, "max_steps must be >= 1, got ", max_steps);
-  RequireArgument(sensitivity_directions.allFinite() && adjoint_weights.allFinite(),
+  RequireArgument(sensitivity_directions.allFinite() && adjoint_weights.allFinite() &&
+                      adjoint_sample_weights.allFinite(),
                   "sensitivity directions and adjoint weights must be finite");
+  for (std::size_t j = 0; j < sample_times.size(); ++j) {
+    RequireArgument(
+        std::isfinite(sample_times[j]) && (j == 0 || sample_times[j] > sample_times[j - 1]),
+        "sample times must be finite and increasing, got ", sample_times[j], " at position ", j);
+  }
+  const bool tracked = sensitivities || sensitivity_directions.size() > 0 ||
+                       adjoint_weights.size() > 0 || adjoint_sample_weights.size() > 0 ||
+                       keep_adjoint;
+  RequireArgument(sample_times.empty() || tracked,
+                  "sample_times need sensitivities: directions, adjoint weights or keep_adjoint");
+  RequireArgument(adjoint_sample_weights.size() == 0 || !sample_times.empty(),
+                  "adjoint sample weights need sample_times");
+  RequireArgument(std::isfinite(adjoint_memory_limit_mb) && adjoint_memory_limit_mb >= 0.0,
+                  "adjoint memory limit must be >= 0 megabytes (0: none), got ",
+                  adjoint_memory_limit_mb);
   newton.Validate();
 }
 
@@ -47,6 +64,9 @@ TimeSteppingStats& TimeSteppingStats::operator+=(const TimeSteppingStats& other)
   num_steps += other.num_steps;
   num_newton_iterations += other.num_newton_iterations;
   num_inside_crossings += other.num_inside_crossings;
+  adjoint_memory_bytes += other.adjoint_memory_bytes;
+  adjoint_file_bytes += other.adjoint_file_bytes;
+  adjoint_cpu_seconds += other.adjoint_cpu_seconds;
   num_factorizations += other.num_factorizations;
   num_backtracks += other.num_backtracks;
   max_complementarity_residual =
@@ -307,9 +327,16 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
   Vector previous_w;
   double previous_h = 0.0;
   std::vector<int> control;  // the control segment of every stretch
-  const std::vector<double> ends =
-      StretchEnds(scene.initial_time, scene.final_time, scene.ControlBreakpoints(),
-                  options.stop_times, &control);
+  // Sample times are stretch ends (stop times) so that a step ends at each.
+  for (double t : options.sample_times) {
+    RequireArgument(t > scene.initial_time && t <= scene.final_time, "sample time ", t,
+                    " is outside (t0, tf] = (", scene.initial_time, ", ", scene.final_time, "]");
+  }
+  std::vector<double> stops = options.stop_times;
+  stops.insert(stops.end(), options.sample_times.begin(), options.sample_times.end());
+  const std::vector<double> ends = StretchEnds(scene.initial_time, scene.final_time,
+                                               scene.ControlBreakpoints(), stops, &control);
+  std::size_t next_sample = 0;
   std::vector<double> control_starts =
       SegmentEnds(scene.initial_time, scene.final_time, scene.ControlBreakpoints());
   control_starts.pop_back();
@@ -322,11 +349,40 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
     sensitivity.leftCols(ny).setIdentity();
   }
   // Directional: d = dy/dtheta V (n_y x k) and the parameter directions; adjoint: the step
-  // transfers, applied transposed after the run.
+  // transfers (the tape), applied transposed after the run.
   const bool directional = options.sensitivity_directions.size() > 0;
-  const bool adjoint = options.adjoint_weights.size() > 0;
+  const bool adjoint = options.adjoint_weights.size() > 0 ||
+                       options.adjoint_sample_weights.size() > 0 || options.keep_adjoint;
   Matrix directions, parameter_directions;
-  std::vector<std::pair<int, Matrix>> transfers;
+  std::shared_ptr<internal::TimeSteppingTape> tape;
+  if (adjoint) {
+    tape = std::make_shared<internal::TimeSteppingTape>();
+    tape->nx = nx;
+    tape->ny = ny;
+    tape->np = np;
+    tape->nu = nu;
+    tape->segments = segments;
+    tape->memory_limit = static_cast<std::size_t>(options.adjoint_memory_limit_mb * 1024 * 1024);
+    // The weights' shapes are checked before any work (the sweep reads them after the run).
+    bool lowered = false;
+    const auto samples = static_cast<Eigen::Index>(options.sample_times.size());
+    Eigen::Index q = 0;
+    if (options.adjoint_weights.size() > 0) {
+      q = internal::ShapedSensitivityArgument(options.adjoint_weights, nx, ny, 1, "adjoint weights",
+                                              &lowered)
+              .cols();
+    }
+    if (options.adjoint_sample_weights.size() > 0) {
+      const Eigen::Index columns =
+          internal::ShapedSensitivityArgument(options.adjoint_sample_weights, nx, ny,
+                                              static_cast<int>(samples), "adjoint sample weights",
+                                              &lowered)
+              .cols();
+      RequireArgument(q == 0 || columns == q * samples, "adjoint sample weights: expected ",
+                      q * samples, " columns (", q, " per sample time, as the final weights), got ",
+                      columns);
+    }
+  }
   if (directional) {
     bool lowered = false;
     const Matrix v =
@@ -335,12 +391,6 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
     directions.setZero(ny, v.cols());
     directions.topRows(lowered ? ny : nx) = v.topRows(lowered ? ny : nx);
     parameter_directions = v.bottomRows(n_theta);
-  }
-  bool lowered_weights = false;
-  Matrix weights;
-  if (adjoint) {
-    weights = internal::ShapedSensitivityArgument(options.adjoint_weights, nx, ny, 1,
-                                                  "adjoint weights", &lowered_weights);
   }
   const bool derivatives = options.sensitivities || directional || adjoint;
   if (derivatives) result.segment_starts = control_starts;
@@ -439,7 +489,7 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
           }
           directions = std::move(next);
         }
-        if (adjoint) transfers.emplace_back(control[segment], transfer);
+        if (adjoint) tape->Add(control[segment], transfer);
       }
       const std::vector<bool> now = PairStatuses(stages.stage(s - 1));
       if (system.num_pairs() > 0 &&
@@ -474,6 +524,14 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
       }
       if (progress) progress(grid[k + 1]);
     }
+    // A sample time ends this stretch exactly (StretchEnds keeps the given values).
+    for (; !failed && next_sample < options.sample_times.size() &&
+           options.sample_times[next_sample] == ends[segment + 1];
+         ++next_sample) {
+      result.sample_states.push_back(y);
+      if (directional) result.sample_directional.push_back(directions.topRows(nx));
+      if (adjoint) tape->sample_positions.push_back(tape->transfers.size());
+    }
   }
   result.final_time = y[system.clock_index()];
   result.final_state = y.head(nx);
@@ -484,21 +542,17 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
     result.directional = directions.topRows(nx);
   }
   if (adjoint && !failed) {
-    // The transposes in reverse order: lambda = T_y^T lambda, gradient += T_(p, u)^T lambda.
-    Matrix lambda = Matrix::Zero(ny, weights.cols());
-    lambda.topRows(weights.rows()) = weights;
-    Matrix gradient = Matrix::Zero(n_theta, weights.cols());
-    for (auto it = transfers.rbegin(); it != transfers.rend(); ++it) {
-      const Matrix& t = it->second;
-      if (np > 0) gradient.topRows(np) += t.middleCols(ny, np).transpose() * lambda;
-      if (nu > 0)
-        gradient.middleRows(np + nu * it->first, nu) += t.rightCols(nu).transpose() * lambda;
-      lambda = t.leftCols(ny).transpose() * lambda;
+    stats.adjoint_memory_bytes = static_cast<double>(tape->bytes);
+    stats.adjoint_file_bytes = static_cast<double>(tape->file_bytes);
+    auto sweep = std::make_shared<const TimeSteppingAdjoint>(tape);
+    if (options.adjoint_weights.size() > 0 || options.adjoint_sample_weights.size() > 0) {
+      TimeSteppingGradient gradient =
+          sweep->Sweep(options.adjoint_weights, options.adjoint_sample_weights);
+      result.adjoint_lowered = std::move(gradient.lowered);
+      result.adjoint = std::move(gradient.theta);
+      stats.adjoint_cpu_seconds = gradient.cpu_seconds;
     }
-    result.adjoint_lowered.resize(weights.cols(), ny + n_theta);
-    result.adjoint_lowered << lambda.transpose(), gradient.transpose();
-    result.adjoint.resize(weights.cols(), nx + n_theta);
-    result.adjoint << lambda.topRows(nx).transpose(), gradient.transpose();
+    if (options.keep_adjoint) result.adjoint_sweep = std::move(sweep);
   }
   if (!options.record_trajectory || failed) {
     if (result.trajectory.t.back() != result.final_time) {

@@ -4,6 +4,27 @@
 #include "moreau/linalg/linear_solver.hpp"
 
 namespace moreau::internal {
+namespace {
+
+// Simulate()'s view of a kept time-stepping sweep.
+class TimeSteppingAdjointSweep final : public AdjointSweep {
+ public:
+  explicit TimeSteppingAdjointSweep(std::shared_ptr<const TimeSteppingAdjoint> adjoint)
+      : adjoint_(std::move(adjoint)) {}
+  AdjointGradient Gradient(const Matrix& final_weights,
+                           const Matrix& sample_weights) const override {
+    TimeSteppingGradient gradient = adjoint_->Sweep(final_weights, sample_weights);
+    AdjointGradient out;
+    out.theta = std::move(gradient.theta);
+    out.cpu_seconds = gradient.cpu_seconds;
+    return out;
+  }
+
+ private:
+  std::shared_ptr<const TimeSteppingAdjoint> adjoint_;
+};
+
+}  // namespace
 
 IntegratorEntry TimeSteppingEntry() {
   using O = TimeSteppingOptions;
@@ -26,12 +47,12 @@ IntegratorEntry TimeSteppingEntry() {
                "record every step (false: initial and final points only)"),
       BindBool("sensitivities", &O::sensitivities,
                "dx(T)/dx(0), dx(T)/dp, dx(T)/du by the IFT on every step (no switch-time terms)"),
-      BindMatrixList("directions", &O::sensitivity_directions,
-                     "directional sensitivities dx(T)/dtheta V: V column by column, n_theta = "
-                     "n_x + n_p + n_u S entries per direction"),
-      BindMatrixList("adjoint_weights", &O::adjoint_weights,
-                     "adjoint sensitivities W^T dx(T)/dtheta: W (n_x x q) column by column"),
   };
+  for (auto& binding : BindDirectionalAndAdjoint<O>(
+           "times in (t0, tf] whose states the sensitivities also cover (each becomes a step "
+           "end, as a stop time)")) {
+    options.push_back(binding);
+  }
   for (auto& binding : BindConstraintFilter(&O::constraint_filter, &O::filter_safety)) {
     options.push_back(binding);
   }
@@ -52,17 +73,25 @@ IntegratorEntry TimeSteppingEntry() {
                "max over steps of ||S Phi||_inf at convergence"),
       BindStat("num_inside_crossings", &S::num_inside_crossings,
                "steps with a free side below zero between their nodes (not resolved: a warning)"),
-      BindStat("cpu_seconds", &S::cpu_seconds, "thread CPU time"),
   };
+  for (auto& binding : BindAdjointStats<S>()) stats.push_back(binding);
+  stats.push_back(BindStat("cpu_seconds", &S::cpu_seconds, "thread CPU time"));
   return MakeEntry<O, TimeSteppingResult>(
       spec, options, stats, SimulateTimeStepping,
       [](const Scene& scene, const TimeSteppingResult& result, SimulationResult* out) {
         out->num_steps = result.stats.num_steps;
         out->num_iterations = result.stats.num_newton_iterations;
+        for (const Vector& y : result.sample_states) {
+          out->sample_states.push_back(y.head(scene.num_states()));
+        }
+        if (result.adjoint_sweep) {
+          out->adjoint = std::make_shared<TimeSteppingAdjointSweep>(result.adjoint_sweep);
+        }
         if (result.directional.size() > 0 || result.adjoint.size() > 0) {
           SimulationSensitivities s;
           s.segment_starts = result.segment_starts;
           s.directional = result.directional;
+          s.sample_directional = result.sample_directional;
           s.adjoint = result.adjoint;
           out->sensitivities = s;
         }
@@ -77,6 +106,7 @@ IntegratorEntry TimeSteppingEntry() {
         s.parameters = result.sensitivities.block(0, ny, nx, np);
         s.inputs = result.sensitivities.block(0, ny + np, nx, nu_all);
         s.directional = result.directional;
+        s.sample_directional = result.sample_directional;
         s.adjoint = result.adjoint;
         out->sensitivities = s;
       });

@@ -58,6 +58,31 @@ def test_gradient_of_a_scalar_objective_with_a_kept_sweep():
     assert _relative(gradient[0], expected) <= PRODUCT_TOLERANCE
 
 
+def test_time_stepping_sample_times_and_kept_sweep():
+    """Time-stepping keeps its step transfers (keep_adjoint) and samples the state at step ends
+    (a sample time becomes a stop time): the gradient of f = |x(T) - target|^2 +
+    |x(t1) - target|^2 from one kept sweep equals the products with the full matrices of the
+    runs stopped at T and at t1 on the same grid."""
+    scene = moreau.scene("F1")
+    target = np.array([0.5, -0.2])
+    t1 = 0.77  # not a multiple of h: a step ends there
+    run = moreau.Integrator(scene, "timestepping", h=0.05, keep_adjoint=True, sample_times=[t1])
+    result = run.simulate(x0=[0.35, 0.02])
+    assert result.success, result.message
+    assert result.sample_states.shape == (1, 2)
+    gradient = result.adjoint(2 * (result.final_state - target),
+                              2 * (result.sample_states - target))
+    assert gradient.shape == (1, 3)  # (x1, x2, omega)
+    full = moreau.Integrator(scene, "timestepping", h=0.05, tstops=[t1],
+                             sensitivities=True).simulate(x0=[0.35, 0.02])
+    at_t1 = moreau.Integrator(scene.copy().set(tf=t1), "timestepping", h=0.05,
+                              sensitivities=True).simulate(x0=[0.35, 0.02])
+    assert np.array_equal(result.sample_states[0], at_t1.final_state)
+    expected = (2 * (result.final_state - target) @ _full(full.sensitivities)
+                + 2 * (at_t1.final_state - target) @ _full(at_t1.sensitivities))
+    assert _relative(gradient[0], expected) <= PRODUCT_TOLERANCE
+
+
 def test_bad_input_raises_value_error():
     scene = moreau.scene("F1")
     with pytest.raises(ValueError, match="sensitivity directions"):

@@ -6,6 +6,7 @@
 
 #include "../problems/reference_problems.hpp"
 #include "moreau/core/convergence.hpp"
+#include "moreau/integrators/simulate.hpp"
 #include "moreau/scenes/catalog.hpp"
 
 namespace moreau {
@@ -300,6 +301,146 @@ TEST(TimeSteppingTest, DirectionalAndAdjointEqualFullProducts) {
               kProductTolerance * std::max(1.0, adjoint.lpNorm<Eigen::Infinity>()))
         << name;
   }
+}
+
+// Sample times and kept sweeps: a sample time is a step end (a stop time), the sample state is
+// the state of a run stopped there, and the directional and adjoint sensitivities at the
+// samples equal the products with the full matrices of the runs stopped there; a kept sweep,
+// Simulate()'s sweep and a sweep over transfers kept in the file equal the in-run adjoint.
+TEST(TimeSteppingTest, SampleTimesAndKeptSweeps) {
+  // The same dense transfers chained in another order: round-off only.
+  constexpr double kProductTolerance = 1e-10;
+  for (const char* name : {"S3", "F1", "rectifier"}) {
+    Scene scene = MakeScene(name);
+    scene.final_time = std::min(scene.final_time, scene.initial_time + 2.0);
+    const double span = scene.final_time - scene.initial_time;
+    // The second sample time is not on the grid of h: it becomes a step end.
+    const std::vector<double> samples = {scene.initial_time + 0.3 * span,
+                                         scene.initial_time + 0.6173 * span};
+    TimeSteppingOptions options;
+    options.step_size = span / 40.0;
+    options.stop_times = samples;  // the grid of the sampled run
+    options.sensitivities = true;
+    // The full matrices at T and at each sample time (runs stopped there).
+    const TimeSteppingResult full_run = SimulateTimeStepping(scene, options);
+    ASSERT_EQ(full_run.status, TimeSteppingStatus::kSuccess) << name << ": " << full_run.message;
+    const int nx = scene.num_states();
+    const Eigen::Index ny = full_run.sensitivities.rows();
+    const Eigen::Index n_theta = full_run.sensitivities.cols() - ny;
+    const auto scene_columns = [&](const Matrix& lowered) {
+      Matrix full = Matrix::Zero(nx, nx + n_theta);  // x0, p, u per segment (later ones zero)
+      full.leftCols(nx) = lowered.topLeftCorner(nx, nx);
+      full.middleCols(nx, lowered.cols() - ny) = lowered.topRightCorner(nx, lowered.cols() - ny);
+      return full;
+    };
+    std::vector<Matrix> at_sample;
+    std::vector<Vector> sample_state;
+    for (double t : samples) {
+      Scene stopped = scene;
+      stopped.final_time = t;
+      const TimeSteppingResult part = SimulateTimeStepping(stopped, options);
+      ASSERT_EQ(part.status, TimeSteppingStatus::kSuccess) << name << ": " << part.message;
+      at_sample.push_back(scene_columns(part.sensitivities));
+      sample_state.push_back(part.final_lowered_state);
+    }
+    TimeSteppingOptions sampled;
+    sampled.step_size = options.step_size;
+    sampled.sample_times = samples;
+    sampled.sensitivity_directions = Matrix::Random(nx + n_theta, 3);
+    sampled.adjoint_weights = Matrix::Random(nx, 2);
+    sampled.adjoint_sample_weights = Matrix::Random(nx, 2 * 2);
+    sampled.keep_adjoint = true;
+    const TimeSteppingResult result = SimulateTimeStepping(scene, sampled);
+    ASSERT_EQ(result.status, TimeSteppingStatus::kSuccess) << name << ": " << result.message;
+    // The same steps as the runs with these stop times: the same values to the bit.
+    EXPECT_EQ(result.final_lowered_state, full_run.final_lowered_state) << name;
+    ASSERT_EQ(result.sample_states.size(), 2u);
+    ASSERT_EQ(result.sample_directional.size(), 2u);
+    Matrix adjoint = sampled.adjoint_weights.transpose() * scene_columns(full_run.sensitivities);
+    for (std::size_t j = 0; j < samples.size(); ++j) {
+      EXPECT_EQ(result.sample_states[j], sample_state[j]) << name << " sample " << j;
+      const Matrix directional = at_sample[j] * sampled.sensitivity_directions;
+      EXPECT_LE((result.sample_directional[j] - directional).lpNorm<Eigen::Infinity>(),
+                kProductTolerance * std::max(1.0, directional.lpNorm<Eigen::Infinity>()))
+          << name << " sample " << j;
+      adjoint += sampled.adjoint_sample_weights.middleCols(2 * static_cast<Eigen::Index>(j), 2)
+                     .transpose() *
+                 at_sample[j];
+    }
+    EXPECT_LE((result.adjoint - adjoint).lpNorm<Eigen::Infinity>(),
+              kProductTolerance * std::max(1.0, adjoint.lpNorm<Eigen::Infinity>()))
+        << name;
+    // The kept sweep is the in-run sweep: the same operations, the same bits.
+    ASSERT_TRUE(result.adjoint_sweep != nullptr);
+    EXPECT_EQ(
+        result.adjoint_sweep->Sweep(sampled.adjoint_weights, sampled.adjoint_sample_weights).theta,
+        result.adjoint)
+        << name;
+    EXPECT_GT(result.stats.adjoint_memory_bytes, 0.0);
+    EXPECT_EQ(result.stats.adjoint_file_bytes, 0.0);
+    // Transfers beyond a bound of 2 kB are written to the file and read back unchanged.
+    TimeSteppingOptions bounded = sampled;
+    bounded.adjoint_memory_limit_mb = 2.0 / 1024.0;
+    const TimeSteppingResult spilled = SimulateTimeStepping(scene, bounded);
+    ASSERT_EQ(spilled.status, TimeSteppingStatus::kSuccess) << name << ": " << spilled.message;
+    EXPECT_GT(spilled.stats.adjoint_file_bytes, 0.0) << name;
+    EXPECT_LE(spilled.stats.adjoint_memory_bytes, 2048.0) << name;
+    EXPECT_EQ(spilled.adjoint, result.adjoint) << name;
+    // Simulate(): options by name, the sample states and the kept sweep.
+    SimulationSettings settings;
+    settings.integrator = "timestepping";
+    settings.options["h"] = options.step_size;
+    settings.options["sample_times"] = samples;
+    settings.options["keep_adjoint"] = true;
+    const SimulationResult simulated = Simulate(scene, settings);
+    ASSERT_TRUE(simulated.success) << simulated.message;
+    ASSERT_EQ(simulated.sample_states.size(), 2u);
+    EXPECT_EQ(simulated.sample_states[1], sample_state[1].head(nx)) << name;
+    ASSERT_TRUE(simulated.adjoint != nullptr);
+    const AdjointGradient gradient =
+        simulated.adjoint->Gradient(sampled.adjoint_weights, sampled.adjoint_sample_weights);
+    ASSERT_TRUE(gradient.success) << gradient.message;
+    EXPECT_LE((gradient.theta - adjoint).lpNorm<Eigen::Infinity>(),
+              kProductTolerance * std::max(1.0, adjoint.lpNorm<Eigen::Infinity>()))
+        << name;
+  }
+}
+
+// Bad sample times and adjoint weights are refused before any work, naming the problem.
+TEST(TimeSteppingTest, RefusesBadSampleTimesAndWeights) {
+  const Scene scene = testing::F1().Make();  // n_x = 2, t in [0, pi/2]
+  const auto refuses = [&](const TimeSteppingOptions& options, const std::string& expected) {
+    try {
+      SimulateTimeStepping(scene, options);
+      ADD_FAILURE() << "expected std::invalid_argument mentioning '" << expected << "'";
+    } catch (const std::invalid_argument& error) {
+      EXPECT_NE(std::string(error.what()).find(expected), std::string::npos) << error.what();
+    }
+  };
+  TimeSteppingOptions options;
+  options.step_size = 0.05;
+  options.keep_adjoint = true;
+  options.sample_times = {0.5, 0.4};
+  refuses(options, "increasing");
+  options.sample_times = {5.0};
+  refuses(options, "outside (t0, tf]");
+  options.sample_times = {0.0};
+  refuses(options, "outside (t0, tf]");
+  options.sample_times = {0.5};
+  options.adjoint_sample_weights = Matrix::Ones(2, 3);  // q = 3 per sample, but no final weights
+  options.adjoint_weights = Matrix::Ones(2, 2);         // q = 2
+  refuses(options, "adjoint sample weights");
+  options.adjoint_sample_weights = Matrix::Ones(5, 1);
+  refuses(options, "adjoint sample weights");
+  options.adjoint_sample_weights = Matrix();
+  options.adjoint_memory_limit_mb = -1.0;
+  refuses(options, "memory limit");
+  TimeSteppingOptions untracked;
+  untracked.sample_times = {0.5};
+  refuses(untracked, "sample_times need sensitivities");
+  TimeSteppingOptions unsampled;
+  unsampled.adjoint_sample_weights = Matrix::Ones(2, 1);
+  refuses(unsampled, "need sample_times");
 }
 
 }  // namespace

@@ -22,6 +22,7 @@
 /// Effects supported: moving sets and switching surfaces. Hysteresis relays and path
 /// constraints are refused (use fesd/ida and alpha, respectively).
 
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -31,6 +32,10 @@
 #include "moreau/newton/semismooth_newton.hpp"
 
 namespace moreau {
+
+namespace internal {
+struct TimeSteppingTape;
+}  // namespace internal
 
 /// Options of the fixed-step Radau IIA time-stepping baseline with stage complementarity; defaults
 /// are the values below.
@@ -62,12 +67,26 @@ struct TimeSteppingOptions {
   /// FesdOptions::sensitivity_directions and adjoint_weights (the same shapes; theta =
   /// (x0, p, u per segment), or the lowered (y0, p, u)). They chain the same dense step
   /// transfers as `sensitivities` (for the small systems time-stepping serves): the adjoint
-  /// keeps one n_y x (n_y + n_p + n_u) transfer per step. Sample times and kept sweeps are
-  /// FESD's only.
+  /// keeps one n_y x (n_y + n_p + n_u) transfer per step (8 bytes each entry), beyond
+  /// adjoint_memory_limit_mb in a temporary file.
   Matrix sensitivity_directions;
   /// Adjoint weights W (n_x x q, or n_y x q over the lowered state), as
-  /// FesdOptions::adjoint_weights: the gradients W^T dx(T)/dtheta (TimeSteppingResult::adjoint).
+  /// FesdOptions::adjoint_weights: the gradients W^T dx(T)/dtheta (+ the sample terms) in
+  /// TimeSteppingResult::adjoint.
   Matrix adjoint_weights;
+  /// Sample times in (t0, tf] (increasing): TimeSteppingResult::sample_states holds the state
+  /// there, the directional and adjoint sensitivities their terms. Each is a step end: it
+  /// joins stop_times, so the grid is laid out between them.
+  std::vector<double> sample_times;
+  /// Adjoint weights of the states at sample_times: n_x x (q * samples) (or n_y rows), sample
+  /// j in columns j q, ..., (j + 1) q - 1; a single column is read column by column.
+  Matrix adjoint_sample_weights;
+  /// Keep the step transfers in the result (TimeSteppingResult::adjoint_sweep) so that
+  /// adjoints for weights chosen after the run cost one reverse sweep each.
+  bool keep_adjoint = false;
+  /// Memory bound of the kept step transfers, in megabytes (0: none); transfers beyond it are
+  /// written to a temporary file and read back by the sweep. >= 0.
+  double adjoint_memory_limit_mb = 0.0;
   /// Near-active constraint filter (docs/sparse-systems.md), as FesdOptions::constraint_filter:
   /// moving-set constraints far from contact are left out of the step systems and checked at
   /// every stage afterwards (the step is solved again with those that are not positive there).
@@ -116,6 +135,12 @@ struct TimeSteppingStats {
   /// Steps in which a free side falls below zero between the nodes and rises again, or whose
   /// indicator bounds admit that without the search resolving it (each one a warning).
   long num_inside_crossings = 0;
+  /// Adjoint: bytes of the step transfers kept in memory, and written to the file beyond
+  /// adjoint_memory_limit_mb.
+  double adjoint_memory_bytes = 0.0;
+  double adjoint_file_bytes = 0.0;
+  /// Thread CPU time of the adjoint reverse sweep in this result.
+  double adjoint_cpu_seconds = 0.0;
   /// CPU time of the run.
   double cpu_seconds = 0.0;
 
@@ -123,6 +148,32 @@ struct TimeSteppingStats {
   TimeSteppingStats& operator+=(const TimeSteppingStats& other);
   /// One line for the command line's summary.
   std::string Summary() const;
+};
+
+/// Gradients of q functionals of one time-stepping run (TimeSteppingAdjoint::Sweep).
+struct TimeSteppingGradient {
+  Matrix theta;              ///< q x (n_x + n_p + n_u S): with respect to (x0, p, u_1..u_S)
+  Matrix lowered;            ///< q x (n_y + n_p + n_u S): with respect to (y0, p, u_1..u_S)
+  double cpu_seconds = 0.0;  ///< thread CPU time of the sweep
+};
+
+/// The reverse sweep of a finished time-stepping run (TimeSteppingOptions::keep_adjoint): the
+/// transposes of its step transfers T_k = d y_(k+1) / d(y_k, p, u) applied in reverse order,
+/// lambda <- T_y^T lambda, gradient += T_(p,u)^T lambda, with the sample weights added where
+/// their step ends. Exactly the transpose of the directional sensitivities. Not thread-safe
+/// (transfers beyond the memory bound are read back from one file).
+class TimeSteppingAdjoint {
+ public:
+  /// Made by the run, which passes its kept transfers; not for applications.
+  explicit TimeSteppingAdjoint(std::shared_ptr<const internal::TimeSteppingTape> tape);
+  /// final_weights: n_x x q or n_y x q (empty: zero); sample_weights: n_x x (q K) or n_y x
+  /// (q K) for the K sample times (empty: zero). Throws std::invalid_argument for other
+  /// shapes or no weights at all.
+  TimeSteppingGradient Sweep(const Matrix& final_weights,
+                             const Matrix& sample_weights = Matrix()) const;
+
+ private:
+  std::shared_ptr<const internal::TimeSteppingTape> tape_;
 };
 
 /// Result of SimulateTimeStepping: status, final values, trajectory, events, per-step certificates,
@@ -161,6 +212,12 @@ struct TimeSteppingResult {
   Matrix adjoint;
   /// With adjoint_weights (q): the gradients over the lowered (y0, p, u), q x (n_y + n_p + n_u S).
   Matrix adjoint_lowered;
+  /// The lowered state y = (x, clock) at every TimeSteppingOptions::sample_times entry.
+  std::vector<Vector> sample_states;
+  /// With sensitivity_directions: dx(t_j)/dtheta V (n_x x k) at every sample time.
+  std::vector<Matrix> sample_directional;
+  /// With keep_adjoint: the run's step transfers for further reverse sweeps (shared by copies).
+  std::shared_ptr<const TimeSteppingAdjoint> adjoint_sweep;
 };
 
 /// Simulates `scene` over [t0, tf]. Throws std::invalid_argument for invalid options, an
