@@ -11,6 +11,7 @@
 // share, the bytes the tape kept and the process's peak resident set.
 #include <CLI/CLI.hpp>
 #include <algorithm>
+#include <cstdio>
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -48,12 +49,29 @@ int main(int argc, char** argv) {
   app.add_option("--tf", horizon, "horizon (0: the scene's)");
   app.add_option("--stages", stages, "Radau IIA stages")->check(CLI::Range(1, 6));
   app.add_option("--repeats", repeats, "runs (the median is reported)")->check(CLI::PositiveNumber);
+  std::vector<std::string> extra;
+  app.add_option("--set", extra,
+                 "another FESD option as name=value (true/false or a number), e.g. "
+                 "estimate_error=false");
   CLI11_PARSE(app, argc, argv);
 
   moreau::Scene scene = moreau::MakeScene(scene_name);
   if (horizon > 0.0) scene.final_time = horizon;
   const int nx = scene.num_states();
   moreau::SimulationSettings settings{"fesd", {{"stages", stages}, {"h", step}}};
+  for (const std::string& option : extra) {
+    const std::size_t equals = option.find('=');
+    if (equals == std::string::npos) {
+      std::fprintf(stderr, "adjoint_cost: --set needs name=value, got '%s'\n", option.c_str());
+      return 2;
+    }
+    const std::string name = option.substr(0, equals), value = option.substr(equals + 1);
+    if (value == "true" || value == "false") {
+      settings.options[name] = value == "true";
+    } else {
+      settings.options[name] = std::stod(value);
+    }
+  }
   if (mode == "adjoint") {
     settings.options["adjoint_weights"] = std::vector<double>(static_cast<std::size_t>(nx), 1.0);
   } else if (mode == "directional") {
