@@ -69,14 +69,15 @@ def _matrix(lib, function, run):
     return out.reshape(cols.value, rows.value).T
 
 
-def test_directional_and_adjoint_equal_products_with_the_full_matrix(lib):
+@pytest.mark.parametrize("integrator", ["fesd", "timestepping"])
+def test_directional_and_adjoint_equal_products_with_the_full_matrix(lib, integrator):
     scene = ctypes.c_void_p()
     assert lib.moreau_scene_builtin(b"F1", ctypes.byref(scene)) == OK
     n = [ctypes.c_size_t() for _ in range(4)]
     assert lib.moreau_scene_sizes(scene, *[ctypes.byref(v) for v in n]) == OK
     nx, n_theta = n[0].value, n[0].value + n[1].value + n[2].value * n[3].value
     run = ctypes.c_void_p()
-    assert lib.moreau_run_create(scene, b"fesd", ctypes.byref(run)) == OK
+    assert lib.moreau_run_create(scene, integrator.encode(), ctypes.byref(run)) == OK
     lib.moreau_scene_free(scene)
     rng = np.random.default_rng(7)
     v = rng.standard_normal((n_theta, 3))
@@ -98,8 +99,8 @@ def test_directional_and_adjoint_equal_products_with_the_full_matrix(lib):
     assert np.abs(directional - full @ v).max() <= PRODUCT_TOLERANCE * scale
     assert np.abs(adjoint - w.T @ full).max() <= PRODUCT_TOLERANCE * scale
     # The same run through the Python package gives the same full matrix.
-    result = moreau.simulate(moreau.scene("F1").set(**{"x0.x1": 0.4, "x0.x2": 0.05}), "fesd",
-                             h=0.05, sensitivities=True)
+    result = moreau.simulate(moreau.scene("F1").set(**{"x0.x1": 0.4, "x0.x2": 0.05}),
+                             integrator, h=0.05, sensitivities=True)
     python_full = np.hstack([result.sensitivities.dx_dx0, result.sensitivities.dx_dp])
     assert np.abs(python_full - full).max() <= PRODUCT_TOLERANCE * scale
     lib.moreau_run_free(run)
