@@ -8,7 +8,6 @@
 //   build/release/bench/fesd_bench --benchmark_filter=SmoothElements (reduction on / off)
 //   build/release/bench/fesd_bench --benchmark_filter=RunCost        (fixed and per-element cost)
 #include <benchmark/benchmark.h>
-#include <time.h>
 
 #include <algorithm>
 #include <chrono>
@@ -16,6 +15,7 @@
 #include <stdexcept>
 #include <vector>
 
+#include "moreau/core/clock.hpp"
 #include "moreau/integrators/fesd.hpp"
 #include "moreau/integrators/ida.hpp"
 #include "moreau/integrators/radau.hpp"
@@ -95,11 +95,7 @@ void BM_RadauElement(benchmark::State& state) {
 BENCHMARK(BM_RadauElement)->Arg(2)->Arg(3)->ArgName("stages")->Unit(benchmark::kMillisecond);
 
 // CPU time of this thread (the machine is shared: wall time counts other processes' work).
-double ThreadCpuSeconds() {
-  timespec t{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
-}
+using moreau::ThreadCpuSeconds;
 
 // The smooth part of a reference scene: its dynamics without effects (S3: the rotation x' =
 // (x2, -x1) without the floor), or for a switching system the vector field of the region

@@ -16,8 +16,8 @@
 //   build/release/bench/ida_bench
 //   scripts/bench-ida   (runs it and prints time per step against N and the log-log slope)
 #include <benchmark/benchmark.h>
-#include <time.h>
 
+#include "moreau/core/clock.hpp"
 #include "moreau/integrators/ida.hpp"
 #include "moreau/scenes/crowd.hpp"
 
@@ -26,12 +26,6 @@ namespace {
 // Horizons: before the first contact (t = 1.5, a front agent reaches a jamb), and after it.
 constexpr double kFreeHorizon = 0.5;
 constexpr double kContactHorizon = 2.0;
-
-double ThreadCpuSeconds() {
-  timespec now{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &now);
-  return static_cast<double>(now.tv_sec) + 1e-9 * static_cast<double>(now.tv_nsec);
-}
 
 void IdaCrowd(benchmark::State& state, double horizon) {
   moreau::CrowdOptions crowd;
@@ -45,10 +39,10 @@ void IdaCrowd(benchmark::State& state, double horizon) {
   moreau::IdaStats stats;
   for (auto _ : state) {
     long calls = 0;
-    const double start = ThreadCpuSeconds();
+    const double start = moreau::ThreadCpuSeconds();
     double first = start, last = start;
     const moreau::IdaResult result = moreau::SimulateIda(scene, options, [&](double) {
-      const double now = ThreadCpuSeconds();
+      const double now = moreau::ThreadCpuSeconds();
       if (calls++ == 0) first = now;
       last = now;
     });

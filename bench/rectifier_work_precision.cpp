@@ -14,8 +14,6 @@
 // measured run that reaches it, and the ratio of Siconos' extrapolated cost to it.
 // Writes OUT_DIR/rectifier_work_precision.{csv,md} (default out/bench). Opt-in
 // (scripts/bench-rectifier); never part of the tests.
-#include <time.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -27,6 +25,7 @@
 #include <vector>
 
 #include "../tests/problems/reference_problems.hpp"
+#include "moreau/core/clock.hpp"
 #include "moreau/integrators/simulate.hpp"
 
 namespace {
@@ -48,12 +47,6 @@ const std::vector<double> kTargets = {1e-4, 1e-6, 1e-8, 1e-10};
 constexpr int kMinRepeats = 5;
 constexpr int kMaxRepeats = 31;
 constexpr double kMinTotalSeconds = 0.2;
-
-double ThreadCpuSeconds() {
-  timespec now{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &now);
-  return static_cast<double>(now.tv_sec) + 1e-9 * static_cast<double>(now.tv_nsec);
-}
 
 struct Method {
   std::string label;
@@ -103,9 +96,9 @@ Point Measure(const Method& method, double parameter, const Scene& scene,
   double total = 0.0;
   while (static_cast<int>(times.size()) < kMinRepeats ||
          (total < kMinTotalSeconds && static_cast<int>(times.size()) < kMaxRepeats)) {
-    const double start = ThreadCpuSeconds();
+    const double start = moreau::ThreadCpuSeconds();
     moreau::Simulate(scene, settings);
-    times.push_back(ThreadCpuSeconds() - start);
+    times.push_back(moreau::ThreadCpuSeconds() - start);
     total += times.back();
   }
   std::sort(times.begin(), times.end());

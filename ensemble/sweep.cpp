@@ -1,8 +1,6 @@
 // Parameter sweeps and Monte Carlo on a thread pool (include/moreau/ensemble/sweep.hpp).
 #include "moreau/ensemble/sweep.hpp"
 
-#include <time.h>
-
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -16,6 +14,7 @@
 #include <sstream>
 #include <thread>
 
+#include "moreau/core/clock.hpp"
 #include "moreau/core/error.hpp"
 
 namespace moreau {
@@ -78,12 +77,6 @@ double Draw(const SweepSample& sample, std::uint64_t seed, long index) {
   const double u2 = Uniform01(SplitMix64(key + 1));
   const double z = std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * std::numbers::pi * u2);
   return sample.a + sample.b * z;
-}
-
-double ThreadCpuSeconds() {
-  timespec now{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &now);
-  return static_cast<double>(now.tv_sec) + 1e-9 * static_cast<double>(now.tv_nsec);
 }
 
 }  // namespace

@@ -5,7 +5,6 @@
 #include <IpIpoptApplication.hpp>
 #include <IpTNLP.hpp>
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -13,6 +12,7 @@
 
 #include "collocation.hpp"
 #include "internal.hpp"
+#include "moreau/core/clock.hpp"
 #include "moreau/core/error.hpp"
 #include "moreau/integrators/fesd.hpp"
 #include "moreau/model/projection.hpp"
@@ -307,7 +307,7 @@ double TerminalError(const OcpProblem& problem, const Vector& x, const Vector& u
 }
 
 void Verify(const OcpProblem& problem, OcpResult* result) {
-  const auto start = std::chrono::steady_clock::now();
+  const RunClock run_clock;
   Scene scene = problem.scene;
   scene.initial_time = result->grid.front();
   // An initial state outside the moving sets jumps onto them at t0 (FESD does the same), and
@@ -391,8 +391,7 @@ void Verify(const OcpProblem& problem, OcpResult* result) {
   } catch (const std::exception& error) {
     result->fesd_verification_message = std::string("FESD re-simulation refused: ") + error.what();
   }
-  result->stats.verification_seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  result->stats.verification_seconds = run_clock.CpuSeconds();
 }
 
 }  // namespace
@@ -405,7 +404,7 @@ namespace {
 OcpLevelResult RunLevel(ocp_internal::Nlp* nlp, const OcpOptions& options,
                         const OcpHomotopyLevel& parameters, int level, int num_levels, bool exact,
                         Vector* z, OcpMultipliers* multipliers, OcpResult* result) {
-  const auto level_start = std::chrono::steady_clock::now();
+  const RunClock level_clock;
   Ipopt::SmartPtr<Ipopt::IpoptApplication> app = IpoptApplicationFactory();
   const double tolerance = exact ? options.tolerance : options.level_tolerance;
   app->Options()->SetNumericValue("tol", tolerance);
@@ -453,8 +452,7 @@ OcpLevelResult RunLevel(ocp_internal::Nlp* nlp, const OcpOptions& options,
   level_result.message = s.str();
   level_result.iterations = tnlp->iterations();
   level_result.objective = tnlp->final_objective();
-  level_result.seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - level_start).count();
+  level_result.seconds = level_clock.CpuSeconds();
   result->levels.push_back(level_result);
   result->stats.iterations += level_result.iterations;
   if (tnlp->solution().size() == z->size() && tnlp->solution().allFinite()) {
@@ -540,7 +538,7 @@ void SolveShootingLevels(const OcpProblem& problem, const OcpOptions& options,
 }
 
 OcpResult SolveByShooting(const OcpProblem& problem, const OcpOptions& options) {
-  const auto start = std::chrono::steady_clock::now();
+  const RunClock run_clock;
   RequireArgument(options.hessian != OcpHessian::kSecondOrder, problem.name,
                   ": second-order Hessians need the collocation transcription (FESD computes no "
                   "second-order sensitivities)");
@@ -582,15 +580,14 @@ OcpResult SolveByShooting(const OcpProblem& problem, const OcpOptions& options) 
       if (result.status == OcpStatus::kSimulationFailure) break;
     }
   }
-  result.stats.cpu_seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  result.stats.cpu_seconds = run_clock.CpuSeconds();
   return result;
 }
 
 // The collocation transcription: the relaxed levels of OcpOptions::homotopy (each with
 // complementarity > 0), then the exact level on the pieces of the last relaxed solution.
 OcpResult SolveByCollocation(const OcpProblem& problem, const OcpOptions& options) {
-  const auto start = std::chrono::steady_clock::now();
+  const RunClock run_clock;
   ocp_internal::CollocationNlp nlp(problem, options);
   RequireArgument(!options.homotopy.empty(), problem.name,
                   ": the collocation transcription needs homotopy levels with a complementarity "
@@ -674,8 +671,7 @@ OcpResult SolveByCollocation(const OcpProblem& problem, const OcpOptions& option
   result.multipliers = multipliers;
   solved->Describe(z, &result);
   result.complementarity_residual = solved->ComplementarityResidual(z);
-  result.stats.cpu_seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  result.stats.cpu_seconds = run_clock.CpuSeconds();
   return result;
 }
 

@@ -1,6 +1,4 @@
 // The error of a run against its scene's answer, CPU timing and the per-series summary.
-#include <time.h>
-
 #include <algorithm>
 #include <cmath>
 #include <iomanip>
@@ -8,6 +6,7 @@
 #include <random>
 #include <sstream>
 
+#include "moreau/core/clock.hpp"
 #include "report.hpp"
 
 namespace moreau::report {
@@ -57,12 +56,6 @@ double Hausdorff(const std::vector<double>& a, const std::vector<double>& b) {
 
 // Seed of the shuffled order of TimeInterleaved's rounds (any fixed value).
 constexpr std::mt19937::result_type kShuffleSeed = 16;
-
-double ThreadCpuSeconds() {
-  timespec now{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &now);
-  return static_cast<double>(now.tv_sec) + 1e-9 * static_cast<double>(now.tv_nsec);
-}
 
 double Median(std::vector<double> values) {
   if (values.empty()) return kNaN;

@@ -2,10 +2,10 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <sstream>
 
+#include "moreau/core/clock.hpp"
 #include "moreau/core/error.hpp"
 #include "moreau/integrators/simulate.hpp"
 #include "sqp.hpp"
@@ -347,7 +347,7 @@ class AlphaDaiRun {
   }
 
   AlphaDaiResult Run() {
-    const auto start = std::chrono::steady_clock::now();
+    const RunClock run_clock;
     AlphaDaiResult result;
     result.constraint_names = constraint_names_;
     result.trajectory.state_names = scene_.state_names;
@@ -391,8 +391,7 @@ class AlphaDaiRun {
     if (!options_.record_trajectory && result.trajectory.t.back() != t_) {
       result.trajectory.Append(t_, x_, u_, last_step_);
     }
-    stats_.cpu_seconds =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    stats_.cpu_seconds = run_clock.CpuSeconds();
     result.stats = stats_;
     return result;
   }

@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "integrator_entry.hpp"
+#include "moreau/core/clock.hpp"
 #include "moreau/core/error.hpp"
 #include "moreau/model/expression.hpp"
 
@@ -338,12 +339,14 @@ void ValidateSimulationSettings(const Scene& scene, const SimulationSettings& se
 
 SimulationResult Simulate(const Scene& scene, const SimulationSettings& settings,
                           const ProgressCallback& progress) {
+  const double wall_start = WallSeconds();
   const std::string name =
       settings.integrator == "auto" ? AutomaticIntegrator(scene) : settings.integrator;
   const internal::IntegratorEntry& entry = internal::FindEntry(name);
   RequireSupportedEffects(scene, name);
   SimulationResult result =
       entry.run(scene, WithSceneDefaults(scene, name, settings.options), progress);
+  result.wall_seconds = WallSeconds() - wall_start;
   result.scene = scene.name;
   result.state_names = scene.state_names;
   return result;
@@ -380,8 +383,11 @@ SimulationResult Simulator::Run(const std::vector<std::pair<std::string, double>
   for (std::size_t i = 0; i < base.parameters.size(); ++i) {
     working.parameters[i].value = base.parameters[i].value;
   }
+  const double wall_start = WallSeconds();
   for (const auto& [name, value] : values) SetSceneValue(&working, name, value);
-  return impl_->run(working, progress);
+  SimulationResult result = impl_->run(working, progress);
+  result.wall_seconds = WallSeconds() - wall_start;
+  return result;
 }
 
 const std::string& Simulator::integrator() const { return impl_->integrator; }

@@ -2,13 +2,13 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <limits>
 #include <sstream>
 
 #include "fesd_run.hpp"
 #include "moreau/complementarity/ncp_function.hpp"
+#include "moreau/core/clock.hpp"
 #include "moreau/core/error.hpp"
 #include "moreau/integrators/simulate.hpp"
 #include "moreau/model/projection.hpp"
@@ -161,7 +161,7 @@ std::string FesdStats::Summary() const {
 namespace internal {
 
 FesdResult FesdRun::Run() {
-  const auto start = std::chrono::steady_clock::now();
+  const RunClock run_clock;
   const Scene& scene = system_.scene();
   y_ = system_.InitialState();
   if (options_.initial_state.size() > 0) {
@@ -212,7 +212,7 @@ FesdResult FesdRun::Run() {
   system_.ClearNonFinite();
   if ((options_.initial_state.size() > 0 || options_.project_initial_state) &&
       !ProjectInitialState()) {
-    return Finish(start);
+    return Finish(run_clock);
   }
   scale_.Reset(y_);
 
@@ -241,7 +241,7 @@ FesdResult FesdRun::Run() {
       Integrate();
     }
   }
-  return Finish(start);
+  return Finish(run_clock);
 }
 
 SemismoothNewtonOptions FesdRun::NewtonOptions(const FesdOptions& options) {
@@ -375,7 +375,7 @@ void FesdRun::EndFixedAdvance() {
   scale_.Update(y_);
 }
 
-FesdResult FesdRun::Finish(std::chrono::steady_clock::time_point start) {
+FesdResult FesdRun::Finish(const RunClock& run_clock) {
   // The clock reaches tf up to round-off (collocation of t' = 1, or kClockTolerance with
   // time-freezing); a run that reached it ends exactly there.
   const Scene& scene = system_.scene();
@@ -432,8 +432,7 @@ FesdResult FesdRun::Finish(std::chrono::steady_clock::time_point start) {
   }
   if (result_.elements.empty()) result_.stats.min_element_length = 0.0;
   result_.stats.num_factorizations = factorizations_;
-  result_.stats.cpu_seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  result_.stats.cpu_seconds = run_clock.CpuSeconds();
   return std::move(result_);
 }
 

@@ -4,7 +4,6 @@
 // run's steps. Both use the same implicit-function-theorem blocks as the full matrices
 // (fesd_sensitivities.cpp), as products (group_sensitivity.cpp).
 #include <Eigen/Dense>
-#include <chrono>
 #include <cmath>
 #include <sstream>
 #include <type_traits>
@@ -13,6 +12,7 @@
 #include "../common/sensitivity_arguments.hpp"
 #include "fesd_run.hpp"
 #include "moreau/complementarity/ncp_function.hpp"
+#include "moreau/core/clock.hpp"
 #include "moreau/core/error.hpp"
 
 namespace moreau::internal {
@@ -371,7 +371,7 @@ bool FesdRun::GroupTransposed(const GroupStep& kept, Matrix* lambda, Matrix* gra
 }
 
 FesdGradient FesdRun::ReverseSweep(const Matrix& final_weights, const Matrix& sample_weights) {
-  const auto start = std::chrono::steady_clock::now();
+  const RunClock run_clock;
   const int np = system_.num_parameters(), nu = system_.num_inputs();
   const int segments = static_cast<int>(tape_.segment_inputs.size());
   const int n_params = np + nu * segments;
@@ -435,7 +435,7 @@ FesdGradient FesdRun::ReverseSweep(const Matrix& final_weights, const Matrix& sa
     out.theta.resize(q, nx_ + n_params);
     out.theta << lambda.topRows(nx_).transpose(), gradient.transpose();
   }
-  out.cpu_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  out.cpu_seconds = run_clock.CpuSeconds();
   return out;
 }
 

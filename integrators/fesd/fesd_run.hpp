@@ -13,7 +13,6 @@
 //   dense_output.cpp       values at requested output times from the collocation polynomials
 
 #include <array>
-#include <chrono>
 #include <map>
 #include <memory>
 #include <optional>
@@ -25,6 +24,7 @@
 #include "../common/smooth_collocation.hpp"
 #include "../common/step_size.hpp"
 #include "group_system.hpp"
+#include "moreau/core/clock.hpp"
 #include "moreau/integrators/fesd.hpp"
 #include "moreau/newton/semismooth_newton.hpp"
 #include "sensitivity_tape.hpp"
@@ -176,7 +176,7 @@ class FesdRun {
   static constexpr double kClockTolerance = 1e-11;
 
   // Completes the result and moves it out (the run is over: Run() is called once).
-  FesdResult Finish(std::chrono::steady_clock::time_point start);
+  FesdResult Finish(const RunClock& run_clock);
 
   void Fail(FesdStatus status, double t, const std::string& reason);
 

@@ -10,11 +10,11 @@
 #include <sunmatrix/sunmatrix_dense.h>
 #include <sunmatrix/sunmatrix_sparse.h>
 
-#include <chrono>
 #include <cstdlib>
 #include <limits>
 #include <sstream>
 
+#include "moreau/core/clock.hpp"
 #include "moreau/integrators/simulate.hpp"
 
 namespace moreau::internal {
@@ -79,7 +79,7 @@ IdaRun::~IdaRun() {
 }
 
 IdaResult IdaRun::Run() {
-  const auto start = std::chrono::steady_clock::now();
+  const RunClock run_clock;
   const Scene& scene = system_.scene();
   result_.trajectory.state_names = scene.state_names;
   result_.trajectory.algebraic_names = system_.algebraic_names();
@@ -134,8 +134,7 @@ IdaResult IdaRun::Run() {
   // The last phase's counters: a run that fails inside a phase has no IDAReInit after it
   // (hard_corner with the Newton factor 0.001 reported 48 steps after 10^7).
   AccumulateStats();
-  result_.stats.cpu_seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  result_.stats.cpu_seconds = run_clock.CpuSeconds();
   return result_;
 }
 

@@ -1,12 +1,12 @@
 #include "moreau/integrators/radau.hpp"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <sstream>
 
 #include "../common/smooth_collocation.hpp"
 #include "../common/step_size.hpp"
+#include "moreau/core/clock.hpp"
 #include "moreau/core/error.hpp"
 #include "moreau/integrators/radau_tableau.hpp"
 #include "moreau/integrators/simulate.hpp"
@@ -104,7 +104,7 @@ class RadauRun {
   }
 
   RadauResult Run() {
-    const auto start = std::chrono::steady_clock::now();
+    const RunClock run_clock;
     const Scene& scene = system_.scene();
     RadauResult result;
     result.trajectory.state_names = scene.state_names;
@@ -150,8 +150,7 @@ class RadauRun {
     stats_.num_newton_iterations = stage_solver_.num_newton_iterations();
     stats_.num_function_evaluations += stage_solver_.num_function_evaluations();
     stats_.num_jacobian_evaluations += stage_solver_.num_function_evaluations();
-    stats_.cpu_seconds =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    stats_.cpu_seconds = run_clock.CpuSeconds();
     result.stats = stats_;
     return result;
   }

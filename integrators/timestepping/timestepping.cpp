@@ -1,7 +1,6 @@
 #include "moreau/integrators/timestepping.hpp"
 
 #include <Eigen/LU>
-#include <chrono>
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -10,6 +9,7 @@
 #include "../common/constraint_filter.hpp"
 #include "../common/crossing_search.hpp"
 #include "../common/sensitivity_arguments.hpp"
+#include "moreau/core/clock.hpp"
 #include "moreau/core/error.hpp"
 #include "moreau/integrators/simulate.hpp"
 #include "timestepping_tape.hpp"
@@ -284,7 +284,7 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
   RequireFixedStepsWithin(
       SegmentEnds(scene.initial_time, scene.final_time, scene.ControlBreakpoints()),
       options.step_size, options.max_steps);
-  const auto start = std::chrono::steady_clock::now();
+  const RunClock run_clock;
   LoweringOptions lowering;
   lowering.switching_form = options.switching_form;
   lowering.require_feasible_initial_state = options.initial_state.size() == 0;
@@ -569,8 +569,7 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
                "(tstops to place a step boundary) or the fesd integrator";
     result.warnings.push_back(warning.str());
   }
-  stats.cpu_seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  stats.cpu_seconds = run_clock.CpuSeconds();
   return result;
 }
 

@@ -1,8 +1,8 @@
 // The kept step transfers of a time-stepping run and their reverse sweep (timestepping_tape.hpp).
-#include <chrono>
 #include <utility>
 
 #include "../common/sensitivity_arguments.hpp"
+#include "moreau/core/clock.hpp"
 #include "moreau/core/error.hpp"
 #include "moreau/integrators/timestepping.hpp"
 #include "timestepping_tape.hpp"
@@ -91,10 +91,10 @@ TimeSteppingAdjoint::TimeSteppingAdjoint(std::shared_ptr<const internal::TimeSte
 
 TimeSteppingGradient TimeSteppingAdjoint::Sweep(const Matrix& final_weights,
                                                 const Matrix& sample_weights) const {
-  const auto start = std::chrono::steady_clock::now();
+  const RunClock run_clock;
   TimeSteppingGradient out;
   tape_->Sweep(final_weights, sample_weights, &out.lowered, &out.theta);
-  out.cpu_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  out.cpu_seconds = run_clock.CpuSeconds();
   return out;
 }
 

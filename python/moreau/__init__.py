@@ -438,8 +438,13 @@ class Result:
 
     @property
     def cpu_seconds(self) -> float:
-        """CPU time of the run."""
+        """CPU time of the integrator's run (the thread's CPU time, not elapsed time)."""
         return self._native.cpu_seconds
+
+    @property
+    def wall_seconds(self) -> float:
+        """Elapsed time of the whole simulation call, set-up included."""
+        return self._native.wall_seconds
 
     def plot(self, states: Optional[Sequence[str]] = None, multipliers: bool = True,
              events: bool = True, ax=None, internal: bool = False,

@@ -382,6 +382,7 @@ PYBIND11_MODULE(_moreau, m) {
       .def_readonly("num_steps", &SimulationResult::num_steps)
       .def_readonly("num_iterations", &SimulationResult::num_iterations)
       .def_readonly("cpu_seconds", &SimulationResult::cpu_seconds)
+      .def_readonly("wall_seconds", &SimulationResult::wall_seconds)
       .def("options",
            [](const SimulationResult& r) {
              py::dict out;

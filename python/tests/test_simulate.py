@@ -41,6 +41,8 @@ def test_python_equals_cli_summary_bit_for_bit(cli, tmp_path, name, integrator, 
     for stat, value in result.stats.items():
         if stat != "cpu_seconds":
             assert value == summary["stats"][stat], stat
+    # Timing (not comparable between runs): the run's CPU time and the call's elapsed time.
+    assert result.cpu_seconds > 0 and result.wall_seconds > 0 and summary["wall_seconds"] > 0
     for option, value in result.options.items():
         if option != "record_stages":  # the command line records FESD's stages
             expected = summary["options"][option]

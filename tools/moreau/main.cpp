@@ -235,7 +235,7 @@ int Run(Scene scene, const moreau::SimulationSettings& settings,
   const moreau::IntegratorSpec& spec = moreau::FindIntegrator(report.integrator);
   std::printf("steps       %ld (%ss)\n", report.num_steps, spec.step_unit.c_str());
   std::printf("iterations  %ld (%s)\n", report.num_iterations, spec.iteration_unit.c_str());
-  std::printf("cpu time    %.3g s\n", report.cpu_seconds);
+  std::printf("cpu time    %.3g s (wall %.3g s)\n", report.cpu_seconds, report.wall_seconds);
   std::printf("stats       %s\n", report.stats_summary.c_str());
   if (report.error_estimate) {
     std::printf("error       %.3g estimated, relative to the solution's scale\n",

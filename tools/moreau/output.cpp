@@ -185,6 +185,7 @@ nlohmann::json SummaryJson(const SimulationResult& report) {
     stats[name] = count ? nlohmann::json(static_cast<long>(value)) : NumberJson(value);
   }
   summary["stats"] = stats;
+  summary["wall_seconds"] = NumberJson(report.wall_seconds);  // elapsed; stats: CPU time
   if (report.error_estimate) summary["error_estimate"] = NumberJson(*report.error_estimate);
   summary["warnings"] = report.warnings;
   if (!report.step_sequence.empty()) summary["step_sequence"] = report.step_sequence;

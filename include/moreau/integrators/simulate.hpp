@@ -177,8 +177,12 @@ struct SimulationResult {
   std::string stats_summary;  ///< the integrator's one-line Summary()
   long num_steps = 0;         ///< IntegratorSpec::step_unit
   long num_iterations = 0;    ///< IntegratorSpec::iteration_unit
-  /// CPU time of the run.
+  /// CPU time of the integrator's run (its cpu_seconds statistic: the thread's CPU time, not
+  /// elapsed time).
   double cpu_seconds = 0.0;
+  /// Elapsed (wall-clock) time of the whole Simulate call, lowering and set-up included: on a
+  /// loaded machine larger than cpu_seconds by the time other work held the cores.
+  double wall_seconds = 0.0;
   /// Per-element (FESD) or per-step (alpha) certificates: column names and rows.
   std::vector<std::string> record_columns;
   /// One row per element or step, values in record_columns order.

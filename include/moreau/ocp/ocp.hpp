@@ -354,7 +354,7 @@ struct OcpLevelResult {
   int iterations = 0;
   /// Objective at the level's solution.
   double objective = 0.0;
-  /// Wall time of the level.
+  /// CPU time of the level (this thread's, not elapsed time).
   double seconds = 0.0;
 };
 
@@ -364,9 +364,9 @@ struct OcpStats {
   long simulations = 0;  ///< interval integrations (each with sensitivities)
   /// FESD finite elements of all interval integrations.
   long fesd_elements = 0;
-  /// CPU time of the solve.
+  /// CPU time of the solve (this thread's, not elapsed time).
   double cpu_seconds = 0.0;
-  /// Time spent in the verification re-simulations.
+  /// CPU time of the verification re-simulations.
   double verification_seconds = 0.0;
   /// Memory of the NLP's derivative data: structural nonzeros of the constraint Jacobian
   /// and of the Hessian approximation (lower triangle; 0 for limited memory).
