@@ -6,6 +6,7 @@
 #include <limits>
 #include <sstream>
 
+#include "../common/sensitivity_arguments.hpp"
 #include "fesd_run.hpp"
 #include "moreau/complementarity/ncp_function.hpp"
 #include "moreau/core/clock.hpp"
@@ -71,24 +72,7 @@ void FesdOptions::Validate() const {
   }
   RequireArgument(std::isfinite(filter_safety) && filter_safety >= 1.0,
                   "filter safety must be >= 1, got ", filter_safety);
-  RequireArgument(sensitivity_directions.allFinite(), "sensitivity directions must be finite");
-  RequireArgument(adjoint_weights.allFinite() && adjoint_sample_weights.allFinite(),
-                  "adjoint weights must be finite");
-  for (std::size_t j = 0; j < sample_times.size(); ++j) {
-    RequireArgument(
-        std::isfinite(sample_times[j]) && (j == 0 || sample_times[j] > sample_times[j - 1]),
-        "sample times must be finite and increasing, got ", sample_times[j], " at position ", j);
-  }
-  const bool tracked = sensitivities || sensitivity_directions.size() > 0 ||
-                       adjoint_weights.size() > 0 || adjoint_sample_weights.size() > 0 ||
-                       keep_adjoint;
-  RequireArgument(sample_times.empty() || tracked,
-                  "sample_times need sensitivities: directions, adjoint weights or keep_adjoint");
-  RequireArgument(adjoint_sample_weights.size() == 0 || !sample_times.empty(),
-                  "adjoint sample weights need sample_times");
-  RequireArgument(std::isfinite(adjoint_memory_limit_mb) && adjoint_memory_limit_mb >= 0.0,
-                  "adjoint memory limit must be >= 0 megabytes (0: none), got ",
-                  adjoint_memory_limit_mb);
+  internal::ValidateSensitivityOptions(*this);
   newton.Validate();
 }
 

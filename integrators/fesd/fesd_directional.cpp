@@ -376,24 +376,9 @@ FesdGradient FesdRun::ReverseSweep(const Matrix& final_weights, const Matrix& sa
   const int segments = static_cast<int>(tape_.segment_inputs.size());
   const int n_params = np + nu * segments;
   const int samples = static_cast<int>(tape_.sample_states.size());
-  bool final_lowered = false, sample_lowered = false;
   Matrix final_shaped, sample_shaped;
-  if (final_weights.size() > 0) {
-    final_shaped =
-        ShapedSensitivityArgument(final_weights, nx_, ny_, 1, "adjoint weights", &final_lowered);
-  }
-  if (sample_weights.size() > 0) {
-    RequireArgument(samples > 0, "adjoint sample weights need sample_times");
-    sample_shaped = ShapedSensitivityArgument(sample_weights, nx_, ny_, samples,
-                                              "adjoint sample weights", &sample_lowered);
-  }
-  RequireArgument(final_shaped.size() > 0 || sample_shaped.size() > 0,
-                  "adjoint: no weights (final or sample) given");
-  const int q = static_cast<int>(final_shaped.size() > 0 ? final_shaped.cols()
-                                                         : sample_shaped.cols() / samples);
-  RequireArgument(sample_shaped.size() == 0 || sample_shaped.cols() == q * samples,
-                  "adjoint sample weights: expected ", q * samples, " columns (", q,
-                  " per sample time, as the final weights), got ", sample_shaped.cols());
+  const int q = static_cast<int>(ShapedAdjointWeights(final_weights, sample_weights, nx_, ny_,
+                                                      samples, &final_shaped, &sample_shaped));
   Matrix lambda = Matrix::Zero(ny_ + 2, q);
   if (final_shaped.size() > 0) lambda.topRows(final_shaped.rows()) = final_shaped;
   Matrix gradient = Matrix::Zero(n_params, q);

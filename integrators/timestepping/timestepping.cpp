@@ -35,24 +35,7 @@ void TimeSteppingOptions::Validate() const {
     RequireArgument(std::isfinite(t), "stop times (tstops) must be finite, got ", t);
   }
   RequireArgument(max_steps >= 1, "max_steps must be >= 1, got ", max_steps);
-  RequireArgument(sensitivity_directions.allFinite() && adjoint_weights.allFinite() &&
-                      adjoint_sample_weights.allFinite(),
-                  "sensitivity directions and adjoint weights must be finite");
-  for (std::size_t j = 0; j < sample_times.size(); ++j) {
-    RequireArgument(
-        std::isfinite(sample_times[j]) && (j == 0 || sample_times[j] > sample_times[j - 1]),
-        "sample times must be finite and increasing, got ", sample_times[j], " at position ", j);
-  }
-  const bool tracked = sensitivities || sensitivity_directions.size() > 0 ||
-                       adjoint_weights.size() > 0 || adjoint_sample_weights.size() > 0 ||
-                       keep_adjoint;
-  RequireArgument(sample_times.empty() || tracked,
-                  "sample_times need sensitivities: directions, adjoint weights or keep_adjoint");
-  RequireArgument(adjoint_sample_weights.size() == 0 || !sample_times.empty(),
-                  "adjoint sample weights need sample_times");
-  RequireArgument(std::isfinite(adjoint_memory_limit_mb) && adjoint_memory_limit_mb >= 0.0,
-                  "adjoint memory limit must be >= 0 megabytes (0: none), got ",
-                  adjoint_memory_limit_mb);
+  internal::ValidateSensitivityOptions(*this);
   newton.Validate();
 }
 
@@ -364,23 +347,11 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
     tape->segments = segments;
     tape->memory_limit = static_cast<std::size_t>(options.adjoint_memory_limit_mb * 1024 * 1024);
     // The weights' shapes are checked before any work (the sweep reads them after the run).
-    bool lowered = false;
-    const auto samples = static_cast<Eigen::Index>(options.sample_times.size());
-    Eigen::Index q = 0;
-    if (options.adjoint_weights.size() > 0) {
-      q = internal::ShapedSensitivityArgument(options.adjoint_weights, nx, ny, 1, "adjoint weights",
-                                              &lowered)
-              .cols();
-    }
-    if (options.adjoint_sample_weights.size() > 0) {
-      const Eigen::Index columns =
-          internal::ShapedSensitivityArgument(options.adjoint_sample_weights, nx, ny,
-                                              static_cast<int>(samples), "adjoint sample weights",
-                                              &lowered)
-              .cols();
-      RequireArgument(q == 0 || columns == q * samples, "adjoint sample weights: expected ",
-                      q * samples, " columns (", q, " per sample time, as the final weights), got ",
-                      columns);
+    if (options.adjoint_weights.size() > 0 || options.adjoint_sample_weights.size() > 0) {
+      Matrix final_shaped, sample_shaped;
+      internal::ShapedAdjointWeights(options.adjoint_weights, options.adjoint_sample_weights, nx,
+                                     ny, static_cast<int>(options.sample_times.size()),
+                                     &final_shaped, &sample_shaped);
     }
   }
   if (directional) {

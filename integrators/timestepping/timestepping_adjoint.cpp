@@ -29,24 +29,9 @@ void TimeSteppingTape::Add(int segment, const Matrix& transfer) {
 void TimeSteppingTape::Sweep(const Matrix& final_weights, const Matrix& sample_weights,
                              Matrix* lowered, Matrix* theta) const {
   const int samples = static_cast<int>(sample_positions.size());
-  bool final_lowered = false, sample_lowered = false;
   Matrix final_shaped, sample_shaped;
-  if (final_weights.size() > 0) {
-    final_shaped =
-        ShapedSensitivityArgument(final_weights, nx, ny, 1, "adjoint weights", &final_lowered);
-  }
-  if (sample_weights.size() > 0) {
-    RequireArgument(samples > 0, "adjoint sample weights need sample_times");
-    sample_shaped = ShapedSensitivityArgument(sample_weights, nx, ny, samples,
-                                              "adjoint sample weights", &sample_lowered);
-  }
-  RequireArgument(final_shaped.size() > 0 || sample_shaped.size() > 0,
-                  "adjoint: no weights (final or sample) given");
-  const Eigen::Index q =
-      final_shaped.size() > 0 ? final_shaped.cols() : sample_shaped.cols() / samples;
-  RequireArgument(sample_shaped.size() == 0 || sample_shaped.cols() == q * samples,
-                  "adjoint sample weights: expected ", q * samples, " columns (", q,
-                  " per sample time, as the final weights), got ", sample_shaped.cols());
+  const Eigen::Index q = ShapedAdjointWeights(final_weights, sample_weights, nx, ny, samples,
+                                              &final_shaped, &sample_shaped);
   const int n_theta = np + nu * segments;
   Matrix lambda = Matrix::Zero(ny, q);
   if (final_shaped.size() > 0) lambda.topRows(final_shaped.rows()) = final_shaped;

@@ -135,10 +135,9 @@ struct TimeSteppingStats {
   /// Steps in which a free side falls below zero between the nodes and rises again, or whose
   /// indicator bounds admit that without the search resolving it (each one a warning).
   long num_inside_crossings = 0;
-  /// Adjoint: bytes of the step transfers kept in memory, and written to the file beyond
-  /// adjoint_memory_limit_mb.
+  /// Adjoint: bytes of the step transfers kept in memory.
   double adjoint_memory_bytes = 0.0;
-  double adjoint_file_bytes = 0.0;
+  double adjoint_file_bytes = 0.0;  ///< transfers beyond adjoint_memory_limit_mb (file)
   /// Thread CPU time of the adjoint reverse sweep in this result.
   double adjoint_cpu_seconds = 0.0;
   /// CPU time of the run.
