@@ -168,12 +168,17 @@ class GoldfarbIdnani {
       const Vector w = l_.triangularView<Eigen::Lower>().solve(np);
       const Vector d = q_.transpose() * w;
       const Vector d1 = d.head(k);
-      const double outside = d.tail(n_ - k).norm();
+      const Vector d2 = d.tail(n_ - k);
+      const double outside = d2.norm();
       const bool dependent = outside <= options_.dependence_tolerance * w.norm();
-      // z = L^{-T} (w - Q1 d1): the primal direction in the null space of the active normals.
+      // z = L^{-T} (w - Q1 d1) = L^{-T} Q2 d2 (w = Q d): the primal direction in the null space
+      // of the active normals, formed from d2. The difference w - Q1 d1 would cancel to the
+      // round-off of |w| where |d2| << |w| (an index-2 constraint over a short step: the x part
+      // of its normal weighs h against the objective's weights), leaving z = 0 and the QP
+      // "infeasible".
       Vector z = Vector::Zero(n_);
       if (!dependent) {
-        z = l_.transpose().triangularView<Eigen::Upper>().solve(Vector(w - q_.leftCols(k) * d1));
+        z = l_.transpose().triangularView<Eigen::Upper>().solve(Vector(q_.rightCols(n_ - k) * d2));
       }
       const Vector r = k > 0 ? Vector(r_.triangularView<Eigen::Upper>().solve(d1)) : Vector();
       const double s = Slack(p);
@@ -191,8 +196,9 @@ class GoldfarbIdnani {
           drop = j;
         }
       }
-      // Full step: the t that makes p active (z^T n_p = |d2|^2 > 0).
-      const double t2 = dependent ? kInfinity : -s / z.dot(np);
+      // Full step: the t that makes p active (z^T n_p = d2^T Q2^T L^{-1} n_p = |d2|^2 > 0,
+      // taken in that form for the same reason as z).
+      const double t2 = dependent ? kInfinity : -s / d2.squaredNorm();
       const double t = std::min(t1, t2);
       if (t == kInfinity) {
         return p.equality ? QpStatus::kDependentEqualities : QpStatus::kInfeasible;

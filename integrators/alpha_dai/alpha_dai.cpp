@@ -277,6 +277,9 @@ constexpr long kMaxStalledAttempts = 50;
 // States whose scale is below this fraction of the largest state scale are weighted by that
 // fraction (a state that starts at zero has no scale of its own yet).
 constexpr double kScaleFloor = 1e-6;
+// Round-off of a step's solution in units of eps (1 + |x|), as Radau's error test (kNoise)
+// takes it: differences of the coarse and fine solutions below this pass.
+constexpr double kRoundOffNoise = 10.0;
 // Error control's rank test: a sensitivity row below this fraction of the size of its terms is
 // round-off (an index-3 row is O(h) of them, so this holds down to steps of about 1e-12).
 constexpr double kNegligibleSensitivity = 1e-12;
@@ -742,11 +745,17 @@ class AlphaDaiRun {
     for (Eigen::Index i = 0; i < nx_; ++i) {
       const double atol =
           options_.absolute_tolerance > 0.0 ? options_.absolute_tolerance : rtol * scale_[i];
-      const double weight =
-          std::max(atol + rtol * std::max(std::fabs(x0[i]), std::fabs(fine[i])), floor);
-      worst = std::max(worst, std::fabs(fine[i] - coarse[i]) / 3.0 / weight);
+      const double size = std::max(std::fabs(x0[i]), std::fabs(fine[i]));
+      const double weight = std::max(atol + rtol * size, floor);
+      // The difference this step may have, never below what floating point resolves in the
+      // compared solutions: a state near zero has a weight near the floor, and over short
+      // steps the per-unit-step allowance would fall below the round-off of the two solves.
+      const double allowed =
+          std::max(weight * h / horizon_,
+                   kRoundOffNoise * std::numeric_limits<double>::epsilon() * (1.0 + size));
+      worst = std::max(worst, std::fabs(fine[i] - coarse[i]) / 3.0 / allowed);
     }
-    return worst * horizon_ / h;
+    return worst;
   }
 
   // End of the next fixed step: equal steps of at most h_nominal over the rest of the

@@ -42,8 +42,7 @@ constexpr double kScaleFloor = 1e-6;
 // needs a reference). The alpha stepper's error control needs small steps at their constraint
 // events (and, for index 3, throughout), where its SQP fails or the step-doubling estimate of
 // the algebraic variables' parasitic oscillation after an event does not fall with h.
-const std::set<std::string> kScenesWithStatus = {"D2", "D3", "dai_index2", "dai_index2.toml",
-                                                 "hard_index3"};
+const std::set<std::string> kScenesWithStatus = {"D2", "D3", "hard_index3"};
 
 // Scenes not checked here, with the reason; docs/accuracy.md names them. Without a reference
 // in the data file ("reference": null, its reason there): crowd (too expensive).
