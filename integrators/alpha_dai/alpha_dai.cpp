@@ -274,6 +274,12 @@ constexpr double kFailureShrink = 0.25;
 // instead of crawling on (the estimate of a non-smooth solution does not fall with h).
 constexpr double kStallFraction = 1e-2;
 constexpr long kMaxStalledAttempts = 50;
+// Crawl guard: kMaxCrawlingSteps accepted steps in a row each so short that the rest of the
+// horizon would need more than kCrawlMargin times the steps max_steps leaves end the run with
+// a status at once instead of after max_steps (dai_index2 at rtol 1e-9 accepted 10^6 steps of
+// 9e-11 after its floor's return, 451 s of CPU, before max_steps stopped it).
+constexpr long kMaxCrawlingSteps = 1000;
+constexpr double kCrawlMargin = 100.0;
 // States whose scale is below this fraction of the largest state scale are weighted by that
 // fraction (a state that starts at zero has no scale of its own yet).
 constexpr double kScaleFloor = 1e-6;
@@ -716,6 +722,25 @@ class AlphaDaiRun {
       Commit(first, h, result);
       Commit(second, h, result);
       stats_.error_estimate += rtol * h / horizon_ * err;
+      // Crawl guard: accepted steps so short that the rest of the horizon would need far more
+      // steps than max_steps leaves end the run now, not at max_steps (see kMaxCrawlingSteps).
+      const double needed = 2.0 * (scene_.final_time - t_) / h;  // two half steps per step
+      const double budget = static_cast<double>(options_.max_steps - stats_.num_steps);
+      if (needed > kCrawlMargin * budget) {
+        if (++crawling_steps_ >= kMaxCrawlingSteps) {
+          std::ostringstream s;
+          s << "the error control crawls: " << crawling_steps_
+            << " accepted steps in a row as short as h = " << h
+            << ", at which the rest of the horizon needs " << needed << " steps, more than "
+            << kCrawlMargin << " times the " << budget
+            << " that max_steps leaves (the estimate does not fall with h: the solution is not "
+               "smooth at this resolution, or an algebraic input is not consistent after an "
+               "event)";
+          return Fail(result, AlphaDaiStatus::kStepSizeTooSmall, s.str());
+        }
+      } else {
+        crawling_steps_ = 0;
+      }
       // At an event f jumps, and (2b) turns the jump into a ~ jump / (gamma h) that decays
       // only by (1 - 1/gamma) per step: its h^2 a term in (2a) would be an O(h) local error
       // in every following step. a restarts from df/dt as at a control breakpoint.
@@ -1222,6 +1247,7 @@ class AlphaDaiRun {
   double h_next_ = 0.0;      // error control: the next step
   double last_step_ = 0.0;
   bool adaptive_ = false;
+  long crawling_steps_ = 0;    // accepted steps in a row that the crawl guard counts
   long stalled_attempts_ = 0;  // rejected or failed error-controlled steps below kStallFraction
   double horizon_ = 0.0;
   Vector scale_;  // largest |x_i| so far (atol = 0)
