@@ -6,6 +6,7 @@
 
 #include <functional>
 #include <map>
+#include <memory>
 #include <string>
 #include <type_traits>
 #include <utility>
@@ -215,6 +216,29 @@ StatBinding<Stats> BindStat(std::string name, Field Stats::*member, std::string 
   return {{std::move(name), std::move(meaning), std::is_integral_v<Field>},
           [member](const Stats& s) { return static_cast<double>(s.*member); }};
 }
+
+// A kept reverse sweep (FesdAdjoint, TimeSteppingAdjoint) as Simulate()'s results offer it:
+// its Sweep's gradient over theta, its time, and (where the sweep can fail) its status.
+template <class Adjoint>
+class KeptAdjointSweep final : public AdjointSweep {
+ public:
+  explicit KeptAdjointSweep(std::shared_ptr<Adjoint> adjoint) : adjoint_(std::move(adjoint)) {}
+  AdjointGradient Gradient(const Matrix& final_weights,
+                           const Matrix& sample_weights) const override {
+    auto gradient = adjoint_->Sweep(final_weights, sample_weights);
+    AdjointGradient out;
+    if constexpr (requires { gradient.success; }) {
+      out.success = gradient.success;
+      out.message = std::move(gradient.message);
+    }
+    out.theta = std::move(gradient.theta);
+    out.cpu_seconds = gradient.cpu_seconds;
+    return out;
+  }
+
+ private:
+  std::shared_ptr<Adjoint> adjoint_;
+};
 
 // Directional and adjoint sensitivities of FESD and time-stepping (docs/sensitivities.md): the
 // options of the same names in both, `sample_times` described by the integrator (where its

@@ -6,28 +6,6 @@
 #include "moreau/linalg/linear_solver.hpp"
 
 namespace moreau::internal {
-namespace {
-
-// A kept FESD reverse sweep as Simulate's results offer it.
-class FesdAdjointSweep final : public AdjointSweep {
- public:
-  explicit FesdAdjointSweep(std::shared_ptr<FesdAdjoint> adjoint) : adjoint_(std::move(adjoint)) {}
-  AdjointGradient Gradient(const Matrix& final_weights,
-                           const Matrix& sample_weights) const override {
-    const FesdGradient gradient = adjoint_->Sweep(final_weights, sample_weights);
-    AdjointGradient out;
-    out.success = gradient.success;
-    out.message = gradient.message;
-    out.theta = gradient.theta;
-    out.cpu_seconds = gradient.cpu_seconds;
-    return out;
-  }
-
- private:
-  std::shared_ptr<FesdAdjoint> adjoint_;
-};
-
-}  // namespace
 
 IntegratorEntry FesdEntry() {
   using O = FesdOptions;
@@ -164,7 +142,8 @@ IntegratorEntry FesdEntry() {
         for (const Vector& y : result.sample_states) {
           out->sample_states.push_back(y.head(scene.num_states()));
         }
-        if (result.adjoint) out->adjoint = std::make_shared<FesdAdjointSweep>(result.adjoint);
+        if (result.adjoint)
+          out->adjoint = std::make_shared<KeptAdjointSweep<FesdAdjoint>>(result.adjoint);
         const FesdSensitivities& given = result.sensitivities;
         if (given.lowered.size() == 0 && given.directional.size() == 0 &&
             given.adjoint.size() == 0) {

@@ -4,27 +4,6 @@
 #include "moreau/linalg/linear_solver.hpp"
 
 namespace moreau::internal {
-namespace {
-
-// Simulate()'s view of a kept time-stepping sweep.
-class TimeSteppingAdjointSweep final : public AdjointSweep {
- public:
-  explicit TimeSteppingAdjointSweep(std::shared_ptr<const TimeSteppingAdjoint> adjoint)
-      : adjoint_(std::move(adjoint)) {}
-  AdjointGradient Gradient(const Matrix& final_weights,
-                           const Matrix& sample_weights) const override {
-    TimeSteppingGradient gradient = adjoint_->Sweep(final_weights, sample_weights);
-    AdjointGradient out;
-    out.theta = std::move(gradient.theta);
-    out.cpu_seconds = gradient.cpu_seconds;
-    return out;
-  }
-
- private:
-  std::shared_ptr<const TimeSteppingAdjoint> adjoint_;
-};
-
-}  // namespace
 
 IntegratorEntry TimeSteppingEntry() {
   using O = TimeSteppingOptions;
@@ -85,7 +64,8 @@ IntegratorEntry TimeSteppingEntry() {
           out->sample_states.push_back(y.head(scene.num_states()));
         }
         if (result.adjoint_sweep) {
-          out->adjoint = std::make_shared<TimeSteppingAdjointSweep>(result.adjoint_sweep);
+          out->adjoint =
+              std::make_shared<KeptAdjointSweep<const TimeSteppingAdjoint>>(result.adjoint_sweep);
         }
         if (result.directional.size() > 0 || result.adjoint.size() > 0) {
           SimulationSensitivities s;
