@@ -286,6 +286,9 @@ constexpr double kScaleFloor = 1e-6;
 // Round-off of a step's solution in units of eps (1 + |x|), as Radau's error test (kNoise)
 // takes it: differences of the coarse and fine solutions below this pass.
 constexpr double kRoundOffNoise = 10.0;
+// Error control: the SQP solves (2a) to this fraction of the step's error allowance (Radau's
+// Newton iterations stop at a like fraction of the tolerance).
+constexpr double kSolveFraction = 1e-2;
 // Error control's rank test: a sensitivity row below this fraction of the size of its terms is
 // round-off (an index-3 row is O(h) of them, so this holds down to steps of about 1e-12).
 constexpr double kNegligibleSensitivity = 1e-12;
@@ -732,10 +735,13 @@ class AlphaDaiRun {
           s << "the error control crawls: " << crawling_steps_
             << " accepted steps in a row as short as h = " << h
             << ", at which the rest of the horizon needs " << needed << " steps, more than "
-            << kCrawlMargin << " times the " << budget
-            << " that max_steps leaves (the estimate does not fall with h: the solution is not "
-               "smooth at this resolution, or an algebraic input is not consistent after an "
-               "event)";
+            << kCrawlMargin << " times the " << budget << " that max_steps leaves";
+          if (options_.max_step_size > 0.0 && h >= options_.max_step_size) {
+            s << " (h_max = " << options_.max_step_size << " bounds the steps)";
+          } else {
+            s << " (the estimate does not fall with h: the solution is not smooth at this "
+                 "resolution, or an algebraic input is not consistent after an event)";
+          }
           return Fail(result, AlphaDaiStatus::kStepSizeTooSmall, s.str());
         }
       } else {
@@ -969,6 +975,17 @@ class AlphaDaiRun {
     };
     internal::SqpOptions sqp_options;
     sqp_options.equality_tolerance = options_.dynamics_tolerance;
+    if (adaptive_) {
+      // The solve's residual must stay below the error control's allowance for this step
+      // (about rtol h / (tf - t0) relative to the states), else the first guess x_n passes
+      // (2a) once h |f| < dynamics_tolerance (1 + |x|) and x freezes while t advances: both
+      // halves of step doubling agree and the frozen steps are accepted (D3 at rtol 1e-9 ran so
+      // for 1000 steps of 1.5e-9 after its heat-flux contact). Round-off bounds it below.
+      sqp_options.equality_tolerance =
+          std::min(options_.dynamics_tolerance,
+                   std::max(kSolveFraction * options_.relative_tolerance * h / horizon_,
+                            kRoundOffNoise * std::numeric_limits<double>::epsilon()));
+    }
     sqp_options.inequality_tolerance = options_.constraint_tolerance;
     sqp_options.activity_tolerance = options_.constraint_tolerance;
     sqp_options.optimality_tolerance = options_.optimality_tolerance;

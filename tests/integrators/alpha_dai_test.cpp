@@ -524,22 +524,49 @@ TEST(AlphaDaiErrorControlTest, IndexTwoActivationReachesTheClosedForm) {
   EXPECT_TRUE(entered);
 }
 
-// A run whose error control crawls (accepted steps far too short to finish within max_steps)
-// ends at once with a status that says so: dai_index2 at rtol 1e-9 accepts steps of about
-// 1e-10 after its floor's return (the algebraic input is not consistent after the event), which
-// used to run 451 s of CPU into max_steps. (Once the stepper re-initializes the algebraic input
-// after events and finishes this run, the test needs another crawling run: it must not pass
-// without exercising the guard.)
-TEST(AlphaDaiErrorControlTest, CrawlingRunsEndAtOnce) {
+// Error-controlled steps so short that h |f| is below the dynamics tolerance still move the
+// state: the SQP solves (2a) to a fraction of the step's error allowance. Before, the first
+// guess x_n passed (2a) within dynamics_tolerance (1 + |x|) = 2e-10, both halves of the doubled
+// step agreed on x_n, and x stayed frozen while t advanced (D3 at rtol 1e-9 did so after its
+// contact). hopf over 1e-8 with h_max = 1e-11 (1000 doubled steps) at rtol 1e-9, so that the
+// allowance per step (1e-9 h / (tf - t0) = 1e-12) is far below h |f| (3e-11), as it is on a
+// horizon of size 1 at steps of 1e-11.
+TEST(AlphaDaiErrorControlTest, TinyStepsStillMoveTheState) {
+  const testing::ReferenceProblem hopf = testing::Hopf();
+  Scene scene = hopf.Make();
+  constexpr double kHorizon = 1e-8, kStep = 1e-11;
+  scene.final_time = scene.initial_time + kHorizon;
   AlphaDaiOptions options;
   options.relative_tolerance = 1e-9;
-  const Scene scene = MakeScene("dai_index2");
+  options.max_step_size = kStep;
+  const AlphaDaiResult result = SimulateAlphaDai(scene, options);
+  ASSERT_EQ(result.status, AlphaDaiStatus::kSuccess) << result.message;
+  const Vector expected = hopf.solution(scene.final_time);
+  const Vector moved = expected - scene.initial_state;
+  ASSERT_GT(moved.norm(), 1e-9);  // |f| about 1: the state moves by about the horizon
+  // The solve's residual is at most 1e-2 rtol h / (tf - t0) = 1e-14 per step (relative to 1 +
+  // |x|): 1000 steps add up to at most 3e-4 of the motion; a frozen state misses all of it.
+  constexpr double kMotionAccuracy = 1e-3;
+  EXPECT_LE((result.final_state - expected).norm(), kMotionAccuracy * moved.norm());
+}
+
+// A run whose accepted steps are far too short to finish within max_steps ends at once with a
+// status that says so. dai_index2 at rtol 1e-9, the run this test used, no longer crawls since
+// the SQP solves (2a) to the step's accuracy (it crawled at 1e-10 after its floor's return with
+// x frozen, 451 s of CPU into max_steps before the guard; it now ends with retries_exhausted
+// at the return): the guard is exercised by steps that h_max keeps as short (hopf with h_max =
+// 1e-6 and max_steps = 3000: 2e6 doubled steps needed, 1000 accepted before the guard).
+TEST(AlphaDaiErrorControlTest, CrawlingRunsEndAtOnce) {
+  AlphaDaiOptions options;
+  options.max_step_size = 1e-6;
+  options.max_steps = 3000;
+  const Scene scene = testing::Hopf().Make();
   const AlphaDaiResult result = SimulateAlphaDai(scene, options);
   EXPECT_EQ(result.status, AlphaDaiStatus::kStepSizeTooSmall) << result.message;
   EXPECT_NE(result.message.find("crawls"), std::string::npos) << result.message;
-  // The guard counts 1000 accepted steps in a row; the run before them is a few hundred.
-  constexpr long kFarBelowMaxSteps = 100'000;
-  EXPECT_LT(result.stats.num_steps, kFarBelowMaxSteps);
+  EXPECT_NE(result.message.find("h_max"), std::string::npos) << result.message;
+  // The guard counts 1000 accepted (doubled) steps in a row: 2000 steps, before max_steps.
+  EXPECT_LT(result.stats.num_steps, options.max_steps);
   EXPECT_LT(result.final_time, scene.final_time);
 }
 
