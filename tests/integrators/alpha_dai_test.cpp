@@ -524,6 +524,58 @@ TEST(AlphaDaiErrorControlTest, IndexTwoActivationReachesTheClosedForm) {
   EXPECT_TRUE(entered);
 }
 
+// D3 with no options: the heat flux reaches its limit at t1 and holds it until its multiplier
+// vanishes at t2 (the angle of attack needed to hold it falls back to the nominal 0.35). Before
+// the algebraic input was made consistent after events (d/dt heat flux = 0 on entry), it
+// oscillated about the consistent value by -0.875 per step, and the run ended 1e-4 after t1
+// (step_size_too_small, the error control stalled; retries_exhausted at steps of 4e-12). The
+// reference: tests/integrators/ d3_phases.py, an independent scipy solve of the three phases
+// (DOP853 at 1e-13; the leave time and offset too).
+TEST(AlphaDaiErrorControlTest, D3HeatFluxArcMatchesThePhases) {
+  const Scene scene = MakeScene("D3");
+  const AlphaDaiOptions defaults;
+  const AlphaDaiResult result = SimulateAlphaDai(scene, defaults);
+  ASSERT_EQ(result.status, AlphaDaiStatus::kSuccess) << result.message;
+  const double horizon = scene.final_time - scene.initial_time;
+  constexpr double kT1 = 84.051158291263121;  // the heat flux reaches its limit
+  constexpr double kT2 = 88.2029753136257;    // the limit lets go (multiplier 0)
+  const Vector x_final{{42.712906673240205, 1.1312597722150621, -0.1242434669753438}};
+  // The working set drops the constraint where phi < -constraint_tolerance (1e-8): phi leaves
+  // zero quadratically (|phi''| = 0.0512 at t2), sqrt(2e-8 / 0.0512) after t2 (d3_phases.py).
+  constexpr double kLeaveOffset = 6.2501e-4;
+  // Events are located to the event resolution rtol (tf - t0) by design (docs/accuracy.md);
+  // measured 1.4e-4 (enter) and 6e-5 (leave, after the offset) of the 2e-4 allowed.
+  const double event_resolution = defaults.relative_tolerance * horizon;
+  // x(T) relative to each state's largest magnitude: the error control keeps the error per
+  // unit step below rtol, so the global error stays within a few rtol (two here; measured
+  // 8.2e-7 on gamma, 1.5e-7 and 1.2e-7 on h and V).
+  constexpr double kStateAccuracy = 2e-6;
+  ASSERT_EQ(result.events.size(), 2u);
+  EXPECT_EQ(result.events[0].kind, EventKind::kEnter);
+  EXPECT_EQ(result.events[0].what, "D3.heat_flux");
+  EXPECT_NEAR(result.events[0].t, kT1, event_resolution);
+  EXPECT_EQ(result.events[1].kind, EventKind::kLeave);
+  EXPECT_EQ(result.events[1].what, "D3.heat_flux");
+  EXPECT_NEAR(result.events[1].t, kT2 + kLeaveOffset, event_resolution);
+  Vector scale = Vector::Zero(3);
+  for (const Vector& x : result.trajectory.x) scale = scale.cwiseMax(x.cwiseAbs());
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_NEAR(result.final_state[i], x_final[i], kStateAccuracy * scale[i]) << "state " << i;
+  }
+  // On the arc alpha is smooth (it rises to 0.4627 at t1 and falls back to 0.35 at t2): no
+  // step changes it by more than a small fraction of that range (the oscillation changed it by
+  // 0.13 per step).
+  constexpr double kLargestArcChange = 1e-2;
+  double largest = 0.0;
+  for (std::size_t k = 1; k < result.trajectory.t.size(); ++k) {
+    if (result.trajectory.t[k - 1] > kT1 + event_resolution && result.trajectory.t[k] < kT2) {
+      largest = std::max(largest, std::fabs(result.trajectory.algebraic[k][0] -
+                                            result.trajectory.algebraic[k - 1][0]));
+    }
+  }
+  EXPECT_LE(largest, kLargestArcChange);
+}
+
 // Error-controlled steps so short that h |f| is below the dynamics tolerance still move the
 // state: the SQP solves (2a) to a fraction of the step's error allowance. Before, the first
 // guess x_n passed (2a) within dynamics_tolerance (1 + |x|) = 2e-10, both halves of the doubled
