@@ -1,5 +1,6 @@
 #include "sqp.hpp"
 
+#include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -92,6 +93,9 @@ class Sqp {
     }
     m_eq_ = static_cast<int>(eval_.equalities.size());
     rows_.num_constraints = static_cast<int>(eval_.inequalities.size());
+    MOREAU_ASSERT(problem_.num_determined == 0 || problem_.num_determined == m_eq_,
+                  "SQP: num_determined must equal the number of equalities");
+    ReduceInequalities();
     double mu = 1.0;
     for (int iteration = 0; iteration < options_.max_iterations; ++iteration) {
       ++result.iterations;
@@ -111,7 +115,7 @@ class Sqp {
         stalled_ = 0;
         previous_violation_ = std::numeric_limits<double>::infinity();
         result.working_set = WorkingSet(qp.active_inequalities, Vector(), false);
-        StoreMultipliers(qp, &result);
+        StoreMultipliers(qp, true, true, &result);
       } else if (qp.status == QpStatus::kInfeasible ||
                  qp.status == QpStatus::kDependentEqualities) {
         elastic = true;
@@ -144,7 +148,7 @@ class Sqp {
         slacks = elastic_qp.x.tail(SlackCount());
         active_rows = elastic_qp.active_inequalities;
         // The elastic QP's rows start with those of the plain QP: same multiplier layout.
-        StoreMultipliers(elastic_qp, &result);
+        StoreMultipliers(elastic_qp, !soft_equalities_, false, &result);
         result.working_set = WorkingSet(active_rows, slacks, false);
         // Local infeasibility: no predicted decrease of the violation even without the
         // objective (z is a stationary point of the linearized l1 violation), or elastic
@@ -224,6 +228,7 @@ class Sqp {
         result.status = SqpStatus::kNonFinite;  // finite without Jacobians, not with them
         return result;
       }
+      ReduceInequalities();
     }
     Fill(&result);
     result.status = SqpStatus::kMaxIterations;
@@ -268,8 +273,14 @@ class Sqp {
   }
 
   bool Feasible(const SqpResult& result) const {
-    return result.equality_residual <= options_.equality_tolerance &&
-           result.inequality_violation <= options_.inequality_tolerance;
+    if (result.equality_residual > options_.equality_tolerance ||
+        result.inequality_violation > options_.inequality_tolerance) {
+      return false;
+    }
+    for (int i = 0; i < rows_.num_constraints; ++i) {
+      if (eval_.inequalities[i] > InequalityTolerance(i)) return false;
+    }
+    return true;
   }
 
   // Residual and violation of the current point.
@@ -297,17 +308,74 @@ class Sqp {
     qp.equality_rhs = -eval_.equalities;
     qp.inequality_matrix = Matrix::Zero(rows_.size(), n_);
     qp.inequality_rhs.resize(rows_.size());
-    AddInequalityRows(0, 0, &qp);
+    AddInequalityRows(0, 0, true, true, &qp);
     return qp;
   }
 
+  // The constraint rows on the equality manifold (SqpProblem::num_determined). With z = (y, v),
+  // y the k determined variables and J_E = [E_y E_v], the equalities' linearization
+  // E_y d_y + E_v d_v = -c_E gives d_y = -E_y^{-1} (c_E + E_v d_v), so that
+  //   c_I + J_I d = (c_I - M c_E) + (J_I,v - M E_v) d_v,   M = J_I,y E_y^{-1},
+  // exactly, for every step d on the manifold. The QP's constraint rows become
+  // [0, J_I,v - M E_v] with right-hand side c_I - M c_E: the same feasible set, but the row no
+  // longer carries the large component along the equalities' normals (J_I,y, which the
+  // equalities' rows nearly span), whose difference from their span the QP would have to
+  // resolve by cancellation. For the alpha stepper's position constraint, J_I,v - M E_v is the
+  // constraint's sensitivity to u through one step, C (I - c h A)^{-1} c h D + G = O(h^2):
+  // without the reduction, in the QP's metric (weight 1e-8 on x, 1 on u) the row is within
+  // 1e-4 (c h)^2 of the span of the dynamics rows relative to its norm, below the QP's
+  // dependence tolerance for h below about 2e-4, and every such QP was declared inconsistent.
+  // The multipliers are unchanged for c_I; those of the equalities become y + M^T lambda
+  // (StoreMultipliers), so that the certificates are the original problem's.
+  void ReduceInequalities() {
+    reduction_.resize(0, 0);
+    row_scales_.resize(0);
+    const int k = problem_.num_determined;
+    const int m = rows_.num_constraints;
+    if (k == 0 || m == 0) return;
+    const Eigen::PartialPivLU<Matrix> lu_transposed(
+        eval_.equality_jacobian.leftCols(k).transpose());
+    reduction_ = lu_transposed.solve(eval_.inequality_jacobian.leftCols(k).transpose()).transpose();
+    reduced_jacobian_ = Matrix::Zero(m, n_);
+    reduced_jacobian_.rightCols(n_ - k) = eval_.inequality_jacobian.rightCols(n_ - k) -
+                                          reduction_ * eval_.equality_jacobian.rightCols(n_ - k);
+    reduced_values_ = eval_.inequalities - reduction_ * eval_.equalities;
+    // Rows that see the free variables weakly are stated in their units: c_I,i / s_i with s_i
+    // the row's size in them (s_i < 1; an index-3 row's is O(h^2)). The QP's feasibility test
+    // (relative to max(1, |b_i|, ...)) and the SQP's tolerance then apply to the change of the
+    // free variables a violation asks for, not to the violation itself: a violation of
+    // 2 (c h)^2, which u = -2 instead of 0 gives hard_index3's floor in one step, passes an
+    // absolute 1e-8 (and the QP's 1e-12) at steps below 1e-4 and accumulates like t^2.
+    row_scales_ = Vector::Ones(m);
+    for (int i = 0; i < m; ++i) {
+      const double size = reduced_jacobian_.row(i).norm();
+      if (size > 0.0 && size < 1.0) row_scales_[i] = 1.0 / size;
+    }
+  }
+
+  // Tolerance on c_I,i: inequality_tolerance in the units of ReduceInequalities' row scaling,
+  // at least the round-off of a constraint computed from z (100 ulps of 1 + |z|).
+  double InequalityTolerance(int i) const {
+    if (row_scales_.size() == 0) return options_.inequality_tolerance;
+    return std::max(options_.inequality_tolerance / row_scales_[i],
+                    kMeritNoise * (1.0 + z_.lpNorm<Eigen::Infinity>()));
+  }
+
   // Rows of the inequality block starting at row0 (constraint rows, then bounds), with the
-  // step d in columns [col0, col0 + n).
-  void AddInequalityRows(int row0, int col0, DenseQp* qp) const {
+  // step d in columns [col0, col0 + n); `reduced`: the constraint rows on the equality manifold
+  // (ReduceInequalities), valid only while the equalities are hard; `scaled`: in the units of
+  // the free variables (row_scales_).
+  void AddInequalityRows(int row0, int col0, bool reduced, bool scaled, DenseQp* qp) const {
     const int m = rows_.num_constraints;
     if (m > 0) {
-      qp->inequality_matrix.block(row0, col0, m, n_) = -eval_.inequality_jacobian;
-      qp->inequality_rhs.segment(row0, m) = eval_.inequalities;
+      if (reduced && reduction_.size() > 0) {
+        const Vector scales = scaled ? row_scales_ : Vector::Ones(m);
+        qp->inequality_matrix.block(row0, col0, m, n_) = -(scales.asDiagonal() * reduced_jacobian_);
+        qp->inequality_rhs.segment(row0, m) = scales.cwiseProduct(reduced_values_);
+      } else {
+        qp->inequality_matrix.block(row0, col0, m, n_) = -eval_.inequality_jacobian;
+        qp->inequality_rhs.segment(row0, m) = eval_.inequalities;
+      }
     }
     int row = row0 + m;
     for (int j : rows_.lower) {
@@ -348,7 +416,9 @@ class Sqp {
     const int rows = rows_.size() + ns;
     qp.inequality_matrix = Matrix::Zero(rows, nv);
     qp.inequality_rhs = Vector::Zero(rows);
-    AddInequalityRows(0, 0, &qp);
+    // With soft equalities the step leaves the equality manifold: the rows are not reduced.
+    // Not scaled: the slacks measure the violation of c_I itself, as the merit function does.
+    AddInequalityRows(0, 0, !soft_equalities_, false, &qp);
     if (m > 0) {
       qp.inequality_matrix.block(0, n_ + EqualitySlacks(), m, m) = Matrix::Identity(m, m);
     }
@@ -412,10 +482,16 @@ class Sqp {
     return set;
   }
 
-  void StoreMultipliers(const QpSolution& qp, SqpResult* result) const {
+  void StoreMultipliers(const QpSolution& qp, bool reduced, bool scaled, SqpResult* result) const {
     const int m = rows_.num_constraints;
     result->equality_multipliers = qp.equality_multipliers;
     result->inequality_multipliers = qp.inequality_multipliers.head(m);
+    if (reduced && reduction_.size() > 0) {
+      if (scaled) {
+        result->inequality_multipliers = result->inequality_multipliers.cwiseProduct(row_scales_);
+      }
+      result->equality_multipliers += reduction_.transpose() * result->inequality_multipliers;
+    }
     result->bound_multipliers = Vector::Zero(n_);
     int row = m;
     for (int j : rows_.lower) result->bound_multipliers[j] += qp.inequality_multipliers[row++];
@@ -431,7 +507,11 @@ class Sqp {
     double complementarity = 0.0;
     if (m > 0) {
       r += eval_.inequality_jacobian.transpose() * result.inequality_multipliers;
+      // A row within its tolerance of zero is active to the resolution of the feasibility
+      // test: its multiplier may be positive (with an index-3 row's multiplier of order
+      // 1/h^2, the product with phi's round-off would otherwise exceed any tolerance).
       for (int i = 0; i < m; ++i) {
+        if (eval_.inequalities[i] >= -InequalityTolerance(i)) continue;
         complementarity = std::max(
             complementarity, result.inequality_multipliers[i] * std::fabs(eval_.inequalities[i]));
       }
@@ -451,6 +531,11 @@ class Sqp {
   RowMap rows_;
   Vector z_;
   SqpEvaluation eval_;
+  // ReduceInequalities at eval_: M, [0, J_I,v - M E_v] and c_I - M c_E (empty M: not reduced).
+  Matrix reduction_;
+  Matrix reduced_jacobian_;
+  Vector reduced_values_;
+  Vector row_scales_;             // 1 / s_i of the scaled rows, else 1 (empty: not reduced)
   bool soft_equalities_ = false;  // layout of the elastic QP (see SolveElastic)
   int stalled_ = 0;               // elastic iterations without progress (see Solve)
   double previous_violation_ = std::numeric_limits<double>::infinity();

@@ -50,6 +50,13 @@ struct SqpProblem {
   Vector reference;          // ref
   Vector hessian_diagonal;   // H_ii > 0
   Vector equality_scales;    // |c_E,i| <= equality_tolerance * scale_i at convergence
+  // When positive, the equalities determine the first num_determined variables (one equality
+  // per such variable, the leading square block of J_E invertible at every point). The QP then
+  // states c_I on the equality manifold, in the remaining variables only (see
+  // Sqp::ReduceInequalities): a constraint on determined variables that depends on the free
+  // ones only weakly (a position constraint through one step: h^2) is otherwise numerically
+  // dependent on the equalities' rows and makes the QP inconsistent.
+  int num_determined = 0;
   // Fills c_E, c_I (and their Jacobians if `jacobians`); returns false for non-finite values.
   std::function<bool(const Vector& z, bool jacobians, SqpEvaluation* out)> evaluate;
   // Optional; called after every QP with the point of linearization (the last point passed to
