@@ -204,6 +204,20 @@ void AdoptPattern(const SparseMatrix& pattern, SparseMatrix* target) {
   if (!same) *target = pattern;
 }
 
+// Adds w d^2 g / (d outer d inner) from a Dual2 evaluation (outer level: direction `outer`,
+// inner level: `inner`; directions beyond the ones a value carries are zero) at a Hessian
+// entry and at its mirror (once on the diagonal, where ij == ji).
+void AddSecondDerivative(const Dual2& g, int outer, int inner, double w, int ij, int ji,
+                         double* values) {
+  double second = 0.0;
+  if (outer < g.size()) {
+    const Dual1& row = g.d(outer);
+    if (inner < row.size()) second = row.d(inner);
+  }
+  values[ij] += w * second;
+  if (ji != ij) values[ji] += w * second;
+}
+
 }  // namespace
 
 FunctionStructure AnalyzeStructure(const SparsityPattern& pattern) {
@@ -854,15 +868,8 @@ void SparseDerivatives::WeightedHessian(TypedFunction* function, const ConstVect
           int cj = compact(plan.pair_j[ue]);
           if (ci / kChunk != a) std::swap(ci, cj);  // ci: the outer one
           if (ci / kChunk != a || cj / kChunk != b) continue;
-          const int outer = ci % kChunk, inner = cj % kChunk;
-          double second = 0.0;
-          if (outer < g.size()) {
-            const Dual1& row = g.d(outer);
-            if (inner < row.size()) second = row.d(inner);
-          }
-          values[plan.position_ij[ue]] += w * second;
-          if (plan.position_ji[ue] != plan.position_ij[ue])
-            values[plan.position_ji[ue]] += w * second;
+          AddSecondDerivative(g, ci % kChunk, cj % kChunk, w, plan.position_ij[ue],
+                              plan.position_ji[ue], values);
         }
       }
       for (int i : seeded_)
@@ -1235,16 +1242,8 @@ void SparseDerivatives::BlockWeightedHessian(TypedFunction* function, const Hess
             int li = plan.pair_local_i[ue], lj = plan.pair_local_j[ue];
             if (li / kChunk != a) std::swap(li, lj);  // li: the outer one
             if (li / kChunk != a || lj / kChunk != c) continue;
-            const int outer = li % kChunk, inner = lj % kChunk;
-            double second = 0.0;
-            if (outer < g.size()) {
-              const Dual1& row = g.d(outer);
-              if (inner < row.size()) second = row.d(inner);
-            }
-            values[plan.position_ij[ue]] += w * second;
-            if (plan.position_ji[ue] != plan.position_ij[ue]) {
-              values[plan.position_ji[ue]] += w * second;
-            }
+            AddSecondDerivative(g, li % kChunk, lj % kChunk, w, plan.position_ij[ue],
+                                plan.position_ji[ue], values);
           }
         }
         for (int j = 0; j < count; ++j) {

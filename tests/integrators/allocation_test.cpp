@@ -8,7 +8,9 @@
 // The bounds are the counts measured when the test was written (release and dev presets count
 // the same calls: the library makes them, not the sanitizers), not targets: a bound above zero
 // marks allocations still to remove (docs/performance.md, "Allocations in the step loop").
+#include <execinfo.h>
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
@@ -28,14 +30,35 @@ namespace {
 // integrators run on the calling thread (their worker threads are off at these sizes).
 thread_local bool counting = false;
 thread_local long allocations = 0;
+// MOREAU_ALLOCATION_TRACE=1 prints the call stack of every allocation in a steady step (to find
+// what still allocates; symbols need -rdynamic or addr2line).
+thread_local bool in_steady_step = false;
+const bool trace = std::getenv("MOREAU_ALLOCATION_TRACE") != nullptr;
+
+void Trace() {
+  if (!trace || !in_steady_step) return;
+  in_steady_step = false;  // backtrace itself may allocate
+  void* frames[24];
+  const int depth = backtrace(frames, 24);
+  backtrace_symbols_fd(frames, depth, 2);
+  static const char kSeparator[] = "----\n";
+  (void)!write(2, kSeparator, sizeof(kSeparator) - 1);
+  in_steady_step = true;
+}
 
 void* Allocate(std::size_t size) {
-  if (counting) ++allocations;
+  if (counting) {
+    ++allocations;
+    Trace();
+  }
   if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
   throw std::bad_alloc();
 }
 void* AllocateAligned(std::size_t size, std::align_val_t align) {
-  if (counting) ++allocations;
+  if (counting) {
+    ++allocations;
+    Trace();
+  }
   const auto a = static_cast<std::size_t>(align);
   if (void* p = std::aligned_alloc(a, (std::max<std::size_t>(size, 1) + a - 1) / a * a)) return p;
   throw std::bad_alloc();
@@ -102,22 +125,24 @@ TEST_P(AllocationTest, SteadyStepsAllocateAtMostTheRecordedCount) {
   const ProgressCallback progress = [&](double) {
     per_step.push_back(allocations - last);
     last = allocations;
+    in_steady_step = per_step.size() >= static_cast<std::size_t>(kWarmupSteps);
   };
   allocations = 0;
   counting = true;
   const SimulationResult result = Simulate(scene, settings, progress);
   counting = false;
+  in_steady_step = false;
   ASSERT_TRUE(result.success) << result.message;
   ASSERT_GT(per_step.size(), static_cast<std::size_t>(2 * kWarmupSteps))
       << "too few steps to see a steady state";
-  long steady = 0, steps_allocating = 0, most = 0;
+  long total = 0, steps_allocating = 0, most = 0;
   for (std::size_t k = kWarmupSteps; k < per_step.size(); ++k) {
-    steady += per_step[k];
+    total += per_step[k];
     steps_allocating += per_step[k] > 0 ? 1 : 0;
     most = std::max(most, per_step[k]);
   }
   const auto steps = static_cast<double>(per_step.size() - kWarmupSteps);
-  const double mean = static_cast<double>(steady) / steps;
+  const double mean = static_cast<double>(total) / steps;
   RecordProperty("allocations_per_step", std::to_string(mean));
   std::cout << c.name << ": " << per_step.size() << " steps, " << mean
             << " allocations per steady step (" << steps_allocating << " steps allocate, at most "
