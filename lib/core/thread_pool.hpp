@@ -1,6 +1,7 @@
 #pragma once
 // A fixed pool of worker threads for the data-parallel loops of large scenes (evaluation of
-// model functions made of blocks, docs/performance.md "Threads"). Private to moreau.
+// model functions made of blocks, docs/sparse-derivatives.md "Functions made of blocks"). Private
+// to moreau.
 //
 // ParallelFor splits [0, n) into contiguous ranges, one per thread (the caller computes the
 // first), and returns when all are done. Work is assigned by range, never by whoever is free,
