@@ -286,6 +286,9 @@ constexpr double kScaleFloor = 1e-6;
 // Round-off of a step's solution in units of eps (1 + |x|), as Radau's error test (kNoise)
 // takes it: differences of the coarse and fine solutions below this pass.
 constexpr double kRoundOffNoise = 10.0;
+// Error control: the SQP solves (2a) to this fraction of the step's error allowance (Radau's
+// Newton iterations stop at a like fraction of the tolerance).
+constexpr double kSolveFraction = 1e-2;
 // Error control's rank test: a sensitivity row below this fraction of the size of its terms is
 // round-off (an index-3 row is O(h) of them, so this holds down to steps of about 1e-12).
 constexpr double kNegligibleSensitivity = 1e-12;
@@ -549,6 +552,7 @@ class AlphaDaiRun {
     BasisInfo basis;
     Vector x1, u1, f1, a1;
     std::vector<int> active;
+    std::vector<int> binding;                          // BindingIndices
     AlphaDaiStatus status = AlphaDaiStatus::kSuccess;  // why no step was found
     std::string reason;
   };
@@ -579,6 +583,164 @@ class AlphaDaiRun {
     f_ = c.f1;
     a_ = c.a1;
     active_ = c.active;
+  }
+
+  // ---------------------------------------------------------------- consistent algebraic inputs
+  // After an event the algebraic inputs must also satisfy the hidden constraints of the binding
+  // constraints of index 2, not only phi <= 0. A step's SQP enforces
+  // phi(x_{n+1}) = 0 on such a constraint, and with x_n on it that is, to first order,
+  //   phi_x ((1 - beta/gamma) f_n + (beta/gamma) f_{n+1}) = 0,
+  // so an inconsistent u_n (phi_x f_n != 0) makes phi_x f_{n+1} = -(1 - beta/gamma)/(beta/gamma)
+  // phi_x f_n: u oscillates about the consistent value by that factor per step (-0.875 at
+  // rho = 0.5), an O(h) local error in x that step doubling measures but that does not fall
+  // with h (D3's heat flux stalled the error control so). This solves, at fixed x = x_n and
+  // t = t_n, for u only,
+  //   minimize    the step's objective J(u) (Try: the reference w(t_n), or u_n)
+  //   subject to  phi_i(x, u, t) <= 0               for every row that depends on u (index 1),
+  //               phi_x,i(x, t) f(x, u, t) + phi_t,i(x, t) <= 0
+  //                                                 for every binding row that does not, and
+  //                                                 whose derivative does (index 2),
+  //               +-f_i(x, u, t) <= 0               for every binding state bound (index 2),
+  //               u_lower <= u <= u_upper,
+  // the hidden constraint d/dt phi <= 0 of index-2 rows (= 0 while they stay active; < 0 lets
+  // them leave). The Jacobian of an index-2 row in u is phi_x f_u, exact from the model's AD
+  // (phi_x and phi_t do not depend on u for such a row). Rows of index 3 (phi_x f_u = 0 too)
+  // are left out: u enters them only at the next level. `binding` (constraint indices as in
+  // ActiveIndices) are the rows the last step's SQP enforces (BindingIndices), not the whole
+  // working set: a row within the activity tolerance but short of zero (phi = -1e-8) must not
+  // have its approach stopped there (dai_index2 at rtol 1e-9 then failed before the contact).
+  // Does nothing when no binding row is of index 2; otherwise replaces u_ (f_ and a_ are then
+  // restarted by the caller). Returns false with a status and reason when no such u is found.
+  bool MakeAlgebraicConsistent(const std::vector<int>& binding, AlphaDaiStatus* status,
+                               std::string* reason) {
+    if (nq_ == 0) return true;
+    Matrix phi_x(nphi_, nx_), phi_u(nphi_, nq_);
+    Vector phi_t = Vector::Zero(nphi_);
+    const Vector full = FullInputs(u_);
+    int row = 0;
+    for (const SmoothFunction& g : constraints_) {
+      const int k = g.num_outputs();
+      Vector value;
+      Matrix jac;
+      g.Jacobian(x_, full, t_, parameters_, Wrt{true, true, true, false}, &value, &jac);
+      phi_x.middleRows(row, k) = jac.leftCols(nx_);
+      for (int j = 0; j < nq_; ++j)
+        phi_u.block(row, j, k, 1) = jac.block(0, nx_ + algebraic_[j], k, 1);
+      phi_t.segment(row, k) = jac.col(jac.cols() - 1);
+      row += k;
+    }
+    Vector f;
+    Matrix a, d;
+    JacobianF(x_, u_, t_, &f, &a, &d);
+    // AD gives exact zeros for rows that do not depend on u, so the classification is exact
+    // (a row whose u-derivative vanishes only at this point is taken as of higher index).
+    std::vector<int> index1;
+    for (int i = 0; i < nphi_; ++i) {
+      if (phi_u.row(i).cwiseAbs().maxCoeff() > 0.0) index1.push_back(i);
+    }
+    Matrix hidden_x(0, nx_);  // rows c with c f(x, u, t) + b <= 0
+    Vector hidden_b(0);
+    auto add_hidden = [&](const Eigen::RowVectorXd& c, double b) {
+      if ((c * d).cwiseAbs().maxCoeff() == 0.0) return;  // index 3 or more
+      hidden_x.conservativeResize(hidden_x.rows() + 1, Eigen::NoChange);
+      hidden_b.conservativeResize(hidden_b.size() + 1);
+      hidden_x.row(hidden_x.rows() - 1) = c;
+      hidden_b[hidden_b.size() - 1] = b;
+    };
+    for (int k : binding) {
+      if (k < nphi_) {
+        if (phi_u.row(k).cwiseAbs().maxCoeff() == 0.0) add_hidden(phi_x.row(k), phi_t[k]);
+      } else if (k < nphi_ + 2 * nx_) {
+        const int i = (k - nphi_) / 2;
+        Eigen::RowVectorXd c = Eigen::RowVectorXd::Zero(nx_);
+        c[i] = (k - nphi_) % 2 == 1 ? 1.0 : -1.0;  // upper: x_i' <= 0; lower: -x_i' <= 0
+        add_hidden(c, 0.0);
+      }
+    }
+    if (hidden_x.rows() == 0) return true;
+    const int n1 = static_cast<int>(index1.size());
+    const Eigen::Index n2 = hidden_x.rows();
+    internal::SqpProblem problem;
+    problem.num_variables = nq_;
+    problem.lower = u_lower_;
+    problem.upper = u_upper_;
+    problem.objective_weights = options_.objective == AlphaDaiObjective::kFeasibility
+                                    ? Vector(Vector::Zero(nq_))
+                                    : Vector(Vector::Ones(nq_));
+    problem.reference = u_;
+    if (options_.objective == AlphaDaiObjective::kReference) {
+      for (int j = 0; j < nq_; ++j) {
+        problem.reference[j] =
+            scene_.inputs[static_cast<std::size_t>(algebraic_[j])].signal.ValueAt(t_);
+      }
+    }
+    problem.hessian_diagonal = Vector::Ones(nq_);
+    problem.evaluate = [&](const Vector& z, bool jacobians, internal::SqpEvaluation* out) {
+      out->equalities.resize(0);
+      out->equality_jacobian.resize(0, nq_);
+      out->inequalities.resize(n1 + n2);
+      Vector phi_z, fz;
+      Matrix phi_zx, phi_zu, az, dz;
+      if (jacobians) {
+        ++stats_.num_jacobian_evaluations;
+        EvaluatePhi(x_, z, t_, &phi_z, &phi_zx, &phi_zu);
+        JacobianF(x_, z, t_, &fz, &az, &dz);
+        out->inequality_jacobian.resize(n1 + n2, nq_);
+        for (int r = 0; r < n1; ++r) {
+          out->inequality_jacobian.row(r) = phi_zu.row(index1[static_cast<std::size_t>(r)]);
+        }
+        out->inequality_jacobian.bottomRows(n2) = hidden_x * dz;
+      } else {
+        ++stats_.num_function_evaluations;
+        EvaluatePhi(x_, z, t_, &phi_z, nullptr, nullptr);
+        fz = EvaluateF(x_, z, t_);
+      }
+      for (int r = 0; r < n1; ++r)
+        out->inequalities[r] = phi_z[index1[static_cast<std::size_t>(r)]];
+      out->inequalities.tail(n2) = hidden_x * fz + hidden_b;
+      return fz.allFinite() && phi_z.allFinite();
+    };
+    internal::SqpOptions sqp_options;
+    sqp_options.inequality_tolerance = options_.constraint_tolerance;
+    sqp_options.activity_tolerance = options_.constraint_tolerance;
+    sqp_options.optimality_tolerance = options_.optimality_tolerance;
+    sqp_options.max_iterations = options_.max_sqp_iterations;
+    const internal::SqpResult sqp = internal::SolveSqp(problem, u_, sqp_options);
+    stats_.num_sqp_iterations += sqp.iterations;
+    stats_.num_qp_iterations += sqp.qp_iterations;
+    stats_.num_elastic_qps += sqp.elastic_qps;
+    if (sqp.status != internal::SqpStatus::kConverged) {
+      *status = sqp.status == internal::SqpStatus::kInfeasible
+                    ? AlphaDaiStatus::kInfeasibleConstraints
+                : sqp.status == internal::SqpStatus::kNonFinite ? AlphaDaiStatus::kNonFinite
+                                                                : AlphaDaiStatus::kRetriesExhausted;
+      std::ostringstream s;
+      s << "no algebraic inputs consistent with the active constraints (phi <= 0 and "
+           "d/dt phi <= 0 for the active ones of index 2) were found at fixed x (SQP "
+        << internal::ToString(sqp.status) << " after " << sqp.iterations
+        << " iterations, largest violation " << sqp.inequality_violation << ", KKT residual "
+        << sqp.kkt_residual << ")";
+      *reason = s.str();
+      return false;
+    }
+    u_ = sqp.z;
+    return true;
+  }
+
+  // The rows of a step's working set that its SQP enforces: a positive multiplier (path
+  // constraints and state bounds; input bounds are bounds of MakeAlgebraicConsistent's problem).
+  std::vector<int> BindingIndices(const Candidate& c) const {
+    std::vector<int> binding;
+    for (int k : c.active) {
+      if (k < nphi_) {
+        if (c.sqp.inequality_multipliers[k] > 0.0) binding.push_back(k);
+      } else if (k < nphi_ + 2 * nx_) {
+        const int i = (k - nphi_) / 2;
+        const double lambda = c.sqp.bound_multipliers[i];  // lower - upper
+        if ((k - nphi_) % 2 == 1 ? lambda < 0.0 : lambda > 0.0) binding.push_back(k);
+      }
+    }
+    return binding;
   }
 
   double InitialStep() const {
@@ -732,10 +894,13 @@ class AlphaDaiRun {
           s << "the error control crawls: " << crawling_steps_
             << " accepted steps in a row as short as h = " << h
             << ", at which the rest of the horizon needs " << needed << " steps, more than "
-            << kCrawlMargin << " times the " << budget
-            << " that max_steps leaves (the estimate does not fall with h: the solution is not "
-               "smooth at this resolution, or an algebraic input is not consistent after an "
-               "event)";
+            << kCrawlMargin << " times the " << budget << " that max_steps leaves";
+          if (options_.max_step_size > 0.0 && h >= options_.max_step_size) {
+            s << " (h_max = " << options_.max_step_size << " bounds the steps)";
+          } else {
+            s << " (the estimate does not fall with h: the solution is not smooth at this "
+                 "resolution, or an algebraic input is not consistent after an event)";
+          }
           return Fail(result, AlphaDaiStatus::kStepSizeTooSmall, s.str());
         }
       } else {
@@ -744,8 +909,17 @@ class AlphaDaiRun {
       // At an event f jumps, and (2b) turns the jump into a ~ jump / (gamma h) that decays
       // only by (1 - 1/gamma) per step: its h^2 a term in (2a) would be an O(h) local error
       // in every following step. a restarts from df/dt as at a control breakpoint.
-      if (event && !RestartAcceleration()) {
-        return Fail(result, AlphaDaiStatus::kNonFinite, "f or df/dt is not finite");
+      // The algebraic inputs are made consistent with the new working set first (see
+      // MakeAlgebraicConsistent): an inconsistent u oscillates and stalls the error control.
+      if (event) {
+        AlphaDaiStatus status = AlphaDaiStatus::kSuccess;
+        std::string reason;
+        if (!MakeAlgebraicConsistent(second.binding, &status, &reason)) {
+          return Fail(result, status, "after the event: " + reason);
+        }
+        if (!RestartAcceleration()) {
+          return Fail(result, AlphaDaiStatus::kNonFinite, "f or df/dt is not finite");
+        }
       }
       // After an event the estimate (O(h) local error) says nothing about the smooth part.
       const double growth =
@@ -969,6 +1143,17 @@ class AlphaDaiRun {
     };
     internal::SqpOptions sqp_options;
     sqp_options.equality_tolerance = options_.dynamics_tolerance;
+    if (adaptive_) {
+      // The solve's residual must stay below the error control's allowance for this step
+      // (about rtol h / (tf - t0) relative to the states), else the first guess x_n passes
+      // (2a) once h |f| < dynamics_tolerance (1 + |x|) and x freezes while t advances: both
+      // halves of step doubling agree and the frozen steps are accepted (D3 at rtol 1e-9 ran so
+      // for 1000 steps of 1.5e-9 after its heat-flux contact). Round-off bounds it below.
+      sqp_options.equality_tolerance =
+          std::min(options_.dynamics_tolerance,
+                   std::max(kSolveFraction * options_.relative_tolerance * h / horizon_,
+                            kRoundOffNoise * std::numeric_limits<double>::epsilon()));
+    }
     sqp_options.inequality_tolerance = options_.constraint_tolerance;
     sqp_options.activity_tolerance = options_.constraint_tolerance;
     sqp_options.optimality_tolerance = options_.optimality_tolerance;
@@ -1148,6 +1333,7 @@ class AlphaDaiRun {
     // (2b)
     c->a1 = (c->f1 - f_) / (c->h * co.gamma) + (1.0 - 1.0 / co.gamma) * a_;
     c->active = ActiveIndices(sqp.working_set);
+    c->binding = BindingIndices(*c);
     if (!c->f1.allFinite() || !c->a1.allFinite() || !c->x1.allFinite()) {
       c->status = AlphaDaiStatus::kNonFinite;
       c->reason = "f or a is not finite at the new point";
