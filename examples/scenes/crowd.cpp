@@ -371,18 +371,18 @@ Scene MakeCrowdScene(const CrowdLayout& layout) {
   scene.AddParameter("exit_y", 0.0, "exit point e, y");
   AddCrowdView(layout, &scene);
 
-  // Every output reads the two coordinates of one agent: a 2 x 2 block diagonal Jacobian.
-  scene.dynamics = MakeSmoothFunction(
-      "crowd.desired_velocity", 2 * n,
-      [n](const auto& x, const auto&, const auto&, const auto& p, auto& out) {
+  // One block per agent (its velocity reads its two coordinates: a 2 x 2 block diagonal
+  // Jacobian), one per pair and one per wall constraint: sparse derivatives evaluate only the
+  // blocks of the constraints in an element system (MakeBlockFunction).
+  scene.dynamics = MakeBlockFunction(
+      "crowd.desired_velocity", n, 2,
+      [](int i, const auto& x, const auto&, const auto&, const auto& p, auto& out) {
         using std::sqrt;
-        for (int i = 0; i < n; ++i) {
-          const auto dx = p[kExitX] - x[2 * i];
-          const auto dy = p[kExitY] - x[2 * i + 1];
-          const auto norm = sqrt(dx * dx + dy * dy + p[kSmoothing] * p[kSmoothing]);
-          out[2 * i] = p[kSpeed] * dx / norm;
-          out[2 * i + 1] = p[kSpeed] * dy / norm;
-        }
+        const auto dx = p[kExitX] - x[2 * i];
+        const auto dy = p[kExitY] - x[2 * i + 1];
+        const auto norm = sqrt(dx * dx + dy * dy + p[kSmoothing] * p[kSmoothing]);
+        out[0] = p[kSpeed] * dx / norm;
+        out[1] = p[kSpeed] * dy / norm;
       });
 
   auto model = std::make_shared<CrowdModel>();
@@ -406,16 +406,15 @@ Scene MakeCrowdScene(const CrowdLayout& layout) {
       contacts.constraint_names.push_back("pair_" + std::to_string(i + 1) + "_" +
                                           std::to_string(j + 1));
     }
-    contacts.constraints = MakeSmoothFunction(
-        "crowd.contacts", static_cast<int>(layout.pairs.size()),
-        [shared](const auto& x, const auto&, const auto&, const auto&, auto& out) {
+    contacts.constraints = MakeBlockFunction(
+        "crowd.contacts", static_cast<int>(layout.pairs.size()), 1,
+        [shared](int k, const auto& x, const auto&, const auto&, const auto&, auto& out) {
           const CrowdModel& m = *shared;
-          for (std::size_t k = 0; k < m.pairs.size(); ++k) {
-            const int i = m.pairs[k].first, j = m.pairs[k].second;
-            const auto dx = x[2 * i] - x[2 * j];
-            const auto dy = x[2 * i + 1] - x[2 * j + 1];
-            out[static_cast<int>(k)] = (dx * dx + dy * dy - m.d2) * m.pair_scale;
-          }
+          const int i = m.pairs[static_cast<std::size_t>(k)].first;
+          const int j = m.pairs[static_cast<std::size_t>(k)].second;
+          const auto dx = x[2 * i] - x[2 * j];
+          const auto dy = x[2 * i + 1] - x[2 * j + 1];
+          out[0] = (dx * dx + dy * dy - m.d2) * m.pair_scale;
         });
     scene.effects.push_back(std::move(contacts));
   }
@@ -426,33 +425,30 @@ Scene MakeCrowdScene(const CrowdLayout& layout) {
   for (const CrowdWallConstraint& w : layout.walls) {
     walls.constraint_names.push_back(ToString(w.wall) + "_" + std::to_string(w.agent + 1));
   }
-  walls.constraints = MakeSmoothFunction(
-      "crowd.walls", static_cast<int>(layout.walls.size()),
-      [shared](const auto& x, const auto&, const auto&, const auto&, auto& out) {
+  walls.constraints = MakeBlockFunction(
+      "crowd.walls", static_cast<int>(layout.walls.size()), 1,
+      [shared](int k, const auto& x, const auto&, const auto&, const auto&, auto& out) {
         const CrowdModel& m = *shared;
-        for (std::size_t k = 0; k < m.walls.size(); ++k) {
-          const int i = m.walls[k].agent;
-          const int row = static_cast<int>(k);
-          // The branch is on the constraint's kind (a constant), never on a traced value.
-          switch (m.walls[k].wall) {
-            case CrowdWall::kLeft:
-              out[row] = x[2 * i] - m.radius;
-              break;
-            case CrowdWall::kBottom:
-              out[row] = x[2 * i + 1] + m.wall_offset;
-              break;
-            case CrowdWall::kTop:
-              out[row] = m.wall_offset - x[2 * i + 1];
-              break;
-            case CrowdWall::kUpperJamb:
-            case CrowdWall::kLowerJamb: {
-              const double centre_y =
-                  m.walls[k].wall == CrowdWall::kUpperJamb ? m.jamb_y : -m.jamb_y;
-              const auto dx = x[2 * i] - m.jamb_x;
-              const auto dy = x[2 * i + 1] - centre_y;
-              out[row] = (dx * dx + dy * dy - m.jamb_d2) * m.jamb_scale;
-              break;
-            }
+        const CrowdWallConstraint& w = m.walls[static_cast<std::size_t>(k)];
+        const int i = w.agent;
+        // The branch is on the constraint's kind (a constant), never on a traced value.
+        switch (w.wall) {
+          case CrowdWall::kLeft:
+            out[0] = x[2 * i] - m.radius;
+            break;
+          case CrowdWall::kBottom:
+            out[0] = x[2 * i + 1] + m.wall_offset;
+            break;
+          case CrowdWall::kTop:
+            out[0] = m.wall_offset - x[2 * i + 1];
+            break;
+          case CrowdWall::kUpperJamb:
+          case CrowdWall::kLowerJamb: {
+            const double centre_y = w.wall == CrowdWall::kUpperJamb ? m.jamb_y : -m.jamb_y;
+            const auto dx = x[2 * i] - m.jamb_x;
+            const auto dy = x[2 * i + 1] - centre_y;
+            out[0] = (dx * dx + dy * dy - m.jamb_d2) * m.jamb_scale;
+            break;
           }
         }
       });

@@ -194,6 +194,14 @@ std::vector<OptionBinding<Options>> BindConstraintFilter(ConstraintFilter Option
           BindReal("filter_safety", safety,
                    "safety factor of the filter's margin (times H and the rate bound), >= 1")};
 }
+// Threads for large scenes (LoweredSystem::SetThreads), declared once for the integrators that
+// run them (FESD, time-stepping).
+template <class Options>
+OptionBinding<Options> BindThreads(int Options::*member) {
+  return BindInteger("threads", member,
+                     "threads evaluating model functions made of blocks in large (sparse) scenes, "
+                     ">= 0 (0: every hardware thread); results are the same for any value");
+}
 // The semismooth Newton settings of the complementarity integrators (FESD, time-stepping).
 template <class Options>
 std::vector<OptionBinding<Options>> BindNewton(SemismoothNewtonOptions Options::*member) {

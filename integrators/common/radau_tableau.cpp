@@ -142,28 +142,36 @@ void RadauTableau::InterpolationWeights(double theta, Vector* w) const {
 }
 
 Vector RadauTableau::InterpolationDerivativeWeights(double theta) const {
-  // d/dtheta of the Lagrange basis above, by the product rule over its linear factors.
-  Vector w(stages);
+  Vector w;
+  InterpolationDerivativeWeights(theta, &w);
+  return w;
+}
+
+void RadauTableau::InterpolationDerivativeWeights(double theta, Vector* w) const {
+  // d/dtheta of the Lagrange basis above, by the product rule over its linear factors
+  // (theta - 0)/c_j and (theta - c_k)/(c_j - c_k), k != j. The roots live on the stack: dense
+  // output calls this per output time.
+  w->resize(stages);
+  std::array<double, kMaxRadauStages> roots{};
   for (int j = 0; j < stages; ++j) {
-    // factors: (theta - 0)/c_j and (theta - c_k)/(c_j - c_k), k != j
-    std::vector<double> roots{0.0};
+    int num_roots = 0;
+    roots[num_roots++] = 0.0;
     double scale = 1.0 / c[j];
     for (int k = 0; k < stages; ++k) {
       if (k == j) continue;
-      roots.push_back(c[k]);
+      roots[num_roots++] = c[k];
       scale /= (c[j] - c[k]);
     }
     double derivative = 0.0;
-    for (std::size_t m = 0; m < roots.size(); ++m) {
+    for (int m = 0; m < num_roots; ++m) {
       double product = 1.0;
-      for (std::size_t n = 0; n < roots.size(); ++n) {
+      for (int n = 0; n < num_roots; ++n) {
         if (n != m) product *= theta - roots[n];
       }
       derivative += product;
     }
-    w[j] = scale * derivative;
+    (*w)[j] = scale * derivative;
   }
-  return w;
 }
 
 const RadauTableau& RadauIIA(int stages) {

@@ -55,14 +55,18 @@ void FesdRun::DenseOutput(const ElementPolynomial& element) {
     // theta with clock(theta) = t: Newton on the clock row of the collocation polynomial.
     double theta = std::clamp((t - start) / (end - start), 0.0, 1.0);
     for (int k = 0; k < kThetaIterations; ++k) {
-      const double value =
-          start + element.increments.row(clock).dot(tableau_.InterpolationWeights(theta));
-      const double slope =
-          element.increments.row(clock).dot(tableau_.InterpolationDerivativeWeights(theta));
+      tableau_.InterpolationWeights(theta, &output_weights_);
+      tableau_.InterpolationDerivativeWeights(theta, &output_slope_weights_);
+      const double value = start + element.increments.row(clock).dot(output_weights_);
+      const double slope = element.increments.row(clock).dot(output_slope_weights_);
       if (!(slope > 0.0)) break;
       theta = std::clamp(theta - (value - t) / slope, 0.0, 1.0);
     }
-    const Vector y = element.y0 + element.increments * tableau_.InterpolationWeights(theta);
+    tableau_.InterpolationWeights(theta, &output_weights_);
+    // y0 + (Z w), with the product formed first as before (the same rounding).
+    output_state_.noalias() = element.increments * output_weights_;
+    output_state_ += element.y0;
+    const Vector& y = output_state_;
     Vector z;
     if (nz_ > 0) {
       // Consistent algebraic values at the interpolated state: continuous variables from the

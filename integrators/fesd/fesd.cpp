@@ -73,6 +73,7 @@ void FesdOptions::Validate() const {
   RequireArgument(std::isfinite(filter_safety) && filter_safety >= 1.0,
                   "filter safety must be >= 1, got ", filter_safety);
   internal::ValidateSensitivityOptions(*this);
+  RequireArgument(threads >= 0, "threads must be >= 0 (0: every hardware thread), got ", threads);
   newton.Validate();
 }
 
@@ -146,6 +147,8 @@ namespace internal {
 
 FesdResult FesdRun::Run() {
   const RunClock run_clock;
+  system_.SetThreads(options_.threads);
+  worker_seconds_start_ = system_.worker_cpu_seconds();
   const Scene& scene = system_.scene();
   y_ = system_.InitialState();
   if (options_.initial_state.size() > 0) {
@@ -416,7 +419,8 @@ FesdResult FesdRun::Finish(const RunClock& run_clock) {
   }
   if (result_.elements.empty()) result_.stats.min_element_length = 0.0;
   result_.stats.num_factorizations = factorizations_;
-  result_.stats.cpu_seconds = run_clock.CpuSeconds();
+  result_.stats.cpu_seconds =
+      run_clock.CpuSeconds() + (system_.worker_cpu_seconds() - worker_seconds_start_);
   return std::move(result_);
 }
 

@@ -539,6 +539,7 @@ class FesdRun {
   bool full_ = false;  // FesdOptions::sensitivities as given: full matrices
   ProgressCallback progress_;
   std::shared_ptr<LoweredSystem> shared_system_;  // kept alive for a kept adjoint
+  double worker_seconds_start_ = 0.0;             // the system's worker CPU time at the run's start
   std::optional<LoweredSystem> owned_;            // empty when running on an external system
   LoweredSystem& system_;
   GroupSystem group_;
@@ -667,6 +668,8 @@ class FesdRun {
   bool dense_output_ = false;         // output times replace element ends
   std::vector<double> output_times_;  // sorted, in (t0, tf]
   std::size_t next_output_ = 0;
+  // DenseOutput's workspaces: interpolation weights, their derivative, the interpolated state.
+  Vector output_weights_, output_slope_weights_, output_state_;
   // Workspaces of the per-element checks and certificates (const members, no allocation per
   // element): event indicators and the consistent free sides of each stage.
   mutable IndicatorEvaluation indicators_;

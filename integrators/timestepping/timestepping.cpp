@@ -36,6 +36,7 @@ void TimeSteppingOptions::Validate() const {
   }
   RequireArgument(max_steps >= 1, "max_steps must be >= 1, got ", max_steps);
   internal::ValidateSensitivityOptions(*this);
+  RequireArgument(threads >= 0, "threads must be >= 0 (0: every hardware thread), got ", threads);
   newton.Validate();
 }
 
@@ -273,6 +274,7 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
   lowering.require_feasible_initial_state = options.initial_state.size() == 0;
   lowering.storage = StorageForLinearSolver(options.newton.linear_solver);
   LoweredSystem system(scene, lowering);
+  system.SetThreads(options.threads);
   internal::CollocationStages stages(&system, options.stages);
   StepSystem step_system(&stages);
   SemismoothNewton newton(options.newton);
@@ -540,7 +542,7 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
                "(tstops to place a step boundary) or the fesd integrator";
     result.warnings.push_back(warning.str());
   }
-  stats.cpu_seconds = run_clock.CpuSeconds();
+  stats.cpu_seconds = run_clock.CpuSeconds() + system.worker_cpu_seconds();
   return result;
 }
 

@@ -35,6 +35,7 @@ IntegratorEntry TimeSteppingEntry() {
   for (auto& binding : BindConstraintFilter(&O::constraint_filter, &O::filter_safety)) {
     options.push_back(binding);
   }
+  options.push_back(BindThreads(&O::threads));
   for (auto& binding : BindNewton(&O::newton)) options.push_back(binding);
   using S = TimeSteppingStats;
   std::vector<StatBinding<S>> stats = {

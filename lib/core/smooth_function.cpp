@@ -1,6 +1,8 @@
 #include "moreau/core/smooth_function.hpp"
 
 #include <algorithm>
+#include <bit>
+#include <cstdint>
 
 #include "sparse_derivatives.hpp"
 
@@ -20,7 +22,29 @@ void ThrowArgumentIndex(const std::string& function, const char* argument, int i
 namespace internal {
 
 TypedFunction::TypedFunction(std::string name, int num_outputs)
-    : name_(std::move(name)), num_outputs_(num_outputs) {}
+    : name_(std::move(name)),
+      num_outputs_(num_outputs),
+      analysis_(std::make_shared<FunctionAnalysis>()) {}
+
+std::unique_ptr<SmoothFunction::Concept> TypedFunction::ShareAnalysis(
+    std::unique_ptr<TypedFunction> copy) const {
+  copy->analysis_ = analysis_;
+  copy->analyzed_ = analyzed_;
+  return copy;
+}
+
+const AnalyzedPattern& TypedFunction::Analysis(const ConstVectorRef& x, const ConstVectorRef& u,
+                                               double t, const ConstVectorRef& p, bool* detected) {
+  const int nx = static_cast<int>(x.size()), nu = static_cast<int>(u.size()),
+            np = static_cast<int>(p.size());
+  bool traced = false;
+  if (analyzed_ == nullptr || !analyzed_->pattern.SameSizes(nx, nu, np)) {
+    analyzed_ = analysis_->Find(this, x, u, t, p, &traced);
+    if (traced) ++detections_;
+  }
+  if (detected != nullptr) *detected = traced;
+  return *analyzed_;
+}
 
 TypedFunction::~TypedFunction() = default;
 
@@ -28,7 +52,7 @@ void TypedFunction::SparseJacobian(const ConstVectorRef& x, const ConstVectorRef
                                    const ConstVectorRef& p, Wrt wrt, Vector* out, SparseMatrix* jac,
                                    const std::vector<int>* rows) {
   if (!sparse_) sparse_ = std::make_unique<SparseDerivatives>();
-  sparse_->Jacobian(this, x, u, t, p, wrt, out, jac, rows);
+  sparse_->Jacobian(this, x, u, t, p, wrt, out, jac, rows, pool_);
 }
 
 void TypedFunction::SparseWeightedHessian(const ConstVectorRef& x, const ConstVectorRef& u,
@@ -57,6 +81,7 @@ void TypedFunction::DenseHessianDirection(const ConstVectorRef& x, const ConstVe
   MOREAU_ASSERT(columns <= Dual1::kCapacity && direction.size() == columns,
                 "dense Hessian direction: too many columns or a direction of the wrong size");
   rows->setZero(num_outputs_, columns);
+  if (Analysis(x, u, t, p).structure.HessianZero(wrt)) return;  // affine in the columns
   if (space2_ == nullptr) space2_ = std::make_unique<Space<Dual2>>();
   Space<Dual2>& space2 = *space2_;
   // Selected input `column`: outer derivative direction `column`, inner derivative its
@@ -113,8 +138,24 @@ bool TypedFunction::Bounds(const ConstVectorRef& x_lower, const ConstVectorRef& 
   return true;
 }
 
+// Only functions made of blocks (block_outputs() > 0) are evaluated block by block.
+void TypedFunction::CallBlock(int, const double*, int, const double*, int, const double&,
+                              const double*, int, double*) {
+  MOREAU_ASSERT(false, "CallBlock of a function that is not made of blocks");
+}
+void TypedFunction::CallBlock(int, const Dual1*, int, const Dual1*, int, const Dual1&, const Dual1*,
+                              int, Dual1*) {
+  MOREAU_ASSERT(false, "CallBlock of a function that is not made of blocks");
+}
+void TypedFunction::CallBlock(int, const Dual2*, int, const Dual2*, int, const Dual2&, const Dual2*,
+                              int, Dual2*) {
+  MOREAU_ASSERT(false, "CallBlock of a function that is not made of blocks");
+}
+
 SparseDerivativeStats TypedFunction::sparse_derivative_stats() const {
-  return sparse_ ? sparse_->stats() : SparseDerivativeStats{};
+  SparseDerivativeStats stats = sparse_ ? sparse_->stats() : SparseDerivativeStats{};
+  stats.num_detections += detections_;
+  return stats;
 }
 
 void TypedFunction::Evaluate(const ConstVectorRef& x, const ConstVectorRef& u, double t,
@@ -127,10 +168,15 @@ void TypedFunction::Evaluate(const ConstVectorRef& x, const ConstVectorRef& u, d
 template <class T, class Seed>
 void TypedFunction::SeedInputs(Space<T>* space, const ConstVectorRef& x, const ConstVectorRef& u,
                                double t, const ConstVectorRef& p, Wrt wrt, Seed&& seed) {
-  space->x.resize(static_cast<std::size_t>(x.size()));
-  space->u.resize(static_cast<std::size_t>(u.size()));
-  space->p.resize(static_cast<std::size_t>(p.size()));
-  space->out.assign(static_cast<std::size_t>(num_outputs_), T(0.0));
+  // Sized once (the sizes do not change between calls of one function).
+  auto fit = [](std::vector<T>* v, Eigen::Index n) {
+    if (v->size() != static_cast<std::size_t>(n)) v->resize(static_cast<std::size_t>(n));
+  };
+  fit(&space->x, x.size());
+  fit(&space->u, u.size());
+  fit(&space->p, p.size());
+  fit(&space->out, num_outputs_);
+  for (T& value : space->out) value = T(0.0);
   int column = 0;
   for (Eigen::Index i = 0; i < x.size(); ++i) {
     space->x[static_cast<std::size_t>(i)] = wrt.x ? seed(x[i], column++) : T(x[i]);
@@ -149,8 +195,40 @@ void TypedFunction::Jacobian(const ConstVectorRef& x, const ConstVectorRef& u, d
   const int nx = static_cast<int>(x.size()), nu = static_cast<int>(u.size()),
             np = static_cast<int>(p.size());
   const int columns = wrt.Columns(nx, nu, np);
-  jac->setZero(num_outputs_, columns);
   out->resize(num_outputs_);
+  // A Jacobian that does not depend on the selected inputs (JacobianConstant) is computed once
+  // per set of values of the other inputs; the values come from an evaluation in Dual1
+  // constants, whose arithmetic is that of the seeded evaluation's values.
+  const bool constant = columns > 0 && Analysis(x, u, t, p).structure.JacobianConstant(wrt);
+  const unsigned bits = WrtBits(wrt);
+  JacobianCache& cache = jacobian_cache_;
+  if (constant) {
+    // The unselected inputs, in the order x, u, t, p, against the key (bit for bit).
+    bool same =
+        cache.valid && cache.wrt_bits == bits && cache.nx == nx && cache.nu == nu && cache.np == np;
+    std::size_t next = 0;
+    auto compare = [&](const double* values, Eigen::Index size) {
+      for (Eigen::Index i = 0; same && i < size; ++i, ++next) {
+        same = std::bit_cast<std::uint64_t>(values[i]) ==
+               std::bit_cast<std::uint64_t>(cache.key[next]);
+      }
+    };
+    if (same && !wrt.x) compare(x.data(), x.size());
+    if (same && !wrt.u) compare(u.data(), u.size());
+    if (same && !wrt.t) compare(&t, 1);
+    if (same && !wrt.p) compare(p.data(), p.size());
+    if (same) {
+      SeedInputs(&space1_, x, u, t, p, wrt, [](double value, int) { return Dual1(value); });
+      Call(space1_.x.data(), nx, space1_.u.data(), nu, space1_.t, space1_.p.data(), np,
+           space1_.out.data());
+      for (int k = 0; k < num_outputs_; ++k) {
+        (*out)[k] = space1_.out[static_cast<std::size_t>(k)].value();
+      }
+      *jac = cache.jacobian;
+      return;
+    }
+  }
+  jac->setZero(num_outputs_, columns);
   constexpr int kChunk = Dual1::kCapacity;
   // At least one pass, so that the value is computed even with no selected column.
   for (int first = 0; first == 0 || first < columns; first += kChunk) {
@@ -170,6 +248,22 @@ void TypedFunction::Jacobian(const ConstVectorRef& x, const ConstVectorRef& u, d
       for (int i = 0; i < value.size(); ++i) (*jac)(k, first + i) = value.d(i);
     }
   }
+  if (constant) {
+    cache.valid = true;
+    cache.wrt_bits = bits;
+    cache.nx = nx;
+    cache.nu = nu;
+    cache.np = np;
+    cache.key.clear();
+    auto append = [&cache](const double* values, Eigen::Index size) {
+      cache.key.insert(cache.key.end(), values, values + size);
+    };
+    if (!wrt.x) append(x.data(), x.size());
+    if (!wrt.u) append(u.data(), u.size());
+    if (!wrt.t) append(&t, 1);
+    if (!wrt.p) append(p.data(), p.size());
+    cache.jacobian = *jac;
+  }
 }
 
 void TypedFunction::WeightedHessian(const ConstVectorRef& x, const ConstVectorRef& u, double t,
@@ -179,11 +273,8 @@ void TypedFunction::WeightedHessian(const ConstVectorRef& x, const ConstVectorRe
             np = static_cast<int>(p.size());
   const int columns = wrt.Columns(nx, nu, np);
   hess->setZero(columns, columns);
-  if (hessian_support_.nx != nx || hessian_support_.nu != nu || hessian_support_.np != np) {
-    const SparsityPattern pattern = DetectSparsity(this, x, u, t, p);
-    hessian_support_ = {nx, nu, np, !pattern.point_dependent && pattern.hess_first.empty()};
-  }
-  if (hessian_support_.empty) return;  // every output is affine: the Hessian is zero
+  // Affine in the selected blocks (a moving set's linear constraint, as S3's floor): zero.
+  if (Analysis(x, u, t, p).structure.HessianZero(wrt)) return;
   if (space2_ == nullptr) space2_ = std::make_unique<Space<Dual2>>();
   Space<Dual2>& space2 = *space2_;
   constexpr int kChunk = Dual1::kCapacity;
@@ -228,7 +319,7 @@ class StackedFunction final : public TypedFunctionFor<StackedFunction> {
   StackedFunction(std::string name, std::vector<SmoothFunction> parts, int num_outputs)
       : TypedFunctionFor(std::move(name), num_outputs), parts_(std::move(parts)) {}
   std::unique_ptr<SmoothFunction::Concept> Clone() const override {
-    return std::make_unique<StackedFunction>(name_, parts_, num_outputs_);
+    return ShareAnalysis(std::make_unique<StackedFunction>(name_, parts_, num_outputs_));
   }
 
  private:
@@ -249,7 +340,7 @@ class ZeroFunction final : public TypedFunctionFor<ZeroFunction> {
  public:
   using TypedFunctionFor::TypedFunctionFor;
   std::unique_ptr<SmoothFunction::Concept> Clone() const override {
-    return std::make_unique<ZeroFunction>(name_, num_outputs_);
+    return ShareAnalysis(std::make_unique<ZeroFunction>(name_, num_outputs_));
   }
 
  private:

@@ -6,9 +6,11 @@
 #include <algorithm>
 #include <cstring>
 #include <deque>
+#include <limits>
 #include <utility>
 
 #include "column_coloring.hpp"
+#include "thread_pool.hpp"
 
 namespace moreau::internal {
 
@@ -158,10 +160,6 @@ std::vector<int> ColumnsOfInputs(const SparsityPattern& pattern, Wrt wrt, int* n
   return column;
 }
 
-unsigned WrtBits(Wrt wrt) {
-  return (wrt.x ? 1u : 0u) | (wrt.u ? 2u : 0u) | (wrt.t ? 4u : 0u) | (wrt.p ? 8u : 0u);
-}
-
 // The rows of a call: all outputs, or the caller's subset (checked once, when a plan is made).
 std::vector<int> SelectedRows(const TypedFunction& function, const std::vector<int>* rows) {
   const int m = function.num_outputs();
@@ -206,7 +204,50 @@ void AdoptPattern(const SparseMatrix& pattern, SparseMatrix* target) {
   if (!same) *target = pattern;
 }
 
+// Adds w d^2 g / (d outer d inner) from a Dual2 evaluation (outer level: direction `outer`,
+// inner level: `inner`; directions beyond the ones a value carries are zero) at a Hessian
+// entry and at its mirror (once on the diagonal, where ij == ji).
+void AddSecondDerivative(const Dual2& g, int outer, int inner, double w, int ij, int ji,
+                         double* values) {
+  double second = 0.0;
+  if (outer < g.size()) {
+    const Dual1& row = g.d(outer);
+    if (inner < row.size()) second = row.d(inner);
+  }
+  values[ij] += w * second;
+  if (ji != ij) values[ji] += w * second;
+}
+
 }  // namespace
+
+FunctionStructure AnalyzeStructure(const SparsityPattern& pattern) {
+  FunctionStructure structure;
+  structure.nx = pattern.nx;
+  structure.nu = pattern.nu;
+  structure.np = pattern.np;
+  structure.point_dependent = pattern.point_dependent;
+  structure.piecewise = pattern.piecewise;
+  auto block = [&pattern](int input) {
+    if (input < pattern.nx) return 0;
+    if (input < pattern.nx + pattern.nu) return 1;
+    return input == pattern.nx + pattern.nu ? 2 : 3;
+  };
+  for (std::size_t e = 0; e < pattern.hess_first.size(); ++e) {
+    const int a = block(pattern.hess_first[e]), b = block(pattern.hess_second[e]);
+    structure.couples[a][b] = structure.couples[b][a] = true;
+  }
+  for (unsigned bits = 0; bits < 16 && !structure.point_dependent; ++bits) {
+    bool zero = true;
+    for (int a = 0; a < 4; ++a) {
+      for (int b = 0; b < 4; ++b) {
+        const bool selected = ((bits >> a) & 1u) != 0 && ((bits >> b) & 1u) != 0;
+        zero = zero && !(selected && structure.couples[a][b]);
+      }
+    }
+    if (zero) structure.hessian_zero |= 1u << bits;
+  }
+  return structure;
+}
 
 SparsityPattern DetectSparsity(TypedFunction* function, const ConstVectorRef& x,
                                const ConstVectorRef& u, double t, const ConstVectorRef& p) {
@@ -239,8 +280,29 @@ SparsityPattern DetectSparsity(TypedFunction* function, const ConstVectorRef& x,
     output_nodes[k] = outputs[k].node();
   }
   pattern.point_dependent = tape.value_dependent;
+  pattern.piecewise = tape.piecewise;
   AnalyzeTape(tape, output_nodes, pattern.num_inputs, &pattern);
   return pattern;
+}
+
+std::shared_ptr<const AnalyzedPattern> FunctionAnalysis::Find(TypedFunction* function,
+                                                              const ConstVectorRef& x,
+                                                              const ConstVectorRef& u, double t,
+                                                              const ConstVectorRef& p,
+                                                              bool* detected) {
+  const int nx = static_cast<int>(x.size()), nu = static_cast<int>(u.size()),
+            np = static_cast<int>(p.size());
+  const std::lock_guard<std::mutex> lock(mutex_);
+  *detected = false;
+  for (const auto& entry : entries_) {
+    if (entry->pattern.SameSizes(nx, nu, np)) return entry;
+  }
+  auto entry = std::make_shared<AnalyzedPattern>();
+  entry->pattern = DetectSparsity(function, x, u, t, p);
+  entry->structure = AnalyzeStructure(entry->pattern);
+  entries_.push_back(entry);
+  *detected = true;
+  return entry;
 }
 
 bool MergePattern(const SparsityPattern& other, SparsityPattern* into) {
@@ -290,6 +352,7 @@ bool MergePattern(const SparsityPattern& other, SparsityPattern* into) {
     into->hess_second = std::move(hess_second);
   }
   into->point_dependent = into->point_dependent || other.point_dependent;
+  into->piecewise = into->piecewise || other.piecewise;
   return grew;
 }
 
@@ -311,6 +374,14 @@ struct SparseDerivatives::JacobianPlan {
   // Entries recovered in pass q: [entry_start[q], entry_start[q + 1]): value position in the
   // pattern, output, direction.
   std::vector<int> entry_start, entry_position, entry_output, entry_direction;
+  // Functions made of blocks (no colouring): the blocks holding a selected row; per block b
+  // (index into `blocks`) its seeded inputs block_input[block_input_start[b] ..] (sorted; the
+  // local direction of an input is its index there), its selected rows block_row[
+  // block_row_start[b] ..], and its entries [block_entry_start[b], block_entry_start[b + 1]):
+  // value position, output and local direction.
+  std::vector<int> blocks, block_input_start, block_input, block_row_start, block_row;
+  std::vector<int> block_entry_start, block_entry_position, block_entry_output,
+      block_entry_direction;
 };
 
 // Everything about SparseWeightedHessian for one (wrt, rows) that does not depend on the point.
@@ -336,6 +407,12 @@ struct SparseDerivatives::HessianPlan {
   bool direction_ready = false;
   SparseMatrix direction_pattern;
   std::vector<int> support_column, support_position;
+  // Functions made of blocks: the blocks of `outputs`; per block b its outputs outputs[
+  // block_output_start[b] ..] and its support block_input[block_input_start[b] ..] (sorted union
+  // of its outputs' supports); per pair e and support entry s the local indices of their
+  // inputs in their block's support.
+  std::vector<int> blocks, block_output_start, block_input_start, block_input;
+  std::vector<int> pair_local_i, pair_local_j, support_local;
 };
 
 SparseDerivatives::SparseDerivatives() = default;
@@ -347,14 +424,21 @@ void SparseDerivatives::UpdatePattern(TypedFunction* function, const ConstVector
             np = static_cast<int>(p.size());
   const bool fresh = !pattern_.SameSizes(nx, nu, np);
   if (!fresh && !pattern_.point_dependent) return;
-  SparsityPattern detected = DetectSparsity(function, x, u, t, p);
-  ++stats_.num_detections;
+  bool traced = false;
   if (fresh) {
-    pattern_ = std::move(detected);
-  } else if (MergePattern(detected, &pattern_)) {
-    ++stats_.num_pattern_growths;
-  } else {
-    return;  // nothing new: the plans stay valid
+    // The pattern the function's analysis holds (traced by this object or by a clone; the
+    // function counts its traces in its stats).
+    pattern_ = function->Analysis(x, u, t, p, &traced).pattern;
+  }
+  if (pattern_.point_dependent && !traced) {
+    // A pattern that may change with the point: traced here as well, the stored one the union.
+    SparsityPattern detected = DetectSparsity(function, x, u, t, p);
+    ++stats_.num_detections;
+    if (MergePattern(detected, &pattern_)) {
+      ++stats_.num_pattern_growths;
+    } else if (!fresh) {
+      return;  // nothing new: the plans stay valid
+    }
   }
   jacobian_plans_.clear();
   hessian_plans_.clear();
@@ -398,8 +482,10 @@ SparseDerivatives::JacobianPlan& SparseDerivatives::FindJacobianPlan(const Typed
     }
     row_start.push_back(static_cast<int>(row_column.size()));
   }
+  const bool blocked = UseBlocks(function);
   const std::vector<int> colors =
-      ColorColumnsDistanceTwo(num_columns, row_start, row_column, &plan->num_colors);
+      blocked ? std::vector<int>(static_cast<std::size_t>(num_columns), -1)
+              : ColorColumnsDistanceTwo(num_columns, row_start, row_column, &plan->num_colors);
   plan->num_passes = (plan->num_colors + kChunk - 1) / kChunk;
 
   // Compressed-column pattern (rows ascend within each column since `selected` ascends) and
@@ -421,11 +507,15 @@ SparseDerivatives::JacobianPlan& SparseDerivatives::FindJacobianPlan(const Typed
     }
   }
   plan->pattern = PatternMatrix(m, num_columns, column_start, row_index);
+  if (blocked) {
+    AddJacobianBlocks(function, selected, row_start, row_column, position, column_of, plan.get());
+  }
 
   // Entries grouped by pass (counting sort on colour / kChunk).
   const int passes = plan->num_passes;
   plan->entry_start.assign(static_cast<std::size_t>(passes) + 1, 0);
   for (int column : row_column) {
+    if (blocked) break;
     ++plan->entry_start[static_cast<std::size_t>(colors[static_cast<std::size_t>(column)] /
                                                  kChunk) +
                         1];
@@ -434,12 +524,12 @@ SparseDerivatives::JacobianPlan& SparseDerivatives::FindJacobianPlan(const Typed
     plan->entry_start[static_cast<std::size_t>(q) + 1] +=
         plan->entry_start[static_cast<std::size_t>(q)];
   }
-  const std::size_t entries = row_column.size();
+  const std::size_t entries = blocked ? 0 : row_column.size();
   plan->entry_position.resize(entries);
   plan->entry_output.resize(entries);
   plan->entry_direction.resize(entries);
   std::vector<int> next(plan->entry_start.begin(), plan->entry_start.end() - 1);
-  for (std::size_t r = 0; r < selected.size(); ++r) {
+  for (std::size_t r = 0; r < selected.size() && !blocked; ++r) {
     for (int e = row_start[r]; e < row_start[r + 1]; ++e) {
       const int color = colors[static_cast<std::size_t>(row_column[static_cast<std::size_t>(e)])];
       const auto at = static_cast<std::size_t>(next[static_cast<std::size_t>(color / kChunk)]++);
@@ -544,10 +634,13 @@ SparseDerivatives::HessianPlan& SparseDerivatives::FindHessianPlan(const TypedFu
   // Distance-2 colouring of the supports (inputs as columns): the inputs of every output have
   // distinct colours, so each output's second derivatives are read off the compressed ones.
   int num_colors = 0;
-  const std::vector<int> colors = ColorColumnsDistanceTwo(pattern_.num_inputs, plan->support_start,
-                                                          plan->support_input, &num_colors);
+  if (UseBlocks(function)) {
+    AddHessianBlocks(function, plan.get());
+  } else {
+    plan->input_color = ColorColumnsDistanceTwo(pattern_.num_inputs, plan->support_start,
+                                                plan->support_input, &num_colors);
+  }
   plan->num_colors = num_colors;
-  plan->input_color = colors;
 
   // Union pattern (both triangles) and the value positions of every pair.
   std::sort(union_entries.begin(), union_entries.end());
@@ -619,12 +712,17 @@ void SparseDerivatives::FillInputs2(const ConstVectorRef& x, const ConstVectorRe
 void SparseDerivatives::Jacobian(TypedFunction* function, const ConstVectorRef& x,
                                  const ConstVectorRef& u, double t, const ConstVectorRef& p,
                                  Wrt wrt, Vector* out, SparseMatrix* jac,
-                                 const std::vector<int>* rows) {
+                                 const std::vector<int>* rows, ThreadPool* pool) {
   UpdatePattern(function, x, u, t, p);
   const JacobianPlan& plan = FindJacobianPlan(*function, wrt, rows);
   AdoptPattern(plan.pattern, jac);
   stats_.jacobian_colors = plan.num_colors;
   stats_.jacobian_passes = plan.num_passes;
+  if (UseBlocks(*function)) {
+    FillInputs1(x, u, t, p);
+    BlockJacobian(function, plan, out, jac->valuePtr(), pool);
+    return;
+  }
   if (plan.num_passes == 0) {  // nothing to differentiate: the value only
     function->Evaluate(x, u, t, p, out);
     return;
@@ -679,6 +777,10 @@ void SparseDerivatives::WeightedHessian(TypedFunction* function, const ConstVect
   std::fill(values, values + hess->nonZeros(), 0.0);
   stats_.hessian_colors = 0;
   stats_.hessian_passes = 0;
+  if (UseBlocks(*function)) {
+    BlockWeightedHessian(function, plan, x, u, t, p, weights, values);
+    return;
+  }
 
   // Outputs with a nonzero weight, their inputs (seeded) and the colours those use, renumbered
   // 0, 1, ... in increasing colour order so that only they take directions.
@@ -766,15 +868,8 @@ void SparseDerivatives::WeightedHessian(TypedFunction* function, const ConstVect
           int cj = compact(plan.pair_j[ue]);
           if (ci / kChunk != a) std::swap(ci, cj);  // ci: the outer one
           if (ci / kChunk != a || cj / kChunk != b) continue;
-          const int outer = ci % kChunk, inner = cj % kChunk;
-          double second = 0.0;
-          if (outer < g.size()) {
-            const Dual1& row = g.d(outer);
-            if (inner < row.size()) second = row.d(inner);
-          }
-          values[plan.position_ij[ue]] += w * second;
-          if (plan.position_ji[ue] != plan.position_ij[ue])
-            values[plan.position_ji[ue]] += w * second;
+          AddSecondDerivative(g, ci % kChunk, cj % kChunk, w, plan.position_ij[ue],
+                              plan.position_ji[ue], values);
         }
       }
       for (int i : seeded_)
@@ -786,11 +881,9 @@ void SparseDerivatives::WeightedHessian(TypedFunction* function, const ConstVect
 // ---- second derivatives along a direction ----------------------------------------------
 
 void SparseDerivatives::HessianDirection(TypedFunction* function, const ConstVectorRef& x,
-                                         const ConstVectorRef& u, double t,
-                                         const ConstVectorRef& p, Wrt wrt,
-                                         const ConstVectorRef& direction,
-                                         SparseMatrix* rows_matrix,
-                                         const std::vector<int>* rows) {
+                                         const ConstVectorRef& u, double t, const ConstVectorRef& p,
+                                         Wrt wrt, const ConstVectorRef& direction,
+                                         SparseMatrix* rows_matrix, const std::vector<int>* rows) {
   UpdatePattern(function, x, u, t, p);
   HessianPlan& plan = FindHessianPlan(*function, wrt, rows);
   const int m = function->num_outputs();
@@ -837,6 +930,12 @@ void SparseDerivatives::HessianDirection(TypedFunction* function, const ConstVec
   AdoptPattern(plan.direction_pattern, rows_matrix);
   double* values = rows_matrix->valuePtr();
   std::fill(values, values + rows_matrix->nonZeros(), 0.0);
+  if (UseBlocks(*function)) {
+    if (plan.outputs.empty()) return;
+    FillInputs2(x, u, t, p);
+    BlockHessianDirection(function, plan, direction, values);
+    return;
+  }
   if (plan.outputs.empty() || plan.num_colors == 0) return;
 
   // Outer level: the colours of chunk a (inputs of one output have distinct colours); inner
@@ -875,8 +974,8 @@ void SparseDerivatives::HessianDirection(TypedFunction* function, const ConstVec
         inner = Dual1(input_values_[i], 1);
         inner.d(0) = d;
       }
-      inputs2_[i] = color / kChunk == a ? Dual2::Variable(inner, outer_size, color % kChunk)
-                                        : Dual2(inner);
+      inputs2_[i] =
+          color / kChunk == a ? Dual2::Variable(inner, outer_size, color % kChunk) : Dual2(inner);
     }
     std::fill(outputs2_.begin(), outputs2_.end(), Dual2(0.0));
     const Dual2* base = inputs2_.data();
@@ -886,8 +985,8 @@ void SparseDerivatives::HessianDirection(TypedFunction* function, const ConstVec
     for (std::size_t o = 0; o < plan.outputs.size(); ++o) {
       const Dual2& g = outputs2_[static_cast<std::size_t>(plan.outputs[o])];
       for (int s = plan.support_start[o]; s < plan.support_start[o + 1]; ++s) {
-        const int color =
-            plan.input_color[static_cast<std::size_t>(plan.support_input[static_cast<std::size_t>(s)])];
+        const int color = plan.input_color[static_cast<std::size_t>(
+            plan.support_input[static_cast<std::size_t>(s)])];
         if (color / kChunk != a) continue;
         const int outer = color % kChunk;
         if (outer >= g.size()) continue;
@@ -898,6 +997,314 @@ void SparseDerivatives::HessianDirection(TypedFunction* function, const ConstVec
   }
   for (int i : seeded_) {
     inputs2_[static_cast<std::size_t>(i)] = Dual2(input_values_[static_cast<std::size_t>(i)]);
+  }
+}
+
+// ---- functions made of blocks -------------------------------------------------------------
+
+namespace {
+// The column of `input` for the selected blocks `wrt_bits` (ColumnsOfInputs for one input); the
+// input must be in a selected block.
+int ColumnOfInput(const SparsityPattern& pattern, unsigned wrt_bits, int input) {
+  const int sizes[4] = {pattern.nx, pattern.nu, 1, pattern.np};
+  int first_input = 0, first_column = 0;
+  for (int block = 0; block < 4; ++block) {
+    const bool selected = ((wrt_bits >> block) & 1u) != 0;
+    if (input < first_input + sizes[block]) {
+      MOREAU_ASSERT(selected, "input of an unselected block has no column");
+      return first_column + input - first_input;
+    }
+    first_input += sizes[block];
+    if (selected) first_column += sizes[block];
+  }
+  MOREAU_ASSERT(false, "input out of range");
+  return -1;
+}
+}  // namespace
+
+bool SparseDerivatives::UseBlocks(const TypedFunction& function) const {
+  return function.block_outputs() > 0 && !pattern_.point_dependent;
+}
+
+void SparseDerivatives::AddJacobianBlocks(
+    const TypedFunction& function, const std::vector<int>& selected,
+    const std::vector<int>& row_start, const std::vector<int>& row_column,
+    const std::vector<int>& position, const std::vector<int>& column_of, JacobianPlan* plan) const {
+  const int per_block = function.block_outputs();
+  std::vector<int> input_of_column;
+  for (std::size_t i = 0; i < column_of.size(); ++i) {
+    if (column_of[i] >= 0) {
+      input_of_column.resize(static_cast<std::size_t>(column_of[i]) + 1);
+      input_of_column[static_cast<std::size_t>(column_of[i])] = static_cast<int>(i);
+    }
+  }
+  plan->block_input_start.assign(1, 0);
+  plan->block_row_start.assign(1, 0);
+  plan->block_entry_start.assign(1, 0);
+  std::vector<int> inputs;
+  for (std::size_t r0 = 0; r0 < selected.size();) {
+    const int block = selected[r0] / per_block;
+    std::size_t r1 = r0;
+    while (r1 < selected.size() && selected[r1] / per_block == block) ++r1;
+    // The block's inputs in the selected columns (sorted, unique).
+    inputs.clear();
+    for (std::size_t r = r0; r < r1; ++r) {
+      for (int e = row_start[r]; e < row_start[r + 1]; ++e) {
+        inputs.push_back(
+            input_of_column[static_cast<std::size_t>(row_column[static_cast<std::size_t>(e)])]);
+      }
+    }
+    std::sort(inputs.begin(), inputs.end());
+    inputs.erase(std::unique(inputs.begin(), inputs.end()), inputs.end());
+    plan->blocks.push_back(block);
+    plan->block_input.insert(plan->block_input.end(), inputs.begin(), inputs.end());
+    plan->block_input_start.push_back(static_cast<int>(plan->block_input.size()));
+    for (std::size_t r = r0; r < r1; ++r) {
+      plan->block_row.push_back(selected[r]);
+      for (int e = row_start[r]; e < row_start[r + 1]; ++e) {
+        const int input =
+            input_of_column[static_cast<std::size_t>(row_column[static_cast<std::size_t>(e)])];
+        plan->block_entry_position.push_back(position[static_cast<std::size_t>(e)]);
+        plan->block_entry_output.push_back(selected[r]);
+        plan->block_entry_direction.push_back(static_cast<int>(
+            std::lower_bound(inputs.begin(), inputs.end(), input) - inputs.begin()));
+      }
+    }
+    plan->block_row_start.push_back(static_cast<int>(plan->block_row.size()));
+    plan->block_entry_start.push_back(static_cast<int>(plan->block_entry_position.size()));
+    r0 = r1;
+  }
+}
+
+void SparseDerivatives::AddHessianBlocks(const TypedFunction& function, HessianPlan* plan) const {
+  const int per_block = function.block_outputs();
+  plan->block_output_start.assign(1, 0);
+  plan->block_input_start.assign(1, 0);
+  plan->pair_local_i.resize(plan->pair_i.size());
+  plan->pair_local_j.resize(plan->pair_i.size());
+  plan->support_local.resize(plan->support_input.size());
+  std::vector<int> inputs;
+  const std::size_t num_outputs = plan->outputs.size();
+  for (std::size_t o0 = 0; o0 < num_outputs;) {
+    const int block = plan->outputs[o0] / per_block;
+    std::size_t o1 = o0;
+    while (o1 < num_outputs && plan->outputs[o1] / per_block == block) ++o1;
+    inputs.assign(plan->support_input.begin() + plan->support_start[o0],
+                  plan->support_input.begin() + plan->support_start[o1]);
+    std::sort(inputs.begin(), inputs.end());
+    inputs.erase(std::unique(inputs.begin(), inputs.end()), inputs.end());
+    auto local = [&inputs](int input) {
+      return static_cast<int>(std::lower_bound(inputs.begin(), inputs.end(), input) -
+                              inputs.begin());
+    };
+    for (std::size_t o = o0; o < o1; ++o) {
+      for (int e = plan->pair_start[o]; e < plan->pair_start[o + 1]; ++e) {
+        const auto ue = static_cast<std::size_t>(e);
+        plan->pair_local_i[ue] = local(plan->pair_i[ue]);
+        plan->pair_local_j[ue] = local(plan->pair_j[ue]);
+      }
+      for (int s = plan->support_start[o]; s < plan->support_start[o + 1]; ++s) {
+        const auto us = static_cast<std::size_t>(s);
+        plan->support_local[us] = local(plan->support_input[us]);
+      }
+    }
+    plan->blocks.push_back(block);
+    plan->block_output_start.push_back(static_cast<int>(o1));
+    plan->block_input.insert(plan->block_input.end(), inputs.begin(), inputs.end());
+    plan->block_input_start.push_back(static_cast<int>(plan->block_input.size()));
+    o0 = o1;
+  }
+}
+
+void SparseDerivatives::BlockJacobian(TypedFunction* function, const JacobianPlan& plan,
+                                      Vector* out, double* values, ThreadPool* pool) {
+  const int m = function->num_outputs();
+  const int per_block = function->block_outputs();
+  const int nx = pattern_.nx, nu = pattern_.nu, np = pattern_.np;
+  // Values of the rows asked for; the others are not computed.
+  out->resize(m);
+  if (!plan.all_rows) out->setConstant(std::numeric_limits<double>::quiet_NaN());
+  const int num_blocks = static_cast<int>(plan.blocks.size());
+  // Threads only where the blocks are many: a parallel loop costs some microseconds.
+  const int threads = pool != nullptr && num_blocks >= kParallelMinBlocks ? pool->threads() : 1;
+  if (static_cast<int>(block_workspaces_.size()) < threads) {
+    block_workspaces_.resize(static_cast<std::size_t>(threads));
+  }
+  auto body = [&](int begin, int end, int thread) {
+    BlockWorkspace& space = block_workspaces_[static_cast<std::size_t>(thread)];
+    std::vector<Dual1>& inputs = thread == 0 ? inputs1_ : space.inputs1;
+    if (thread > 0) {  // this thread's constant copy of the inputs (thread 0's is inputs1_)
+      inputs.resize(input_values_.size());
+      for (std::size_t i = 0; i < input_values_.size(); ++i) inputs[i] = Dual1(input_values_[i]);
+    }
+    std::vector<Dual1>& outputs = space.outputs1;
+    outputs.resize(static_cast<std::size_t>(per_block));
+    const Dual1* base = inputs.data();
+    for (int b = begin; b < end; ++b) {
+      const auto ub = static_cast<std::size_t>(b);
+      const int first_input = plan.block_input_start[ub];
+      const int count = plan.block_input_start[ub + 1] - first_input;
+      const int first_output = plan.blocks[ub] * per_block;
+      // At least one pass (the values), chunks of kChunk directions.
+      for (int c0 = 0; c0 == 0 || c0 < count; c0 += kChunk) {
+        const int directions = std::min(kChunk, count - c0);
+        for (int j = 0; j < directions; ++j) {
+          const auto i = static_cast<std::size_t>(
+              plan.block_input[static_cast<std::size_t>(first_input + c0 + j)]);
+          inputs[i] = Dual1::Variable(input_values_[i], directions, j);
+        }
+        for (Dual1& value : outputs) value = Dual1(0.0);
+        function->CallBlock(plan.blocks[ub], base, nx, base + nx, nu,
+                            base[static_cast<std::size_t>(nx + nu)], base + nx + nu + 1, np,
+                            outputs.data());
+        if (c0 == 0) {
+          for (int r = plan.block_row_start[ub]; r < plan.block_row_start[ub + 1]; ++r) {
+            const int row = plan.block_row[static_cast<std::size_t>(r)];
+            (*out)[row] = outputs[static_cast<std::size_t>(row - first_output)].value();
+          }
+        }
+        for (int e = plan.block_entry_start[ub]; e < plan.block_entry_start[ub + 1]; ++e) {
+          const auto ue = static_cast<std::size_t>(e);
+          const int direction = plan.block_entry_direction[ue] - c0;
+          if (direction < 0 || direction >= directions) continue;
+          const Dual1& g =
+              outputs[static_cast<std::size_t>(plan.block_entry_output[ue] - first_output)];
+          values[plan.block_entry_position[ue]] = direction < g.size() ? g.d(direction) : 0.0;
+        }
+        for (int j = 0; j < directions; ++j) {
+          const auto i = static_cast<std::size_t>(
+              plan.block_input[static_cast<std::size_t>(first_input + c0 + j)]);
+          inputs[i] = Dual1(input_values_[i]);
+        }
+      }
+    }
+  };
+  if (threads > 1) {
+    pool->ParallelFor(num_blocks, body);
+  } else {
+    body(0, num_blocks, 0);
+  }
+}
+
+void SparseDerivatives::BlockWeightedHessian(TypedFunction* function, const HessianPlan& plan,
+                                             const ConstVectorRef& x, const ConstVectorRef& u,
+                                             double t, const ConstVectorRef& p,
+                                             const ConstVectorRef& weights, double* values) {
+  const int per_block = function->block_outputs();
+  const int nx = pattern_.nx, nu = pattern_.nu, np = pattern_.np;
+  bool filled = false;
+  block_outputs2_.resize(static_cast<std::size_t>(per_block));
+  const Dual2* base = inputs2_.data();
+  for (std::size_t b = 0; b < plan.blocks.size(); ++b) {
+    const int o0 = plan.block_output_start[b], o1 = plan.block_output_start[b + 1];
+    bool active = false;
+    for (int o = o0; o < o1 && !active; ++o) {
+      active = weights[plan.outputs[static_cast<std::size_t>(o)]] != 0.0;
+    }
+    if (!active) continue;  // zero weights: no derivative work
+    if (!filled) {
+      FillInputs2(x, u, t, p);
+      base = inputs2_.data();
+      filled = true;
+    }
+    const int first_input = plan.block_input_start[b];
+    const int count = plan.block_input_start[b + 1] - first_input;
+    const int first_output = plan.blocks[b] * per_block;
+    const int chunks = (count + kChunk - 1) / kChunk;
+    ++stats_.hessian_passes;
+    // Outer level seeds the local directions of chunk a, inner level those of chunk c >= a.
+    for (int a = 0; a < chunks; ++a) {
+      const int outer_size = std::min(kChunk, count - a * kChunk);
+      for (int c = a; c < chunks; ++c) {
+        const int inner_size = std::min(kChunk, count - c * kChunk);
+        for (int j = 0; j < count; ++j) {
+          const int chunk = j / kChunk;
+          if (chunk != a && chunk != c) continue;
+          const auto i =
+              static_cast<std::size_t>(plan.block_input[static_cast<std::size_t>(first_input + j)]);
+          const double value = input_values_[i];
+          const Dual1 inner =
+              chunk == c ? Dual1::Variable(value, inner_size, j % kChunk) : Dual1(value);
+          inputs2_[i] = chunk == a ? Dual2::Variable(inner, outer_size, j % kChunk) : Dual2(inner);
+        }
+        for (Dual2& value : block_outputs2_) value = Dual2(0.0);
+        function->CallBlock(plan.blocks[b], base, nx, base + nx, nu,
+                            base[static_cast<std::size_t>(nx + nu)], base + nx + nu + 1, np,
+                            block_outputs2_.data());
+        for (int o = o0; o < o1; ++o) {
+          const int k = plan.outputs[static_cast<std::size_t>(o)];
+          const double w = weights[k];
+          if (w == 0.0) continue;
+          const Dual2& g = block_outputs2_[static_cast<std::size_t>(k - first_output)];
+          for (int e = plan.pair_start[static_cast<std::size_t>(o)];
+               e < plan.pair_start[static_cast<std::size_t>(o) + 1]; ++e) {
+            const auto ue = static_cast<std::size_t>(e);
+            int li = plan.pair_local_i[ue], lj = plan.pair_local_j[ue];
+            if (li / kChunk != a) std::swap(li, lj);  // li: the outer one
+            if (li / kChunk != a || lj / kChunk != c) continue;
+            AddSecondDerivative(g, li % kChunk, lj % kChunk, w, plan.position_ij[ue],
+                                plan.position_ji[ue], values);
+          }
+        }
+        for (int j = 0; j < count; ++j) {
+          const auto i =
+              static_cast<std::size_t>(plan.block_input[static_cast<std::size_t>(first_input + j)]);
+          inputs2_[i] = Dual2(input_values_[i]);
+        }
+      }
+    }
+  }
+}
+
+void SparseDerivatives::BlockHessianDirection(TypedFunction* function, const HessianPlan& plan,
+                                              const ConstVectorRef& direction, double* values) {
+  const int per_block = function->block_outputs();
+  const int nx = pattern_.nx, nu = pattern_.nu, np = pattern_.np;
+  block_outputs2_.resize(static_cast<std::size_t>(per_block));
+  const Dual2* base = inputs2_.data();
+  stats_.hessian_passes = 0;
+  for (std::size_t b = 0; b < plan.blocks.size(); ++b) {
+    const int first_input = plan.block_input_start[b];
+    const int count = plan.block_input_start[b + 1] - first_input;
+    const int first_output = plan.blocks[b] * per_block;
+    const int o0 = plan.block_output_start[b], o1 = plan.block_output_start[b + 1];
+    // Outer level: the block's inputs (chunks of kChunk); inner level: the one direction.
+    for (int c0 = 0; c0 < count; c0 += kChunk) {
+      const int outer_size = std::min(kChunk, count - c0);
+      for (int j = 0; j < count; ++j) {
+        const auto i =
+            static_cast<std::size_t>(plan.block_input[static_cast<std::size_t>(first_input + j)]);
+        Dual1 inner(input_values_[i]);
+        const double d = direction[ColumnOfInput(pattern_, plan.wrt_bits, static_cast<int>(i))];
+        if (d != 0.0) {
+          inner = Dual1(input_values_[i], 1);
+          inner.d(0) = d;
+        }
+        inputs2_[i] = j >= c0 && j < c0 + outer_size ? Dual2::Variable(inner, outer_size, j - c0)
+                                                     : Dual2(inner);
+      }
+      for (Dual2& value : block_outputs2_) value = Dual2(0.0);
+      function->CallBlock(plan.blocks[b], base, nx, base + nx, nu,
+                          base[static_cast<std::size_t>(nx + nu)], base + nx + nu + 1, np,
+                          block_outputs2_.data());
+      ++stats_.hessian_passes;
+      for (int o = o0; o < o1; ++o) {
+        const int k = plan.outputs[static_cast<std::size_t>(o)];
+        const Dual2& g = block_outputs2_[static_cast<std::size_t>(k - first_output)];
+        for (int s = plan.support_start[static_cast<std::size_t>(o)];
+             s < plan.support_start[static_cast<std::size_t>(o) + 1]; ++s) {
+          const int outer = plan.support_local[static_cast<std::size_t>(s)] - c0;
+          if (outer < 0 || outer >= outer_size || outer >= g.size()) continue;
+          const Dual1& row = g.d(outer);
+          if (row.size() > 0) values[plan.support_position[static_cast<std::size_t>(s)]] = row.d(0);
+        }
+      }
+    }
+    for (int j = 0; j < count; ++j) {
+      const auto i =
+          static_cast<std::size_t>(plan.block_input[static_cast<std::size_t>(first_input + j)]);
+      inputs2_[i] = Dual2(input_values_[i]);
+    }
   }
 }
 

@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <vector>
 
 #include "moreau/core/smooth_function.hpp"
@@ -19,6 +20,8 @@ struct SparsityPattern {
   int num_inputs = 0;
   // The traced evaluation inspected a traced value (SparsityTape::value_dependent).
   bool point_dependent = false;
+  // |a| of a traced value (SparsityTape::piecewise).
+  bool piecewise = false;
   // Output k depends on the inputs jac_inputs[jac_start[k] .. jac_start[k + 1]) (sorted).
   std::vector<int> jac_start, jac_inputs;
   // Second-derivative pairs (hess_first[e], hess_second[e]), first <= second, of output k for
@@ -28,6 +31,34 @@ struct SparsityPattern {
   bool SameSizes(int x, int u, int p) const { return nx == x && nu == u && np == p; }
 };
 
+// The selected blocks of `wrt` as bits (x 1, u 2, t 4, p 8).
+inline unsigned WrtBits(Wrt wrt) {
+  return (wrt.x ? 1u : 0u) | (wrt.u ? 2u : 0u) | (wrt.t ? 4u : 0u) | (wrt.p ? 8u : 0u);
+}
+
+// What a pattern proves about a function's derivatives, per argument block (0 = x, 1 = u,
+// 2 = t, 3 = p): couples[a][b] if some output has a second-derivative pair of an input of block
+// a and one of block b. Patterns that depend on the point prove nothing.
+struct FunctionStructure {
+  int nx = -1, nu = -1, np = -1;
+  bool point_dependent = true;
+  bool piecewise = false;
+  bool couples[4][4] = {};
+  // Bit WrtBits(wrt) set: HessianZero(wrt) (made by AnalyzeStructure).
+  unsigned hessian_zero = 0;
+
+  bool SameSizes(int x, int u, int p) const { return nx == x && nu == u && np == p; }
+  // No second derivative among the selected blocks: weighted Hessians and second derivatives
+  // along directions with respect to them are zero.
+  bool HessianZero(Wrt wrt) const { return (hessian_zero >> WrtBits(wrt)) & 1u; }
+  // The first derivatives with respect to the selected blocks do not depend on the values of
+  // the selected inputs (affine in them, no |.|): for fixed values of the other inputs the
+  // Jacobian is one constant matrix, bit for bit (forward mode then multiplies the seeds by
+  // the same constants at every point).
+  bool JacobianConstant(Wrt wrt) const { return HessianZero(wrt) && !piecewise; }
+};
+FunctionStructure AnalyzeStructure(const SparsityPattern& pattern);
+
 // Traces `function` at (x, u, t, p) with SparsityTracer and derives its patterns.
 SparsityPattern DetectSparsity(TypedFunction* function, const ConstVectorRef& x,
                                const ConstVectorRef& u, double t, const ConstVectorRef& p);
@@ -35,9 +66,35 @@ SparsityPattern DetectSparsity(TypedFunction* function, const ConstVectorRef& x,
 // into := into u other (same sizes). Returns true if entries were added.
 bool MergePattern(const SparsityPattern& other, SparsityPattern* into);
 
+// A function's pattern for one set of argument sizes, and what it proves.
+struct AnalyzedPattern {
+  SparsityPattern pattern;
+  FunctionStructure structure;
+};
+
+// The analysis of one function, shared by a function object and its clones (copies of a scene,
+// of a lowered system, of an integrator's workspace all evaluate the same code): its traced
+// pattern per argument sizes, detected by the first object that needs it. Thread-safe: clones
+// may be used from different threads. A point-dependent pattern is the one of the first point
+// traced (its structure proves nothing; SparseDerivatives traces such functions at every call).
+class FunctionAnalysis {
+ public:
+  // The entry for the sizes of x, u, p; traces `function` at (x, u, t, p) if there is none
+  // yet (*detected then true).
+  std::shared_ptr<const AnalyzedPattern> Find(TypedFunction* function, const ConstVectorRef& x,
+                                              const ConstVectorRef& u, double t,
+                                              const ConstVectorRef& p, bool* detected);
+
+ private:
+  std::mutex mutex_;
+  std::vector<std::shared_ptr<const AnalyzedPattern>> entries_;
+};
+
 // The sparse derivative machinery of one TypedFunction: its pattern (detected at the first
 // call), the patterns and colourings of the (wrt, rows) combinations in use (cached, least
 // recently used evicted), and the Dual1/Dual2 workspaces. No allocation in steady state.
+class ThreadPool;
+
 class SparseDerivatives {
  public:
   SparseDerivatives();
@@ -45,16 +102,16 @@ class SparseDerivatives {
   SparseDerivatives(const SparseDerivatives&) = delete;
   SparseDerivatives& operator=(const SparseDerivatives&) = delete;
 
+  // `pool` (may be null): the threads a function made of blocks may use for its Jacobian.
   void Jacobian(TypedFunction* function, const ConstVectorRef& x, const ConstVectorRef& u, double t,
                 const ConstVectorRef& p, Wrt wrt, Vector* out, SparseMatrix* jac,
-                const std::vector<int>* rows);
+                const std::vector<int>* rows, ThreadPool* pool = nullptr);
   void WeightedHessian(TypedFunction* function, const ConstVectorRef& x, const ConstVectorRef& u,
                        double t, const ConstVectorRef& p, Wrt wrt, const ConstVectorRef& weights,
                        SparseMatrix* hess, const std::vector<int>* rows);
-  void HessianDirection(TypedFunction* function, const ConstVectorRef& x,
-                        const ConstVectorRef& u, double t, const ConstVectorRef& p, Wrt wrt,
-                        const ConstVectorRef& direction, SparseMatrix* rows_matrix,
-                        const std::vector<int>* rows);
+  void HessianDirection(TypedFunction* function, const ConstVectorRef& x, const ConstVectorRef& u,
+                        double t, const ConstVectorRef& p, Wrt wrt, const ConstVectorRef& direction,
+                        SparseMatrix* rows_matrix, const std::vector<int>* rows);
   SparseDerivativeStats stats() const;
 
   // Least recently used plans beyond this number are dropped (active sets change over a run;
@@ -74,6 +131,29 @@ class SparseDerivatives {
                                  const std::vector<int>* rows);
   HessianPlan& FindHessianPlan(const TypedFunction& function, Wrt wrt,
                                const std::vector<int>* rows);
+  // Functions made of blocks (TypedFunction::block_outputs() > 0, a pattern that does not
+  // depend on the point): per block forward mode with one direction per input of the block
+  // (chunks of 16 beyond), only the blocks the plan's rows or nonzero weights need. Jacobians
+  // run on the pool's threads, each block's entries written to their own places; second
+  // derivatives (Dual2 inputs are 2.3 kB each: one array, one thread) run in block order.
+  bool UseBlocks(const TypedFunction& function) const;
+  // Block Jacobians with fewer blocks than this run on the calling thread (a parallel loop
+  // costs some microseconds of synchronization).
+  static constexpr int kParallelMinBlocks = 1024;
+  void BlockJacobian(TypedFunction* function, const JacobianPlan& plan, Vector* out, double* values,
+                     ThreadPool* pool);
+  void BlockWeightedHessian(TypedFunction* function, const HessianPlan& plan,
+                            const ConstVectorRef& x, const ConstVectorRef& u, double t,
+                            const ConstVectorRef& p, const ConstVectorRef& weights, double* values);
+  void BlockHessianDirection(TypedFunction* function, const HessianPlan& plan,
+                             const ConstVectorRef& direction, double* values);
+  // Per-block plan data (made with the plans of functions made of blocks).
+  void AddJacobianBlocks(const TypedFunction& function, const std::vector<int>& selected,
+                         const std::vector<int>& row_start, const std::vector<int>& row_column,
+                         const std::vector<int>& position, const std::vector<int>& column_of,
+                         JacobianPlan* plan) const;
+  void AddHessianBlocks(const TypedFunction& function, HessianPlan* plan) const;
+
   // Constant Dual1/Dual2 copies of all inputs (x | u | t | p).
   void FillInputs1(const ConstVectorRef& x, const ConstVectorRef& u, double t,
                    const ConstVectorRef& p);
@@ -94,6 +174,12 @@ class SparseDerivatives {
   std::vector<int> seeded_column_;  // HessianDirection: the column of every seeded input
   std::vector<char> needed_chunk_pairs_;
   int mark_stamp_ = 0;
+  // Block evaluations: per thread (thread 0: inputs1_) the Dual1 inputs and a block's outputs.
+  struct BlockWorkspace {
+    std::vector<Dual1> inputs1, outputs1;
+  };
+  std::vector<BlockWorkspace> block_workspaces_;
+  std::vector<Dual2> block_outputs2_;
 
   SparseDerivativeStats stats_;
 };

@@ -62,6 +62,7 @@ void ArgumentMatrix::Jacobian(const BlockContext& context, const SmoothFunction&
   }
   const Wrt wrt = all_ ? Wrt::All() : Wrt::XT();
   if (is_sparse_) {
+    if (function.typed() != nullptr) function.typed()->set_thread_pool(context.pool);
     // Only the rows in `rows` are differentiated (the near-active filter's working set).
     function.SparseJacobian(x_, *context.inputs, t, *context.parameters, wrt, values, &columns_,
                             rows);

@@ -639,7 +639,7 @@ class ExpressionFunction final : public TypedFunctionFor<ExpressionFunction> {
       : Base(std::move(name), static_cast<int>(program->outputs.size())),
         program_(std::move(program)) {}
   std::unique_ptr<SmoothFunction::Concept> Clone() const override {
-    return std::make_unique<ExpressionFunction>(name_, program_);
+    return ShareAnalysis(std::make_unique<ExpressionFunction>(name_, program_));
   }
 
  private:

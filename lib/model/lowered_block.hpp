@@ -11,6 +11,8 @@
 
 namespace moreau::internal {
 
+class ThreadPool;
+
 // Where a block's unknowns and equations sit in the lowered system.
 struct BlockLayout {
   int y_offset = 0;     // first internal state of the block in y (after x, before the clock)
@@ -35,6 +37,9 @@ struct BlockContext {
   // Derivative storage of the system (LoweredSystem::sparse()): blocks differentiate their
   // model functions with sparse AD and add sparse blocks when set.
   bool sparse = false;
+  // The system's threads (LoweredSystem::SetThreads), for sparse derivatives of functions made
+  // of blocks; null: the calling thread only.
+  ThreadPool* pool = nullptr;
   // Set by LoweredSystem::EvaluateField: only F and its derivatives are wanted; a block may
   // leave its G, A, B rows and their derivatives unwritten (they are not read).
   bool field_only = false;

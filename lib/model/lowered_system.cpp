@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <limits>
 
+#include "../core/thread_pool.hpp"
 #include "lowered_block.hpp"
 #include "moreau/core/error.hpp"
 
@@ -81,6 +82,18 @@ LoweredSystem& LoweredSystem::operator=(const LoweredSystem& other) {
     parameters_ = other.parameters_;
   }
   return *this;
+}
+
+void LoweredSystem::SetThreads(int threads) {
+  const int resolved = sparse_ ? internal::ThreadPool::Resolve(threads) : 1;
+  if (resolved == this->threads()) return;
+  pool_ = resolved > 1 ? std::make_unique<internal::ThreadPool>(resolved) : nullptr;
+}
+
+int LoweredSystem::threads() const { return pool_ ? pool_->threads() : 1; }
+
+double LoweredSystem::worker_cpu_seconds() const {
+  return pool_ ? pool_->worker_cpu_seconds() : 0.0;
 }
 
 void LoweredSystem::Build() {
@@ -257,6 +270,7 @@ void LoweredSystem::FilterableConstraints(const Vector& y, const Vector& velocit
   rate_bounds->setConstant(num_declared_pairs_, std::numeric_limits<double>::quiet_NaN());
   internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
   context.sparse = sparse_;
+  context.pool = pool_.get();
   for (std::size_t b = 0; b < blocks_.size(); ++b) {
     internal::LoweredBlock& block = *blocks_[b];
     if (!block.Filterable()) continue;
@@ -271,6 +285,7 @@ double LoweredSystem::MinExcludedConstraint(const Vector& y) const {
   double smallest = std::numeric_limits<double>::infinity();
   internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
   context.sparse = sparse_;
+  context.pool = pool_.get();
   for (const auto& block : blocks_) {
     if (block->Filterable()) smallest = std::min(smallest, block->MinExcluded(context, y));
   }
@@ -281,6 +296,7 @@ void LoweredSystem::ExcludedViolations(const Vector& y, double threshold,
                                        std::vector<bool>* include) const {
   internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
   context.sparse = sparse_;
+  context.pool = pool_.get();
   for (std::size_t b = 0; b < blocks_.size(); ++b) {
     if (!blocks_[b]->Filterable()) continue;
     blocks_[b]->ExcludedBelow(context, y, threshold, declared_pair_offset_[b], include);
@@ -409,6 +425,7 @@ Vector LoweredSystem::MemorySwitchingFunctions(const Vector& y) const {
   Vector out(block.num_memory_switches());
   internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
   context.sparse = sparse_;
+  context.pool = pool_.get();
   block.MemorySwitchingFunctions(context, y, out);
   return out;
 }
@@ -486,6 +503,7 @@ void LoweredSystem::InitialAlgebraicGuess(const Vector& y, const Vector* previou
   z->setZero(num_algebraic_);
   internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
   context.sparse = sparse_;
+  context.pool = pool_.get();
   for (const auto& block : blocks_) block->InitialGuess(context, y, previous, *z);
 }
 
@@ -600,6 +618,7 @@ void LoweredSystem::EvaluatePoint(const ConstVectorRef& y, const ConstVectorRef&
 
   internal::BlockContext context{nx, clock, &inputs_, &parameters_};
   context.sparse = sparse_;
+  context.pool = pool_.get();
   context.field_only = field_only;
   context.switching_mode = field_only ? switching_mode : -1;
   // Smooth dynamics: x' = f(x, u, clock, p); clock' = 1.

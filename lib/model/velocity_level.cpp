@@ -404,6 +404,7 @@ void LoweredSystem::EvaluateVelocityLevel(const ConstVectorRef& y, const ConstVe
     context.velocity_roles = &roles;
     context.velocity = &v;
     context.sparse = sparse_;
+    context.pool = pool_.get();
     for (const auto& block : blocks_) block->AddCurvature(context, y, e.F, derivatives, &curvature);
     for (DerivativeMatrix* m : {&curvature.pair_y, &curvature.equation_y, &curvature.pair_u,
                                 &curvature.equation_u, &curvature.pair_p, &curvature.equation_p}) {
@@ -427,6 +428,7 @@ void LoweredSystem::EvaluateEventIndicators(const ConstVectorRef& y, const Const
   }
   internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
   context.sparse = sparse_;
+  context.pool = pool_.get();
   for (const auto& block : blocks_) {
     block->EventIndicators(context, y, v, a_zero, derivatives, out);
   }

@@ -6,10 +6,13 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <random>
 #include <string>
+#include <type_traits>
 #include <vector>
 
+#include "../../lib/core/thread_pool.hpp"
 #include "moreau/core/smooth_function.hpp"
 #include "moreau/model/scene.hpp"
 #include "moreau/model/scene_file.hpp"
@@ -84,14 +87,20 @@ void CompareWithDense(const SmoothFunction& f, const Point& point, Wrt wrt,
                                                                 << "inside the domain";
   f.SparseJacobian(point.x, point.u, point.t, point.p, wrt, &sparse_value, jac, rows);
   ASSERT_EQ(sparse_value.size(), m) << where;
+  const std::vector<int> selected = rows ? *rows : AllRows(m);
+  std::vector<char> in_rows(static_cast<std::size_t>(m), 0);
+  for (int k : selected) in_rows[static_cast<std::size_t>(k)] = 1;
+  // Functions made of blocks compute the values of the rows asked for alone (the others NaN).
+  const bool blocks = f.typed() != nullptr && f.typed()->block_outputs() > 0;
   for (int k = 0; k < m; ++k) {
+    if (blocks && !in_rows[static_cast<std::size_t>(k)]) {
+      EXPECT_TRUE(std::isnan(sparse_value[k])) << where << ": value " << k;
+      continue;
+    }
     EXPECT_NEAR(sparse_value[k], dense_value[k],
                 kDerivativeTolerance * (1 + std::fabs(dense_value[k])))
         << where << ": value " << k;
   }
-  const std::vector<int> selected = rows ? *rows : AllRows(m);
-  std::vector<char> in_rows(static_cast<std::size_t>(m), 0);
-  for (int k : selected) in_rows[static_cast<std::size_t>(k)] = 1;
   Matrix expected = dense_jac;
   for (int k = 0; k < m; ++k) {
     if (!in_rows[static_cast<std::size_t>(k)]) expected.row(k).setZero();
@@ -244,7 +253,8 @@ void CheckScene(const Scene& scene, unsigned seed) {
         EXPECT_EQ(f.sparse_derivative_stats().hessian_passes, 0) << what;
       }
     }
-    // Catalog functions are branch-free: one detection serves every call.
+    // Catalog functions are branch-free: one detection (by the first derivative) serves every
+    // call.
     EXPECT_EQ(f.sparse_derivative_stats().num_detections, f.typed() ? 1 : 0) << what;
   }
 }
@@ -389,7 +399,8 @@ TEST(SparsityDetectionTest, BranchesAreFollowedOnBothSidesAndThePatternOnlyGrows
   }
   const SparseDerivativeStats stats = f.sparse_derivative_stats();
   EXPECT_TRUE(stats.point_dependent);
-  EXPECT_EQ(stats.num_detections, 6);       // every sparse call traces again
+  // The first dense derivative traces (the function's analysis), then every sparse call.
+  EXPECT_EQ(stats.num_detections, 1 + 6);
   EXPECT_EQ(stats.num_pattern_growths, 1);  // the second side added entries once
   // The stored pattern is the union of both sides: row 0 has x0, x1 and x2.
   EXPECT_EQ(jac.nonZeros(), 4);
@@ -522,7 +533,7 @@ TEST(SparseCostTest, ManyColoursSpanSeveralChunksOfDirections) {
   }
 }
 
-TEST(SparseCostTest, CopiesDetectOnTheirOwnAndPlansAreCachedPerRowSubset) {
+TEST(SparseCostTest, CopiesShareTheDetectedPatternAndPlansAreCachedPerRowSubset) {
   Vector q;
   const SmoothFunction c = NeighbourPairs(16, &q);
   const Vector none;
@@ -535,10 +546,12 @@ TEST(SparseCostTest, CopiesDetectOnTheirOwnAndPlansAreCachedPerRowSubset) {
   }
   EXPECT_EQ(c.sparse_derivative_stats().num_detections, 1);
   EXPECT_EQ(c.sparse_derivative_stats().num_cached_plans, 2);
+  // A copy (as every scene and lowered system copies its functions) takes the pattern its
+  // original detected: no traced evaluation of its own.
   const SmoothFunction copy = c;
   EXPECT_EQ(copy.sparse_derivative_stats().num_detections, 0);
   copy.SparseJacobian(q, none, 0.0, none, Wrt::X(), &value, &jac, &first);
-  EXPECT_EQ(copy.sparse_derivative_stats().num_detections, 1);
+  EXPECT_EQ(copy.sparse_derivative_stats().num_detections, 0);
   EXPECT_EQ(jac.nonZeros(), 12);  // three pairs, four coordinates each
 }
 
@@ -556,6 +569,163 @@ TEST(SparseCostTest, StackedAndZeroFunctionsKeepTheirPartsPatterns) {
   const int m = pairs.num_outputs();
   EXPECT_EQ(Matrix(jac).middleRows(m, 2).lpNorm<Eigen::Infinity>(), 0.0);
   EXPECT_EQ(Matrix(jac).bottomRows(m), Matrix(jac_pairs));
+}
+
+// ---- functions made of blocks ----------------------------------------------------------------
+
+// Block b of a test family of `blocks` blocks over `agents` agents (x = 2 coordinates per agent,
+// t, p = 2 parameters): two outputs coupling agent b with agent (7 b + 3) mod agents, and in
+// every 13th block a sum over 12 agents (24 inputs: more than one chunk of 16 directions).
+template <class X, class T, class P, class Out>
+void TestBlock(int b, int agents, const X& x, const T& t, const P& p, Out& out) {
+  using std::sin;
+  const int i = b % agents, j = (7 * b + 3) % agents;
+  const auto dx = x[2 * i] - x[2 * j];
+  const auto dy = x[2 * i + 1] - x[2 * j + 1];
+  out[0] = (dx * dx + dy * dy) * p[0] - 1.0;
+  out[1] = sin(x[2 * i]) * x[2 * j + 1] + t * x[2 * i] * p[1];
+  if (b % 13 == 0) {
+    for (int k = 0; k < 12; ++k) {
+      const int a = (b + 5 * k) % agents;
+      out[1] += x[2 * a] * x[2 * a + 1] * 0.1;
+    }
+  }
+}
+
+SmoothFunction BlockFamily(int blocks, int agents) {
+  return MakeBlockFunction("family", blocks, 2,
+                           [agents](int b, const auto& x, const auto&, const auto& t, const auto& p,
+                                    auto& out) { TestBlock(b, agents, x, t, p, out); });
+}
+
+// The same outputs as one lambda.
+SmoothFunction WholeFamily(int blocks, int agents) {
+  return MakeSmoothFunction(
+      "family", 2 * blocks,
+      [blocks, agents](const auto& x, const auto&, const auto& t, const auto& p, auto& out) {
+        using T = std::decay_t<decltype(t)>;
+        for (int b = 0; b < blocks; ++b) {
+          T values[2] = {T(0.0), T(0.0)};
+          TestBlock(b, agents, x, t, p, values);
+          out[2 * b] = values[0];
+          out[2 * b + 1] = values[1];
+        }
+      });
+}
+
+Point FamilyPoint(int agents) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  Point point;
+  point.x.resize(2 * agents);
+  for (Eigen::Index i = 0; i < point.x.size(); ++i) point.x[i] = unit(rng);
+  point.t = 0.3;
+  point.p = Vector{{1.5, -0.7}};
+  return point;
+}
+
+// Sparse derivatives of a function made of blocks (one block at a time, one direction per
+// input of the block, only the blocks of the rows asked for) equal those of the same outputs
+// written as one lambda (compressed forward mode over colours): the same dual-number
+// operations per entry, weighted Hessians summed in another order (kDerivativeTolerance).
+// Values and dense derivatives evaluate the blocks in order: equal exactly.
+TEST(BlockFunctionTest, DerivativesEqualThoseOfTheSameOutputsWrittenAsOneLambda) {
+  const int blocks = 60, agents = 40;
+  const SmoothFunction block = BlockFamily(blocks, agents), whole = WholeFamily(blocks, agents);
+  const Point point = FamilyPoint(agents);
+  const int m = 2 * blocks;
+  std::mt19937 rng(3);
+  std::bernoulli_distribution coin(0.4);
+  std::vector<int> subset;
+  for (int k = 0; k < m; ++k) {
+    if (coin(rng)) subset.push_back(k);
+  }
+  Vector weights(m);
+  for (int k = 0; k < m; ++k) weights[k] = coin(rng) ? 0.5 + 0.01 * k : 0.0;
+  Vector value_block, value_whole;
+  block.Evaluate(point.x, point.u, point.t, point.p, &value_block);
+  whole.Evaluate(point.x, point.u, point.t, point.p, &value_whole);
+  EXPECT_EQ(value_block, value_whole);
+  for (Wrt wrt : {Wrt::X(), Wrt::XT(), Wrt::All()}) {
+    const std::string where = "wrt " + WrtName(wrt);
+    Matrix dense_block, dense_whole;
+    block.Jacobian(point.x, point.u, point.t, point.p, wrt, &value_block, &dense_block);
+    whole.Jacobian(point.x, point.u, point.t, point.p, wrt, &value_whole, &dense_whole);
+    EXPECT_EQ(dense_block, dense_whole) << where;
+    const std::vector<const std::vector<int>*> row_sets = {nullptr, &subset};
+    for (const std::vector<int>* rows : row_sets) {
+      const std::string what = where + (rows ? " (row subset)" : "");
+      SparseMatrix jac_block, jac_whole, hess_block, hess_whole;
+      block.SparseJacobian(point.x, point.u, point.t, point.p, wrt, &value_block, &jac_block, rows);
+      whole.SparseJacobian(point.x, point.u, point.t, point.p, wrt, &value_whole, &jac_whole, rows);
+      ASSERT_TRUE(SamePattern(jac_block, jac_whole)) << what;
+      ASSERT_NO_FATAL_FAILURE(ExpectClose(Matrix(jac_block), Matrix(jac_whole), what));
+      // Values of the rows asked for; the others are not computed (NaN).
+      const std::vector<int> selected = rows ? *rows : AllRows(m);
+      std::vector<char> in_rows(static_cast<std::size_t>(m), 0);
+      for (int k : selected) in_rows[static_cast<std::size_t>(k)] = 1;
+      for (int k = 0; k < m; ++k) {
+        if (in_rows[static_cast<std::size_t>(k)]) {
+          EXPECT_EQ(value_block[k], value_whole[k]) << what << ": value " << k;
+        } else {
+          EXPECT_TRUE(std::isnan(value_block[k])) << what << ": value " << k;
+        }
+      }
+      block.SparseWeightedHessian(point.x, point.u, point.t, point.p, wrt, weights, &hess_block,
+                                  rows);
+      whole.SparseWeightedHessian(point.x, point.u, point.t, point.p, wrt, weights, &hess_whole,
+                                  rows);
+      ASSERT_TRUE(SamePattern(hess_block, hess_whole)) << what;
+      ASSERT_NO_FATAL_FAILURE(
+          ExpectClose(Matrix(hess_block), Matrix(hess_whole), what + " Hessian"));
+      Vector direction(jac_block.cols());
+      for (Eigen::Index j = 0; j < direction.size(); ++j) direction[j] = coin(rng) ? 0.3 * j : 0.0;
+      SparseMatrix along_block, along_whole;
+      block.SparseHessianDirection(point.x, point.u, point.t, point.p, wrt, direction, &along_block,
+                                   rows);
+      whole.SparseHessianDirection(point.x, point.u, point.t, point.p, wrt, direction, &along_whole,
+                                   rows);
+      ASSERT_TRUE(SamePattern(along_block, along_whole)) << what;
+      ASSERT_NO_FATAL_FAILURE(
+          ExpectClose(Matrix(along_block), Matrix(along_whole), what + " Hessian direction"));
+    }
+  }
+}
+
+// The block path on any number of threads gives the same bits: each block's entries are
+// computed alone and written to their own places (more blocks than the parallel threshold).
+TEST(BlockFunctionTest, JacobiansAreBitwiseTheSameOnAnyNumberOfThreads) {
+  const int blocks = 2000, agents = 700;
+  const SmoothFunction f = BlockFamily(blocks, agents);
+  const Point point = FamilyPoint(agents);
+  std::vector<int> subset;
+  for (int k = 0; k < 2 * blocks; k += 3) subset.push_back(k);
+  const std::vector<const std::vector<int>*> row_sets = {nullptr, &subset};
+  std::vector<Vector> reference_values(row_sets.size());
+  std::vector<SparseMatrix> references(row_sets.size());
+  for (int threads : {1, 2, 3, 5}) {
+    internal::ThreadPool pool(threads);
+    f.typed()->set_thread_pool(&pool);
+    for (std::size_t r = 0; r < row_sets.size(); ++r) {
+      Vector value;
+      SparseMatrix jac;
+      f.SparseJacobian(point.x, point.u, point.t, point.p, Wrt::XT(), &value, &jac, row_sets[r]);
+      if (threads == 1) {
+        references[r] = jac;
+        reference_values[r] = value;
+        continue;
+      }
+      const std::string what = std::to_string(threads) + " threads, rows " + std::to_string(r);
+      ASSERT_TRUE(SamePattern(jac, references[r])) << what;
+      EXPECT_EQ(0, std::memcmp(jac.valuePtr(), references[r].valuePtr(),
+                               sizeof(double) * static_cast<std::size_t>(jac.nonZeros())))
+          << what;
+      EXPECT_EQ(0, std::memcmp(value.data(), reference_values[r].data(),
+                               sizeof(double) * static_cast<std::size_t>(value.size())))
+          << what;  // NaN rows included: the same bits
+    }
+    f.typed()->set_thread_pool(nullptr);
+  }
 }
 
 }  // namespace

@@ -20,6 +20,16 @@
 /// Reading x[i] outside the argument's size or writing out[k] outside the declared output
 /// size throws std::invalid_argument naming the function, the argument and both sizes.
 ///
+/// Large models whose outputs come in independent groups (one constraint per pair of agents,
+/// one velocity per agent) are better written block by block (MakeBlockFunction): a lambda
+/// that computes the outputs of one block,
+///
+///   [](int block, const auto& x, const auto& u, const auto& t, const auto& p, auto& out) { ... }
+///
+/// Sparse derivatives then evaluate only the blocks of the rows asked for (the near-active
+/// constraints), each with as many derivative directions as inputs it reads (no colouring), and
+/// in parallel on the threads of a thread pool when one is set (docs/sparse-derivatives.md).
+///
 /// Evaluation uses per-object workspaces and is not thread-safe; copies are deep (each
 /// integrator owns its copies), so separate objects may be used from separate threads.
 
@@ -127,12 +137,17 @@ struct Wrt {
 namespace internal {
 class TypedFunction;
 class SparseDerivatives;
+class FunctionAnalysis;
+struct AnalyzedPattern;
+class ThreadPool;
 }  // namespace internal
 
 /// Counters of the sparse derivatives of one function object (docs/sparse-derivatives.md).
 struct SparseDerivativeStats {
-  /// Traced evaluations that detected the sparsity pattern (1 after the first sparse call of a
-  /// function without value-dependent branches).
+  /// Traced evaluations this object made: the pattern's detection (1 after the first derivative
+  /// call of a function without value-dependent branches; 0 for a copy of a function that had
+  /// detected it: copies share their original's pattern), and for a point-dependent function
+  /// one more at every sparse call.
   int num_detections = 0;
   /// The traced evaluation inspected a value that depends on the inputs (a comparison, isfinite,
   /// ValueOf): the pattern may depend on the point, so it is detected again at every sparse
@@ -199,7 +214,8 @@ class SmoothFunction {
   /// are empty. The stored entries are the structurally nonzero ones of those rows (entries
   /// that happen to vanish at this point are stored as zeros), so the pattern of jac is the
   /// same at every point for the same (wrt, rows): a sparse factorization's symbolic analysis
-  /// can be reused.
+  /// can be reused. For functions made of blocks (MakeBlockFunction) only the blocks holding a
+  /// row in `rows` are evaluated: the other entries of out are NaN.
   void SparseJacobian(const ConstVectorRef& x, const ConstVectorRef& u, double t,
                       const ConstVectorRef& p, Wrt wrt, Vector* out, SparseMatrix* jac,
                       const std::vector<int>* rows = nullptr) const;
@@ -341,6 +357,18 @@ class TypedFunction : public SmoothFunction::Concept {
   bool Bounds(const ConstVectorRef& x_lower, const ConstVectorRef& x_upper, const ConstVectorRef& u,
               double t_lower, double t_upper, const ConstVectorRef& p, Vector* lower,
               Vector* upper) override;
+  // The traced pattern and structure of this function for the sizes of x, u, p
+  // (FunctionAnalysis, lib/core/sparse_derivatives.hpp): detected once and shared with every
+  // clone, so that copies of a scene or lowered system do not trace again (*detected: this call
+  // traced). Structure decides what need not be computed: a weighted Hessian or second
+  // derivatives along a direction with respect to blocks the function is affine in are zero (no
+  // Dual2 evaluation: a moving set's linear constraint, as S3's floor), and a Jacobian with
+  // respect to such blocks is a constant for fixed values of the other inputs (jacobian_cache_).
+  const AnalyzedPattern& Analysis(const ConstVectorRef& x, const ConstVectorRef& u, double t,
+                                  const ConstVectorRef& p, bool* detected = nullptr);
+  // Makes `copy` (a clone of this function: same code, same outputs) share this function's
+  // analysis (its detected patterns). Every Clone() passes its result through it.
+  std::unique_ptr<SmoothFunction::Concept> ShareAnalysis(std::unique_ptr<TypedFunction> copy) const;
   // Dense counterpart of SparseHessianDirection for at most Dual1::kCapacity selected columns:
   // rows(k, j) = (d^2 g_k / d(selected)^2 . direction)_j for every output, from one Dual2
   // evaluation (outer directions: the selected columns; inner: the direction). No sparsity
@@ -350,6 +378,20 @@ class TypedFunction : public SmoothFunction::Concept {
   void DenseHessianDirection(const ConstVectorRef& x, const ConstVectorRef& u, double t,
                              const ConstVectorRef& p, Wrt wrt, const ConstVectorRef& direction,
                              Matrix* rows);
+
+  // Functions made of blocks (MakeBlockFunction): the outputs of every block (0 for other
+  // functions), and the evaluation of one block in the scalar type, its outputs into
+  // out[0 .. block_outputs()) (zeroed by the caller).
+  virtual int block_outputs() const { return 0; }
+  virtual void CallBlock(int block, const double* x, int nx, const double* u, int nu,
+                         const double& t, const double* p, int np, double* out);
+  virtual void CallBlock(int block, const Dual1* x, int nx, const Dual1* u, int nu, const Dual1& t,
+                         const Dual1* p, int np, Dual1* out);
+  virtual void CallBlock(int block, const Dual2* x, int nx, const Dual2* u, int nu, const Dual2& t,
+                         const Dual2* p, int np, Dual2* out);
+  // The threads that sparse derivatives of functions made of blocks may use (null: the
+  // calling thread only). The pool must outlive the calls; results do not depend on it.
+  void set_thread_pool(ThreadPool* pool) { pool_ = pool; }
 
   // out[0..num_outputs()) = g(x, u, t, p) in the scalar type; `out` is zeroed by the caller.
   virtual void Call(const double* x, int nx, const double* u, int nu, const double& t,
@@ -384,18 +426,23 @@ class TypedFunction : public SmoothFunction::Concept {
   // Made at the first dense WeightedHessian: its scalar t alone is a Dual2 (~2.3 kB), which
   // would make every function object, and every copy of a scene, a large allocation.
   std::unique_ptr<Space<Dual2>> space2_;
-  // Whether every output has a zero Hessian (all of them affine in the arguments), from the
-  // traced pattern for the argument sizes of the last WeightedHessian call; such a Hessian
-  // needs no Dual2 evaluation (a moving set's linear constraint, as S3's floor). Patterns
-  // that depend on the point (the trace inspected a value) are never taken as empty.
-  struct HessianSupport {
+  std::shared_ptr<FunctionAnalysis> analysis_;
+  std::shared_ptr<const AnalyzedPattern> analyzed_;  // the entry last used
+  int detections_ = 0;                               // traces this object made for it
+  // The constant dense Jacobian of the last Jacobian call where it is one, keyed by the wrt
+  // blocks and the values of the unselected inputs (compared bit for bit).
+  struct JacobianCache {
+    bool valid = false;
+    unsigned wrt_bits = 0;
     int nx = -1, nu = -1, np = -1;
-    bool empty = false;
+    std::vector<double> key;
+    Matrix jacobian;
   };
-  HessianSupport hessian_support_;
+  JacobianCache jacobian_cache_;
   // Detected patterns, colourings and workspaces; made at the first sparse call and not copied
   // (a copy detects again at its own first sparse call).
   std::unique_ptr<SparseDerivatives> sparse_;
+  ThreadPool* pool_ = nullptr;
 };
 
 // A TypedFunction whose five Call overloads forward to one template
@@ -437,7 +484,8 @@ class AutoDiffFunction final : public TypedFunctionFor<AutoDiffFunction<F>> {
   AutoDiffFunction(std::string name, int num_outputs, F f)
       : Base(std::move(name), num_outputs), f_(std::move(f)) {}
   std::unique_ptr<SmoothFunction::Concept> Clone() const override {
-    return std::make_unique<AutoDiffFunction>(this->name_, this->num_outputs_, f_);
+    return this->ShareAnalysis(
+        std::make_unique<AutoDiffFunction>(this->name_, this->num_outputs_, f_));
   }
 
  private:
@@ -451,6 +499,56 @@ class AutoDiffFunction final : public TypedFunctionFor<AutoDiffFunction<F>> {
   F f_;
 };
 
+// Implementation of SmoothFunction for a generic lambda F over blocks (MakeBlockFunction).
+template <class F>
+class BlockFunction final : public TypedFunctionFor<BlockFunction<F>> {
+  using Base = TypedFunctionFor<BlockFunction<F>>;
+  friend Base;
+
+ public:
+  BlockFunction(std::string name, int num_blocks, int block_outputs, F f)
+      : Base(std::move(name), num_blocks * block_outputs),
+        num_blocks_(num_blocks),
+        block_outputs_(block_outputs),
+        f_(std::move(f)) {}
+  std::unique_ptr<SmoothFunction::Concept> Clone() const override {
+    return this->ShareAnalysis(
+        std::make_unique<BlockFunction>(this->name_, num_blocks_, block_outputs_, f_));
+  }
+  int block_outputs() const override { return block_outputs_; }
+  void CallBlock(int block, const double* x, int nx, const double* u, int nu, const double& t,
+                 const double* p, int np, double* out) override {
+    Block(block, x, nx, u, nu, t, p, np, out);
+  }
+  void CallBlock(int block, const Dual1* x, int nx, const Dual1* u, int nu, const Dual1& t,
+                 const Dual1* p, int np, Dual1* out) override {
+    Block(block, x, nx, u, nu, t, p, np, out);
+  }
+  void CallBlock(int block, const Dual2* x, int nx, const Dual2* u, int nu, const Dual2& t,
+                 const Dual2* p, int np, Dual2* out) override {
+    Block(block, x, nx, u, nu, t, p, np, out);
+  }
+
+ private:
+  template <class T>
+  void Block(int block, const T* x, int nx, const T* u, int nu, const T& t, const T* p, int np,
+             T* out) {
+    ArgVector<T> xv(x, nx, "x", &this->name_), uv(u, nu, "u", &this->name_),
+        pv(p, np, "p", &this->name_);
+    OutVector<T> ov(out, block_outputs_, &this->name_);
+    f_(block, xv, uv, t, pv, ov);
+  }
+  template <class T>
+  void Invoke(const T* x, int nx, const T* u, int nu, const T& t, const T* p, int np, T* out) {
+    for (int b = 0; b < num_blocks_; ++b) {
+      Block(b, x, nx, u, nu, t, p, np, out + static_cast<std::ptrdiff_t>(b) * block_outputs_);
+    }
+  }
+  int num_blocks_;
+  int block_outputs_;
+  F f_;
+};
+
 }  // namespace internal
 
 /// Wraps a generic lambda (see file comment) with `num_outputs` outputs. `name` appears in
@@ -461,6 +559,28 @@ SmoothFunction MakeSmoothFunction(std::string name, int num_outputs, F f) {
                   "': number of outputs must be non-negative, got ", num_outputs);
   return SmoothFunction(
       std::make_unique<internal::AutoDiffFunction<F>>(std::move(name), num_outputs, std::move(f)));
+}
+
+/// A function made of `num_blocks` >= 0 blocks of `block_outputs` >= 1 outputs each: output k
+/// of block b is output b * block_outputs + k, and f(block, x, u, t, p, out) writes the
+/// outputs of one block to out[0 .. block_outputs) (zero-initialized; writing beyond throws
+/// std::invalid_argument as for MakeSmoothFunction). The blocks must be independent: block b's
+/// outputs are computed from its own call alone. Values, dense derivatives and sparsity
+/// detection evaluate all blocks in order; sparse derivatives evaluate only the blocks of the
+/// rows they are asked for, with one derivative direction per input of the block (forward
+/// mode on the block, no colouring), on the thread pool of the lowered system when it has one
+/// (docs/sparse-derivatives.md). Use it for models of many small independent parts (the crowd:
+/// one block per agent, per pair, per wall constraint).
+template <class F>
+SmoothFunction MakeBlockFunction(std::string name, int num_blocks, int block_outputs, F f) {
+  RequireArgument(num_blocks >= 0, "function '", name,
+                  "': number of blocks must be non-negative, got ", num_blocks);
+  RequireArgument(block_outputs >= 1, "function '", name,
+                  "': outputs per block must be at least 1, got ", block_outputs);
+  RequireArgument(static_cast<long long>(num_blocks) * block_outputs <= (1LL << 30), "function '",
+                  name, "': ", num_blocks, " blocks of ", block_outputs, " outputs are too many");
+  return SmoothFunction(std::make_unique<internal::BlockFunction<F>>(std::move(name), num_blocks,
+                                                                     block_outputs, std::move(f)));
 }
 
 /// The outputs of `parts` one after the other: g = (g_0, g_1, ...), all of the same arguments

@@ -60,6 +60,9 @@ struct SparsityTape {
   std::vector<Node> nodes;
   // A comparison, isfinite/isnan or ValueOf was applied to a traced value.
   bool value_dependent = false;
+  // |a| was applied to a traced value: a first derivative changes sign with the point although
+  // no second derivative appears.
+  bool piecewise = false;
 
   int Record(Kind kind, int a, int b) {
     nodes.push_back({kind, a, b});

@@ -123,6 +123,11 @@ struct FesdOptions {
   ConstraintFilter constraint_filter = ConstraintFilter::kAutomatic;
   /// Safety factor of the filter's margin, >= 1.
   double filter_safety = 4.0;
+  /// Threads evaluating the derivatives of model functions made of blocks (MakeBlockFunction)
+  /// in large scenes (systems stored sparse; LoweredSystem::SetThreads), >= 0: 0 for every
+  /// hardware thread, 1 for the calling thread alone. Results are bitwise the same for any
+  /// value; cpu_seconds counts every thread's CPU time.
+  int threads = 0;
   /// Compute dx(T)/dx(0), dx(T)/dp, dx(T)/du (FesdResult::sensitivities).
   bool sensitivities = false;
   /// Directional (forward) sensitivities (docs/sensitivities.md): a block V of k directions

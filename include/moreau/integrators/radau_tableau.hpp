@@ -37,6 +37,8 @@ struct RadauTableau {
   void InterpolationWeights(double theta, Vector* w) const;
   /// Weights of its derivative: h u'(t0 + theta h) = sum_j w'_j Z_j.
   Vector InterpolationDerivativeWeights(double theta) const;
+  /// The same derivative weights into *w (resized to the stages; no allocation once sized).
+  void InterpolationDerivativeWeights(double theta, Vector* w) const;
 };
 
 /// The tableau with `stages` stages (computed once and cached). Throws std::invalid_argument

@@ -96,6 +96,11 @@ struct TimeSteppingOptions {
   /// Stop times (breakpoints): the fixed grid is laid out between them as between control
   /// breakpoints, so that a step ends at each (any order; times outside (t0, tf) are ignored).
   std::vector<double> stop_times;
+  /// Threads evaluating the derivatives of model functions made of blocks (MakeBlockFunction)
+  /// in large scenes (systems stored sparse; LoweredSystem::SetThreads), >= 0: 0 for every
+  /// hardware thread, 1 for the calling thread alone. Results are bitwise the same for any
+  /// value; cpu_seconds counts every thread's CPU time.
+  int threads = 0;
   /// Start from this lowered state y0 = (x, clock) instead of the scene's x0 (shooting codes;
   /// empty: the scene's). Need not lie in the moving sets: the first step catches up.
   Vector initial_state;

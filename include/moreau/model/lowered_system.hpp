@@ -226,6 +226,7 @@ namespace internal {
 class LoweredBlock;
 class ArgumentMatrix;
 class VelocitySolver;
+class ThreadPool;
 }  // namespace internal
 
 /// A scene lowered to a DCS (see file comment).
@@ -403,6 +404,18 @@ class LoweredSystem {
 
   /// True if derivatives are stored sparse (LoweringOptions::storage resolved).
   bool sparse() const { return sparse_; }
+  /// Threads that evaluate the sparse derivatives of model functions made of blocks
+  /// (MakeBlockFunction) in parallel: `threads` > 0 threads (the calling one included), or every
+  /// hardware thread for `threads` <= 0. Only systems stored sparse use them (small systems
+  /// stay on the calling thread, where their evaluations take microseconds); calls over fewer
+  /// than 512 blocks run on the calling thread. Results are bitwise the same for any number of
+  /// threads: each block's derivatives are computed alone and written to their own places,
+  /// second derivatives in block order. A copy of the system starts without threads.
+  void SetThreads(int threads);
+  /// The threads in use (1: the calling thread only).
+  int threads() const;
+  /// CPU time the worker threads spent for this system since SetThreads (RunClock).
+  double worker_cpu_seconds() const;
   /// Structurally nonzero entries of each derivative block with respect to y and z at the
   /// initial point (sparse storage; dense storage counts every entry), for sizing linear
   /// solvers before the first evaluation.
@@ -549,6 +562,7 @@ class LoweredSystem {
   mutable std::unique_ptr<internal::ArgumentMatrix> dynamics_jacobian_holder_;
   // SolveVelocityLevel's solver and its last solutions (velocity_level.cpp); not copied.
   mutable std::shared_ptr<internal::VelocitySolver> velocity_solver_;
+  std::unique_ptr<internal::ThreadPool> pool_;  // SetThreads; not copied
 };
 
 }  // namespace moreau
