@@ -45,14 +45,17 @@
 /// steps, which are kept. Weighted per state by atol_i + rtol max(|x_n,i|, |x_{n+1},i|)
 /// (atol = 0: atol_i = rtol times the largest |x_i| so far), it must stay below h / (tf - t0)
 /// (error per unit step, as FESD and Radau IIA do, so that the error at tf is about rtol of
-/// the solution's scale). A step in which the working set changes (an event: a constraint or
-/// bound becomes active or inactive; its local error is only O(h)) is instead accepted only
-/// when h <= rtol (tf - t0), which locates the event time to rtol of the horizon. The next
-/// step is h min(5, max(0.2, 0.9 err^{-1/2})); a step whose SQP fails is retried with h/4
-/// down to min_step_size. Active index-3 constraints are tested for rank deficiency by the
-/// sensitivity of the active constraints to the basic algebraic inputs through one step,
-/// S = C (I - c1 h A)^{-1} c1 h D + G with unit rows (independent of h for every index), not
-/// by the scaled basis matrix, whose sigma_min is O(h) for index 3 (Sec. 6.1.1) and would
+/// the solution's scale); while an index-3 constraint is active, the states its basic inputs
+/// drive (velocities) are judged per step instead, as RADAU5 scales index-2 variables' error
+/// by h (Hairer & Wanner, "Solving Ordinary Differential Equations II", 1996, Sec. VII.8):
+/// the constraint fixes their integral, so their step errors do not add up. A step in which the
+/// working set changes (an event: a constraint or bound becomes active or inactive; its local error
+/// is only O(h)) is instead accepted only when h <= rtol (tf - t0), which locates the event time to
+/// rtol of the horizon. The next step is h min(5, max(0.2, 0.9 err^{-1/2})); a step whose SQP fails
+/// is retried with h/4 down to min_step_size. Active index-3 constraints are tested for rank
+/// deficiency by the sensitivity of the active constraints to the basic algebraic inputs through
+/// one step, S = C (I - c1 h A)^{-1} c1 h D + G with unit rows (independent of h for every index),
+/// not by the scaled basis matrix, whose sigma_min is O(h) for index 3 (Sec. 6.1.1) and would
 /// refuse every step below about 0.1.
 /// With a fixed step h (step_size > 0): the paper's rule (Sec. 7, Step 2): h_i = sqrt(min{h^2,
 /// h_{i-1}^2, ERRTOL / (2.25 max_{j <= i} ||a_j||_inf)}); ERRTOL = infinity gives fixed steps
