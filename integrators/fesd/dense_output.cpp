@@ -73,9 +73,17 @@ void FesdRun::DenseOutput(const ElementPolynomial& element) {
       // state, jump variables from the velocity-level problem with the element's statuses.
       Eigen::Index nearest = 0;
       (tableau_.c.array() - theta).abs().minCoeff(&nearest);
-      Vector v;
       z = element.algebraic.col(nearest);
-      if (system_.SolveVelocityLevel(y, element.a_zero, z, &v)) z = ConsistentGuess(y, v);
+      const std::vector<bool>& continuous = system_.continuous_algebraic();
+      if (std::all_of(continuous.begin(), continuous.end(), [](bool c) { return c; })) {
+        // Every algebraic variable is a function of the state (index-1 complementarity, as
+        // the circuits' diodes): ConsistentGuess takes nothing from the velocity level, whose
+        // solve (most of a circuit's dense output) is skipped.
+        z = ConsistentGuess(y, z);
+      } else {
+        Vector v;
+        if (system_.SolveVelocityLevel(y, element.a_zero, z, &v)) z = ConsistentGuess(y, v);
+      }
     }
     result_.trajectory.Append(t, y.head(nx_), TrajectoryAlgebraic(z), element.h);
   }

@@ -126,9 +126,16 @@ class ComplementarityBlock final : public LoweredBlock {
     }
     EvaluateFunctions(context, y, Derivatives::kNone);
     const Matrix d = RowMajor(d_values_, m_, m_);
-    std::vector<bool> active(static_cast<std::size_t>(m_), false);
+    // The active set to try first: the previous values' when given, else the set of this
+    // block's last guess (consecutive guesses, e.g. dense output along an element, mostly keep
+    // their set). A guess only saves the LCP solve: a set is accepted only if its solution is
+    // complementary, and the LCP solution is unique (D is a P-matrix).
+    std::vector<bool>& active = guess_active_;
     if (previous != nullptr) {
+      active.assign(static_cast<std::size_t>(m_), false);
       for (int k = 0; k < m_; ++k) active[static_cast<std::size_t>(k)] = (*previous)[z0 + k] > 0.0;
+    } else if (active.size() != static_cast<std::size_t>(m_)) {
+      active.assign(static_cast<std::size_t>(m_), false);
     }
     Vector lambda;
     if (!SolveOnActiveSet(d, active, &lambda)) {
@@ -421,6 +428,7 @@ class ComplementarityBlock final : public LoweredBlock {
   bool index_one_;
   Vector x_, g_, b_values_, d_values_, lambda_, lambda_bar_;
   Vector bound_lower_, bound_upper_;  // IndicatorBounds' enclosures of g
+  std::vector<bool> guess_active_;    // InitialGuess: the active set of the last guess
   Matrix jac_g_, jac_b_, jac_d_, d_lambda_bar_, hessian_;
   ArgumentMatrix directions_;
 };
