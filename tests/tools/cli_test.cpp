@@ -269,8 +269,8 @@ TEST(CliTest, DaiScenesRunWithAlpha) {
   const std::filesystem::path directory =
       std::filesystem::temp_directory_path() / "moreau_cli_test_alpha";
   constexpr double kTol = 1e-8;  // AlphaDaiOptions::constraint_tolerance (TOL)
-  // The paper's fixed steps (h = 0.1); without h the steps are error-controlled and these
-  // scenes end with a status (docs/accuracy.md).
+  // The paper's fixed steps (h = 0.1); without h the steps are error-controlled (D3 then
+  // succeeds, D2 ends with a status at its wave: docs/accuracy.md).
   for (const char* arguments :
        {"D2 --integrator alpha --h 0.1", "D3 --integrator alpha --rho 0.99 --h 0.1",
         "D2 --rho 0 --objective least-change --h 0.1"}) {
