@@ -146,9 +146,15 @@ std::string FesdStats::Summary() const {
 namespace internal {
 
 FesdResult FesdRun::Run() {
-  const RunClock run_clock;
+  RunClock run_clock;
   system_.SetThreads(options_.threads);
-  worker_seconds_start_ = system_.worker_cpu_seconds();
+  const double worker_seconds_start = system_.worker_cpu_seconds();
+  // The system's worker threads (a lowered system may outlive a run) spent this run's share
+  // since the start; it joins the run's CPU time.
+  auto finish = [&] {
+    run_clock.AddWorkerSeconds(system_.worker_cpu_seconds() - worker_seconds_start);
+    return Finish(run_clock);
+  };
   const Scene& scene = system_.scene();
   y_ = system_.InitialState();
   if (options_.initial_state.size() > 0) {
@@ -199,7 +205,7 @@ FesdResult FesdRun::Run() {
   system_.ClearNonFinite();
   if ((options_.initial_state.size() > 0 || options_.project_initial_state) &&
       !ProjectInitialState()) {
-    return Finish(run_clock);
+    return finish();
   }
   scale_.Reset(y_);
 
@@ -228,7 +234,7 @@ FesdResult FesdRun::Run() {
       Integrate();
     }
   }
-  return Finish(run_clock);
+  return finish();
 }
 
 SemismoothNewtonOptions FesdRun::NewtonOptions(const FesdOptions& options) {
@@ -419,8 +425,7 @@ FesdResult FesdRun::Finish(const RunClock& run_clock) {
   }
   if (result_.elements.empty()) result_.stats.min_element_length = 0.0;
   result_.stats.num_factorizations = factorizations_;
-  result_.stats.cpu_seconds =
-      run_clock.CpuSeconds() + (system_.worker_cpu_seconds() - worker_seconds_start_);
+  result_.stats.cpu_seconds = run_clock.CpuSeconds();
   return std::move(result_);
 }
 

@@ -539,7 +539,6 @@ class FesdRun {
   bool full_ = false;  // FesdOptions::sensitivities as given: full matrices
   ProgressCallback progress_;
   std::shared_ptr<LoweredSystem> shared_system_;  // kept alive for a kept adjoint
-  double worker_seconds_start_ = 0.0;             // the system's worker CPU time at the run's start
   std::optional<LoweredSystem> owned_;            // empty when running on an external system
   LoweredSystem& system_;
   GroupSystem group_;

@@ -268,7 +268,7 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
   RequireFixedStepsWithin(
       SegmentEnds(scene.initial_time, scene.final_time, scene.ControlBreakpoints()),
       options.step_size, options.max_steps);
-  const RunClock run_clock;
+  RunClock run_clock;
   LoweringOptions lowering;
   lowering.switching_form = options.switching_form;
   lowering.require_feasible_initial_state = options.initial_state.size() == 0;
@@ -542,7 +542,8 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
                "(tstops to place a step boundary) or the fesd integrator";
     result.warnings.push_back(warning.str());
   }
-  stats.cpu_seconds = run_clock.CpuSeconds() + system.worker_cpu_seconds();
+  run_clock.AddWorkerSeconds(system.worker_cpu_seconds());  // its own system's threads
+  stats.cpu_seconds = run_clock.CpuSeconds();
   return result;
 }
 
