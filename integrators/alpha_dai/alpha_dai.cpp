@@ -439,14 +439,16 @@ class AlphaDaiRun {
     for (int j = 0; j < nq_; ++j) d->col(j) = jac.col(nx_ + algebraic_[j]);
   }
 
-  // phi and, with jacobians, dphi/dx and dphi/du (algebraic columns).
+  // phi and, with jacobians, dphi/dx and dphi/du (algebraic columns), and dphi/dt when phi_t
+  // is given (with the Jacobians).
   void EvaluatePhi(const Vector& x, const Vector& u, double t, Vector* phi, Matrix* phi_x,
-                   Matrix* phi_u) const {
+                   Matrix* phi_u, Vector* phi_t = nullptr) const {
     phi->resize(nphi_);
     if (phi_x != nullptr) {
       phi_x->resize(nphi_, nx_);
       phi_u->resize(nphi_, nq_);
     }
+    if (phi_t != nullptr) phi_t->resize(nphi_);
     const Vector full = FullInputs(u);
     int row = 0;
     for (const SmoothFunction& g : constraints_) {
@@ -456,10 +458,11 @@ class AlphaDaiRun {
         g.Evaluate(x, full, t, parameters_, &value);
       } else {
         Matrix jac;
-        g.Jacobian(x, full, t, parameters_, Wrt{true, true, false, false}, &value, &jac);
+        g.Jacobian(x, full, t, parameters_, Wrt{true, true, phi_t != nullptr, false}, &value, &jac);
         phi_x->middleRows(row, k) = jac.leftCols(nx_);
         for (int j = 0; j < nq_; ++j)
           phi_u->block(row, j, k, 1) = jac.block(0, nx_ + algebraic_[j], k, 1);
+        if (phi_t != nullptr) phi_t->segment(row, k) = jac.col(jac.cols() - 1);
       }
       phi->segment(row, k) = value;
       row += k;
@@ -614,21 +617,9 @@ class AlphaDaiRun {
   bool MakeAlgebraicConsistent(const std::vector<int>& binding, AlphaDaiStatus* status,
                                std::string* reason) {
     if (nq_ == 0) return true;
-    Matrix phi_x(nphi_, nx_), phi_u(nphi_, nq_);
-    Vector phi_t = Vector::Zero(nphi_);
-    const Vector full = FullInputs(u_);
-    int row = 0;
-    for (const SmoothFunction& g : constraints_) {
-      const int k = g.num_outputs();
-      Vector value;
-      Matrix jac;
-      g.Jacobian(x_, full, t_, parameters_, Wrt{true, true, true, false}, &value, &jac);
-      phi_x.middleRows(row, k) = jac.leftCols(nx_);
-      for (int j = 0; j < nq_; ++j)
-        phi_u.block(row, j, k, 1) = jac.block(0, nx_ + algebraic_[j], k, 1);
-      phi_t.segment(row, k) = jac.col(jac.cols() - 1);
-      row += k;
-    }
+    Vector phi, phi_t;
+    Matrix phi_x, phi_u;
+    EvaluatePhi(x_, u_, t_, &phi, &phi_x, &phi_u, &phi_t);
     Vector f;
     Matrix a, d;
     JacobianF(x_, u_, t_, &f, &a, &d);
