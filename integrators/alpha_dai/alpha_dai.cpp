@@ -789,8 +789,10 @@ class AlphaDaiRun {
       if (options_.estimate_error) EstimateFixedStep(step, &margin);
       // A fixed step is not shortened: a constraint that may exceed its tolerance between the
       // step's ends is counted and warned about (see kMaxInsideRetries).
-      const InsideResult inside = SearchInside(Save(), step, margin);
-      if (inside.outcome != internal::CrossingOutcome::kNone) CountUnresolved(inside);
+      if (nphi_ > 0) {
+        const InsideResult inside = SearchInside(Save(), step, margin);
+        if (inside.outcome != internal::CrossingOutcome::kNone) CountUnresolved(inside);
+      }
       Commit(step, h_nominal, result);
       h_previous_ = h_nominal;
       if (progress_) progress_(t_);
@@ -853,7 +855,7 @@ class AlphaDaiRun {
     // about sum_i |dphi/dx_i| times the box's widths, decide rows within that distance of zero
     // (a constraint just left, as D3's heat flux) only on pieces of about this size.
     auto thresholds = [&]() {
-      Vector phi, phi_t;
+      Vector phi;
       Matrix phi_x, phi_u;
       EvaluatePhi(end.x1, end.u1, end.t1, &phi, &phi_x, &phi_u);
       Vector weights(nx_);
@@ -988,12 +990,15 @@ class AlphaDaiRun {
       }
       // Constraints between the ends of the two half steps (see kMaxInsideRetries); the
       // distance of the fine solution from the exact one, the estimate, widens the box.
-      const Vector margin = (second.x1 - coarse.x1).cwiseAbs() / 3.0;
-      InsideResult inside = SearchInside(start, first, margin);
-      if (inside.outcome == internal::CrossingOutcome::kNone) {
-        inside = SearchInside(
-            Snapshot{first.t1, first.x1, first.u1, first.f1, first.a1, first.active, 0.0}, second,
-            margin);
+      InsideResult inside;
+      if (nphi_ > 0) {
+        const Vector margin = (second.x1 - coarse.x1).cwiseAbs() / 3.0;
+        inside = SearchInside(start, first, margin);
+        if (inside.outcome == internal::CrossingOutcome::kNone) {
+          inside = SearchInside(
+              Snapshot{first.t1, first.x1, first.u1, first.f1, first.a1, first.active, 0.0}, second,
+              margin);
+        }
       }
       const bool shortenable = h > event_step;
       if (inside.outcome == internal::CrossingOutcome::kFound && shortenable &&
