@@ -43,7 +43,9 @@ void SemismoothNewtonOptions::Validate() const {
                   polish_ratio);
 }
 
-std::string ToString(NewtonStatus status) {
+namespace {
+// The status's name (a literal: FailureMessage appends it without a temporary string).
+const char* StatusName(NewtonStatus status) {
   switch (status) {
     case NewtonStatus::kConverged:
       return "converged";
@@ -60,6 +62,9 @@ std::string ToString(NewtonStatus status) {
   }
   return "?";
 }
+}  // namespace
+
+std::string ToString(NewtonStatus status) { return StatusName(status); }
 
 SemismoothNewtonStats& SemismoothNewtonStats::operator+=(const SemismoothNewtonStats& other) {
   iterations += other.iterations;
@@ -96,26 +101,7 @@ void FailureMessage(NewtonStatus status, long iterations, std::string_view reaso
   char count[24];
   std::snprintf(count, sizeof(count), "%ld", iterations);
   message->clear();
-  switch (status) {  // ToString(status), without its temporary
-    case NewtonStatus::kConverged:
-      *message += "converged";
-      break;
-    case NewtonStatus::kMaxIterations:
-      *message += "max_iterations";
-      break;
-    case NewtonStatus::kLineSearchFailed:
-      *message += "line_search_failed";
-      break;
-    case NewtonStatus::kStagnated:
-      *message += "stagnated";
-      break;
-    case NewtonStatus::kStationaryPoint:
-      *message += "stationary_point";
-      break;
-    case NewtonStatus::kNonFinite:
-      *message += "non_finite";
-      break;
-  }
+  *message += StatusName(status);
   *message += " after ";
   *message += count;
   *message += " iterations: ";
