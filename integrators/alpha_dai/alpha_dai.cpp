@@ -5,6 +5,7 @@
 #include <cmath>
 #include <sstream>
 
+#include "inside_constraints.hpp"
 #include "moreau/core/clock.hpp"
 #include "moreau/core/error.hpp"
 #include "moreau/integrators/simulate.hpp"
@@ -230,6 +231,9 @@ AlphaDaiStats& AlphaDaiStats::operator+=(const AlphaDaiStats& other) {
   if (other.error_estimate >= 0.0)
     error_estimate = std::max(error_estimate, 0.0) + other.error_estimate;
   num_unestimated_steps += other.num_unestimated_steps;
+  num_inside_crossings += other.num_inside_crossings;
+  num_unresolved_crossings += other.num_unresolved_crossings;
+  num_bound_evaluations += other.num_bound_evaluations;
   cpu_seconds += other.cpu_seconds;
   return *this;
 }
@@ -242,8 +246,9 @@ std::string AlphaDaiStats::Summary() const {
     << " SQP iterations, " << num_qp_iterations << " QP iterations, max phi+ "
     << max_constraint_violation << ", min sigma(B) " << min_basis_sigma << ", min rho " << min_rho
     << ", " << num_rejected_steps << " rejected (" << num_event_rejections << " at events, "
-    << num_failed_steps << " failed), error estimate " << error_estimate << ", " << cpu_seconds
-    << " s";
+    << num_failed_steps << " failed), " << num_inside_crossings << " inside crossings ("
+    << num_unresolved_crossings << " unresolved), error estimate " << error_estimate << ", "
+    << cpu_seconds << " s";
   return s.str();
 }
 
@@ -292,6 +297,18 @@ constexpr double kSolveFraction = 1e-2;
 // Error control's rank test: a sensitivity row below this fraction of the size of its terms is
 // round-off (an index-3 row is O(h) of them, so this holds down to steps of about 1e-12).
 constexpr double kNegligibleSensitivity = 1e-12;
+// Constraints between step ends (docs/alpha-method.md, "Constraints between step ends"): a
+// step of the error control in which a path constraint is found above its tolerance on the
+// step's continuous extension is retried ending on the crossing, at most kMaxInsideRetries
+// times in a row (each retry ends on the first zero of the new step's extension, which is
+// about the old one's, so two or three suffice; the cap bounds the work where the extension and
+// the SQP's end points disagree); a search the bounds cannot decide is retried with half the
+// step at most kMaxUnresolvedRetries times in a row (FESD's rule: a graze within the bounds'
+// overestimate of the tolerance stays undecided at every resolution). Steps at the event
+// resolution rtol (tf - t0) are not shortened. Then the step is accepted and counted
+// (AlphaDaiStats::num_unresolved_crossings, a warning).
+constexpr int kMaxInsideRetries = 8;
+constexpr int kMaxUnresolvedRetries = 2;
 
 long Binomial(long n, long k) {
   if (k < 0 || k > n) return 0;
@@ -396,6 +413,7 @@ class AlphaDaiRun {
           ErrorEstimateWarning(stats_.error_estimate, options_.relative_tolerance);
       if (!warning.empty()) result.warnings.push_back(warning);
     }
+    if (stats_.num_unresolved_crossings > 0) result.warnings.push_back(UnresolvedWarning());
     result.final_time = t_;
     result.final_state = x_;
     result.final_inputs = u_;
@@ -767,7 +785,14 @@ class AlphaDaiRun {
       }
       Candidate step;
       if (!Solve(t_end, &h_nominal, &step)) return Fail(result, step.status, step.reason);
-      if (options_.estimate_error) EstimateFixedStep(step);
+      Vector margin = Vector::Zero(nx_);
+      if (options_.estimate_error) EstimateFixedStep(step, &margin);
+      // A fixed step is not shortened: a constraint that may exceed its tolerance between the
+      // step's ends is counted and warned about (see kMaxInsideRetries).
+      if (nphi_ > 0) {
+        const InsideResult inside = SearchInside(Save(), step, margin);
+        if (inside.outcome != internal::CrossingOutcome::kNone) CountUnresolved(inside);
+      }
       Commit(step, h_nominal, result);
       h_previous_ = h_nominal;
       if (progress_) progress_(t_);
@@ -776,8 +801,9 @@ class AlphaDaiRun {
   }
 
   // Fixed steps: the step-doubling estimate of an accepted step (two half steps from the same
-  // start), accumulated into error_estimate; the state is left as it was.
-  void EstimateFixedStep(const Candidate& step) {
+  // start), accumulated into error_estimate, and its size per state into *margin (left as it
+  // is when a half step fails); the state is left as it was.
+  void EstimateFixedStep(const Candidate& step, Vector* margin) {
     const Snapshot start = Save();
     Candidate first, second;
     bool ok = Solve(t_ + 0.5 * step.h, nullptr, &first);
@@ -797,6 +823,89 @@ class AlphaDaiRun {
     const double err = ErrorPerUnitStep(start.x, step.x1, second.x1, step.h,
                                         std::vector<bool>(static_cast<std::size_t>(nx_), false));
     stats_.error_estimate += options_.relative_tolerance * step.h / horizon_ * err;
+    *margin = (second.x1 - step.x1).cwiseAbs() / 3.0;
+  }
+
+  // ------------------------------------------------------------- constraints between step ends
+  // Where a path constraint may exceed its tolerance between a step's ends: the first time, the
+  // row, and whether a value above it was found (kFound) or the bounds could not decide
+  // (kUnresolved).
+  struct InsideResult {
+    internal::CrossingOutcome outcome = internal::CrossingOutcome::kNone;
+    double time = 0.0;
+    int constraint = -1;
+  };
+
+  // Searches the step from `start` to `end` (internal::InsideConstraintSearch, the box of x
+  // widened by `margin`): the rows in the working set at neither end. Active rows are the
+  // step's business (the SQP keeps them at zero at the ends; an event's steps are short).
+  InsideResult SearchInside(const Snapshot& start, const Candidate& end, const Vector& margin) {
+    InsideResult inside;
+    if (nphi_ == 0) return inside;
+    std::vector<char> watched(static_cast<std::size_t>(nphi_), 1);
+    for (const std::vector<int>* active : {&start.active, &end.active}) {
+      for (int k : *active) {
+        if (k < nphi_) watched[static_cast<std::size_t>(k)] = 0;
+      }
+    }
+    // What the tolerances resolve in phi: tol plus phi's change under a state error of one
+    // tolerance weight per state, sum_i |dphi/dx_i| w_i at the step's end. A value above tol by
+    // less on the continuous extension is within the solution's accuracy (the exact solution
+    // may graze the constraint there or not); and the interval bounds, which overestimate by
+    // about sum_i |dphi/dx_i| times the box's widths, decide rows within that distance of zero
+    // (a constraint just left, as D3's heat flux) only on pieces of about this size.
+    auto thresholds = [&]() {
+      Vector phi;
+      Matrix phi_x, phi_u;
+      EvaluatePhi(end.x1, end.u1, end.t1, &phi, &phi_x, &phi_u);
+      Vector weights(nx_);
+      for (Eigen::Index i = 0; i < nx_; ++i) {
+        weights[i] = ToleranceWeight(i, std::max(std::fabs(start.x[i]), std::fabs(end.x1[i])));
+      }
+      return Vector((phi_x.cwiseAbs() * weights).array() + options_.constraint_tolerance);
+    };
+    const internal::Crossing crossing = inside_.Search(
+        {start.t, &start.x, &start.u, &start.f}, {end.t1, &end.x1, &end.u1, &end.f1}, inputs_,
+        std::move(watched), margin, options_.constraint_tolerance, thresholds);
+    stats_.num_bound_evaluations += crossing.bound_evaluations;
+    inside.outcome = crossing.outcome;
+    inside.constraint = crossing.function;
+    const double theta =
+        crossing.outcome == internal::CrossingOutcome::kFound ? crossing.theta : crossing.sample;
+    inside.time = start.t + theta * (end.t1 - start.t);
+    return inside;
+  }
+
+  // A step accepted with a constraint that may exceed its tolerance between its ends.
+  void CountUnresolved(const InsideResult& inside) {
+    if (inside.outcome == internal::CrossingOutcome::kFound) ++stats_.num_inside_crossings;
+    ++stats_.num_unresolved_crossings;
+    if (!std::isfinite(first_unresolved_time_)) {
+      first_unresolved_time_ = inside.time;
+      first_unresolved_constraint_ = inside.constraint;
+    }
+  }
+
+  std::string UnresolvedWarning() const {
+    std::ostringstream s;
+    s.precision(10);
+    s << stats_.num_unresolved_crossings
+      << (stats_.num_unresolved_crossings == 1 ? " step" : " steps")
+      << " (the first at t = " << first_unresolved_time_;
+    if (first_unresolved_constraint_ >= 0) {
+      s << ", constraint '"
+        << constraint_names_[static_cast<std::size_t>(first_unresolved_constraint_)] << "'";
+    }
+    s << ") where a path constraint may exceed tol = " << options_.constraint_tolerance
+      << " between the step's ends (a value above it was found on the step's continuous "
+         "extension, or its interval bound admits one) and the step was not shortened onto it "
+         "("
+      << (adaptive_ ? "the step was at the event resolution rtol (tf - t0) or its retries were "
+                      "used up"
+                    : "fixed steps are not shortened")
+      << "): the constraint may have been stepped over; bound the step (h_max"
+      << (adaptive_ ? ", or a smaller rtol" : ", or a smaller h") << ")";
+    return s.str();
   }
 
   // Error control by step doubling (see the header): one step of h and two of h/2 from t_;
@@ -878,6 +987,41 @@ class AlphaDaiRun {
           return Fail(result, AlphaDaiStatus::kStepSizeTooSmall, s.str());
         }
         continue;
+      }
+      // Constraints between the ends of the two half steps (see kMaxInsideRetries); the
+      // distance of the fine solution from the exact one, the estimate, widens the box.
+      InsideResult inside;
+      if (nphi_ > 0) {
+        const Vector margin = (second.x1 - coarse.x1).cwiseAbs() / 3.0;
+        inside = SearchInside(start, first, margin);
+        if (inside.outcome == internal::CrossingOutcome::kNone) {
+          inside = SearchInside(
+              Snapshot{first.t1, first.x1, first.u1, first.f1, first.a1, first.active, 0.0}, second,
+              margin);
+        }
+      }
+      const bool shortenable = h > event_step;
+      if (inside.outcome == internal::CrossingOutcome::kFound && shortenable &&
+          inside_retries_ < kMaxInsideRetries) {
+        // Again, ending on the crossing: the SQP then sees the constraint at the step's end.
+        ++inside_retries_;
+        ++stats_.num_rejected_steps;
+        ++stats_.num_inside_crossings;
+        h_next_ = std::max(inside.time - t_, event_step);
+        continue;
+      }
+      if (inside.outcome == internal::CrossingOutcome::kUnresolved && shortenable &&
+          unresolved_retries_ < kMaxUnresolvedRetries) {
+        ++unresolved_retries_;
+        ++stats_.num_rejected_steps;
+        h_next_ = std::max(0.5 * h, event_step);
+        continue;
+      }
+      if (inside.outcome == internal::CrossingOutcome::kNone) {
+        inside_retries_ = 0;
+        unresolved_retries_ = 0;
+      } else {
+        CountUnresolved(inside);
       }
       Commit(first, h, result);
       Commit(second, h, result);
@@ -986,15 +1130,10 @@ class AlphaDaiRun {
   // VelocityLevelStates) are judged per step, the estimate times h / (tf - t0).
   double ErrorPerUnitStep(const Vector& x0, const Vector& coarse, const Vector& fine, double h,
                           const std::vector<bool>& per_step) const {
-    const double rtol = options_.relative_tolerance;
-    const double floor =
-        rtol * kScaleFloor * std::max(scale_.maxCoeff(), std::numeric_limits<double>::min());
     double worst = 0.0;
     for (Eigen::Index i = 0; i < nx_; ++i) {
-      const double atol =
-          options_.absolute_tolerance > 0.0 ? options_.absolute_tolerance : rtol * scale_[i];
       const double size = std::max(std::fabs(x0[i]), std::fabs(fine[i]));
-      const double weight = std::max(atol + rtol * size, floor);
+      const double weight = ToleranceWeight(i, size);
       // The difference this step may have, never below what floating point resolves in the
       // compared solutions: a state near zero has a weight near the floor, and over short
       // steps the per-unit-step allowance would fall below the round-off of the two solves.
@@ -1004,6 +1143,17 @@ class AlphaDaiRun {
       worst = std::max(worst, std::fabs(fine[i] - coarse[i]) / 3.0 / allowed);
     }
     return worst;
+  }
+
+  // The tolerance weight of state i of size `size` (its largest magnitude over a step):
+  // atol_i + rtol size, at least the floor kScaleFloor rtol max_j scale_j.
+  double ToleranceWeight(Eigen::Index i, double size) const {
+    const double rtol = options_.relative_tolerance;
+    const double floor =
+        rtol * kScaleFloor * std::max(scale_.maxCoeff(), std::numeric_limits<double>::min());
+    const double atol =
+        options_.absolute_tolerance > 0.0 ? options_.absolute_tolerance : rtol * scale_[i];
+    return std::max(atol + rtol * size, floor);
   }
 
   // End of the next fixed step: equal steps of at most h_nominal over the rest of the
@@ -1496,6 +1646,12 @@ class AlphaDaiRun {
   Matrix a_matrix_, d_matrix_, phi_x_, phi_u_;
   BasisInfo basis_;
   AlphaDaiStats stats_;
+  // Constraints between step ends (see kMaxInsideRetries).
+  internal::InsideConstraintSearch inside_{constraints_, parameters_, algebraic_};
+  int inside_retries_ = 0;      // consecutive retries for a crossing found inside a step
+  int unresolved_retries_ = 0;  // consecutive retries for an undecided search
+  double first_unresolved_time_ = std::numeric_limits<double>::infinity();
+  int first_unresolved_constraint_ = -1;
 };
 
 }  // namespace

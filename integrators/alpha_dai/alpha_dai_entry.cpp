@@ -88,6 +88,14 @@ IntegratorEntry AlphaDaiEntry() {
                "estimated)"),
       BindStat("num_unestimated_steps", &S::num_unestimated_steps,
                "fixed steps whose error could not be estimated"),
+      BindStat("num_inside_crossings", &S::num_inside_crossings,
+               "steps in which a path constraint was found above tol between the step's ends "
+               "(error control: retried ending on the crossing)"),
+      BindStat("num_unresolved_crossings", &S::num_unresolved_crossings,
+               "steps accepted although a path constraint may exceed tol between their ends "
+               "(a warning names the first)"),
+      BindStat("num_bound_evaluations", &S::num_bound_evaluations,
+               "interval evaluations of the path constraints over steps"),
       BindStat("cpu_seconds", &S::cpu_seconds, "thread CPU time"),
   };
   return MakeEntry<O, AlphaDaiResult>(

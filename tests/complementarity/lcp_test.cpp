@@ -245,6 +245,46 @@ TEST(SemismoothNewtonTest, SparseAndDenseLinearAlgebraAgree) {
   EXPECT_LE((dense.z - sparse.z).lpNorm<Eigen::Infinity>(), 1e-12);
 }
 
+// r(w) = (w_1 - 5, w_2 - 5) with a Jacobian reported as c [1 1; 1 1] (singular, c = 0.05):
+// no Newton direction exists, and steepest descent on the merit reduces |r_1 + r_2| by the
+// factor 1 - 2c per step, a decrease of the merit by 19% per step that the window test never
+// calls stagnation, but 1e-12 is 270 steps away. The solve must stop after the documented
+// streak of steepest-descent steps (8) with kStagnated, not run to max_iterations.
+class SingularJacobianSystem final : public MixedComplementaritySystem {
+ public:
+  int num_unknowns() const override { return 2; }
+  int num_equations() const override { return 2; }
+  int num_pairs() const override { return 0; }
+  bool Evaluate(const Vector& w, bool /*with_jacobian*/, Vector* r, Vector* a, Vector* b) override {
+    *r = w.array() - 5.0;
+    a->resize(0);
+    b->resize(0);
+    return true;
+  }
+  void AssembleJacobian(const Vector& /*da*/, const Vector& /*db*/,
+                        SystemMatrix* jacobian) override {
+    jacobian->AddBlock(0, 0, Matrix::Constant(2, 2, 0.05));
+  }
+};
+
+TEST(SemismoothNewtonTest, SteepestDescentCrawlEndsAsStagnated) {
+  // The streak after which the solve stops (kMaxGradientStreak in semismooth_newton.cpp), and
+  // one more iteration in which the streak is found too long.
+  constexpr long kGradientStreak = 8;
+  SingularJacobianSystem system;
+  SemismoothNewton newton;  // max_iterations = 100
+  const SemismoothNewtonResult result = newton.Solve(system, Vector::Zero(2));
+  EXPECT_EQ(result.status, NewtonStatus::kStagnated) << result.message;
+  EXPECT_NE(result.message.find("no Newton descent direction"), std::string::npos)
+      << result.message;
+  EXPECT_EQ(result.stats.gradient_steps, kGradientStreak) << result.stats.Summary();
+  EXPECT_LE(result.stats.iterations, kGradientStreak + 1) << result.stats.Summary();
+  // Every step decreased the residual (a crawl, not a failure of the line search).
+  for (std::size_t k = 1; k < result.residual_history.size(); ++k) {
+    EXPECT_LT(result.residual_history[k], result.residual_history[k - 1]);
+  }
+}
+
 TEST(SemismoothNewtonTest, InvalidOptionsAreRejected) {
   SemismoothNewtonOptions options;
   options.tolerance = 0.0;

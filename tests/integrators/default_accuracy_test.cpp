@@ -39,15 +39,15 @@ constexpr double kScaleFloor = 1e-6;
 // Scenes whose default run ends with a non-success status (docs/accuracy.md lists them with
 // their reasons; the goal is none). A scene listed here needs no reference: the test asks its
 // default run for a non-success status with a message, and fails once it succeeds (then it
-// needs a reference). D2: the traveling wave reaches the robot at t = 6 with a relative speed
-// of 0.1 m/s that only a jump of the speed V could cancel, and the algebraic inputs act on V'
-// (index 3 met at a nonzero rate: no solution without look-ahead once the steps are short).
+// needs a reference). D2: the robot meets obs1 at t = 2.83 at a rate of 0.23 m/s that only a
+// jump of its velocity could cancel, and the algebraic inputs act on V' and theta' (index 3
+// met at a nonzero rate: no solution without look-ahead once the steps are short).
 const std::set<std::string> kScenesWithStatus = {"D2"};
 
 // Scenes not checked here, with the reason; docs/accuracy.md names them. Without a reference
 // in the data file ("reference": null, its reason there): crowd (too expensive).
 const std::map<std::string, std::string> kScenesUnchecked = {
-    {"crowd", "no reference: its default run takes minutes"},
+    {"crowd", "no reference: its default run takes about 22 s, minutes under the sanitizers"},
 };
 
 // Event kinds left out of the comparison: 'ambiguous' reports a point where the solution is

@@ -273,6 +273,18 @@ struct AlphaDaiStats {
   /// Fixed steps whose error could not be estimated (a half step failed); not in
   /// error_estimate.
   long num_unestimated_steps = 0;
+  /// Path constraints inactive at both ends of a step are bounded over the step's continuous
+  /// extension (interval arithmetic; docs/alpha-method.md, "Constraints between step ends"):
+  /// steps in which a constraint was found above constraint_tolerance between the ends
+  /// (error control: the step was retried ending on the crossing), ...
+  long num_inside_crossings = 0;
+  /// ... steps accepted although a constraint may exceed constraint_tolerance between their
+  /// ends (fixed steps, which are not shortened; steps already at the event resolution rtol
+  /// (tf - t0) or retried 8 times in a row; searches the bounds could not decide), with
+  /// a warning in AlphaDaiResult::warnings naming the first time, ...
+  long num_unresolved_crossings = 0;
+  /// ... and the interval evaluations of the constraints this took.
+  long num_bound_evaluations = 0;
   /// CPU time of the run.
   double cpu_seconds = 0.0;
 
@@ -302,7 +314,8 @@ struct AlphaDaiResult {
   /// Counters and extreme certificates.
   AlphaDaiStats stats;
   /// What the caller should know although the run succeeded (a fixed-step run whose estimated
-  /// error exceeds kErrorWarningFactor rtol), one sentence each.
+  /// error exceeds kErrorWarningFactor rtol; steps in which a path constraint may exceed its
+  /// tolerance between the ends, AlphaDaiStats::num_unresolved_crossings), one sentence each.
   std::vector<std::string> warnings;
 };
 

@@ -112,9 +112,11 @@ enum class NewtonStatus {
   kConverged,         ///< ||S Phi(w)||_inf <= tolerance
   kMaxIterations,     ///< max_iterations iterations without convergence
   kLineSearchFailed,  ///< no step length >= min_step satisfies the Armijo condition
-  kStagnated,         ///< the merit fell by less than a relative 1e-3 over stagnation_window
-  kStationaryPoint,   ///< grad theta = J^T S^2 Phi vanishes (to round-off) while Phi != 0
-  kNonFinite,         ///< the residual at the initial point is not finite or not defined
+  /// the merit fell by less than a relative 1e-3 over stagnation_window, or 8 consecutive
+  /// iterations found no Newton descent direction (steepest descent only)
+  kStagnated,
+  kStationaryPoint,  ///< grad theta = J^T S^2 Phi vanishes (to round-off) while Phi != 0
+  kNonFinite,        ///< the residual at the initial point is not finite or not defined
 };
 /// The status as text (snake case).
 std::string ToString(NewtonStatus status);
