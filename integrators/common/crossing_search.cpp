@@ -93,11 +93,13 @@ void CrossingWorkspace::Reserve(int functions, const CrossingSearchLimits& limit
 Crossing SearchCrossing(const std::vector<char>& watched, const Vector& thresholds,
                         const CrossingFunctions& functions, const CrossingSearchLimits& limits) {
   CrossingWorkspace workspace;
-  return SearchCrossing(watched, thresholds, functions, limits, &workspace);
+  return SearchCrossing(watched, thresholds,
+                        CrossingFunctionRefs{functions.values, functions.bounds}, limits,
+                        &workspace);
 }
 
 Crossing SearchCrossing(const std::vector<char>& watched, const Vector& thresholds,
-                        const CrossingFunctions& functions, const CrossingSearchLimits& limits,
+                        const CrossingFunctionRefs& functions, const CrossingSearchLimits& limits,
                         CrossingWorkspace* workspace) {
   Crossing crossing;
   const auto n = static_cast<Eigen::Index>(watched.size());

@@ -15,6 +15,7 @@
 // reported as unresolved, except next to the path's ends, where the values are known: a
 // dip there within 2^-30 of the step is not a crossing the step could resolve anyway.
 
+#include <functional>
 #include <type_traits>
 #include <utility>
 #include <vector>
@@ -93,8 +94,14 @@ class FunctionRef<R(Args...)> {
 // The functions f_k(theta) along a path and their enclosures over intervals of theta.
 struct CrossingFunctions {
   // Values at theta into *values (all functions); false if not evaluable there.
-  FunctionRef<bool(double theta, Vector* values)> values;
+  std::function<bool(double theta, Vector* values)> values;
   // Enclosures over [a, b] (entries -inf, +inf where none).
+  std::function<void(double a, double b, Vector* lower, Vector* upper)> bounds;
+};
+// The same by non-owning reference, for callers that search every step (no std::function
+// made per search): the callables must outlive it.
+struct CrossingFunctionRefs {
+  FunctionRef<bool(double theta, Vector* values)> values;
   FunctionRef<void(double a, double b, Vector* lower, Vector* upper)> bounds;
 };
 
@@ -133,9 +140,9 @@ struct CrossingWorkspace {
 Crossing SearchCrossing(const std::vector<char>& watched, const Vector& thresholds,
                         const CrossingFunctions& functions,
                         const CrossingSearchLimits& limits = {});
-// The same search in the caller's workspace.
+// The same search with the functions by reference, in the caller's workspace.
 Crossing SearchCrossing(const std::vector<char>& watched, const Vector& thresholds,
-                        const CrossingFunctions& functions, const CrossingSearchLimits& limits,
+                        const CrossingFunctionRefs& functions, const CrossingSearchLimits& limits,
                         CrossingWorkspace* workspace);
 
 // The smallest value of the Hermite interpolant through (nodes[i], values[i], slopes[i]) (degree

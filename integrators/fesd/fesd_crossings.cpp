@@ -62,7 +62,7 @@ Violation FesdRun::InsideViolation(const CollocationStages& stages, const Vector
     b.path.Box(a, c, &b.box_lower, &b.box_upper);
     system_.BoundEventIndicators(b.box_lower, b.box_upper, a_zero_, lower, upper);
   };
-  const CrossingFunctions functions{values_at, bounds_over};
+  const CrossingFunctionRefs functions{values_at, bounds_over};
   // Side k below minus its tolerance at theta (a crossing, then located between the start and
   // theta by bisection on the polynomial, as the bounded search would locate it).
   auto negative_at = [&](int k, double theta) {

@@ -197,7 +197,7 @@ bool IdaRun::BoundedHiddenRoot(double t_a, double t_b, double* t_negative) {
       upper->tail(nr_) = b.relay_upper;
     }
   };
-  const internal::CrossingFunctions functions{values_at, bounds_over};
+  const internal::CrossingFunctionRefs functions{values_at, bounds_over};
   const internal::Crossing crossing =
       internal::SearchCrossing(watched, b.thresholds, functions, {}, &b.search);
   if (crossing.outcome == internal::CrossingOutcome::kUnresolved) {

@@ -253,7 +253,7 @@ bool CrossesInsideStep(const LoweredSystem& system, const internal::CollocationS
     path->Box(a, c, &check->box_lower, &check->box_upper);
     system.BoundEventIndicators(check->box_lower, check->box_upper, before, lower, upper);
   };
-  const internal::CrossingFunctions functions{values_at, bounds_over};
+  const internal::CrossingFunctionRefs functions{values_at, bounds_over};
   // The end of the step must be above the thresholds too (else the status would have changed).
   Vector& end = check->end;
   if (!functions.values(1.0, &end)) return false;
