@@ -68,9 +68,14 @@ bool NearActiveFilter::Check(const Vector& y, double* smallest) {
 void NearActiveFilter::StepAccepted() { std::fill(forced_.begin(), forced_.end(), false); }
 
 std::vector<bool> NearActiveFilter::working() const {
-  std::vector<bool> flags(static_cast<std::size_t>(system_->num_declared_pairs()), false);
-  for (int k : system_->working_pairs()) flags[static_cast<std::size_t>(k)] = true;
+  std::vector<bool> flags;
+  working(&flags);
   return flags;
+}
+
+void NearActiveFilter::working(std::vector<bool>* flags) const {
+  flags->assign(static_cast<std::size_t>(system_->num_declared_pairs()), false);
+  for (int k : system_->working_pairs()) (*flags)[static_cast<std::size_t>(k)] = true;
 }
 
 bool NearActiveFilter::Restore(const std::vector<bool>& working,

@@ -45,6 +45,8 @@ class NearActiveFilter {
   void StepAccepted();
   // The working set as flags over the declared pairs (snapshots), and its restoration.
   std::vector<bool> working() const;
+  // The same into *flags (a kept snapshot's vector: no allocation per step).
+  void working(std::vector<bool>* flags) const;
   bool Restore(const std::vector<bool>& working, LoweredSystem::WorkingLayout* previous);
 
   struct Stats {

@@ -2,6 +2,7 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 
@@ -78,15 +79,38 @@ void PolynomialPath::Box(double a, double b, Vector* lower, Vector* upper) const
   }
 }
 
+void CrossingWorkspace::Reserve(int functions, const CrossingSearchLimits& limits) {
+  const auto n = static_cast<std::size_t>(std::max(functions, 0));
+  lower.resize(functions);
+  upper.resize(functions);
+  values.resize(functions);
+  levels.resize(functions);
+  bounded.reserve(n);
+  // Depth first: at most one pending right half per level besides the node taken.
+  stack.reserve(static_cast<std::size_t>(limits.max_depth) + 2);
+}
+
 Crossing SearchCrossing(const std::vector<char>& watched, const Vector& thresholds,
                         const CrossingFunctions& functions, const CrossingSearchLimits& limits) {
+  CrossingWorkspace workspace;
+  return SearchCrossing(watched, thresholds,
+                        CrossingFunctionRefs{functions.values, functions.bounds}, limits,
+                        &workspace);
+}
+
+Crossing SearchCrossing(const std::vector<char>& watched, const Vector& thresholds,
+                        const CrossingFunctionRefs& functions, const CrossingSearchLimits& limits,
+                        CrossingWorkspace* workspace) {
   Crossing crossing;
   const auto n = static_cast<Eigen::Index>(watched.size());
   MOREAU_ASSERT(thresholds.size() == n, "SearchCrossing: one threshold per function");
-  Vector lower, upper, values;
+  Vector& lower = workspace->lower;
+  Vector& upper = workspace->upper;
+  Vector& values = workspace->values;
   // Functions the bound decides (a finite lower bound over the whole step); the others are
   // checked by the samples the search takes for the rest.
-  std::vector<char> bounded(watched.size(), 0);
+  std::vector<char>& bounded = workspace->bounded;
+  bounded.assign(watched.size(), 0);
   auto suspicious = [&](double a, double b) {
     functions.bounds(a, b, &lower, &upper);
     ++crossing.bound_evaluations;
@@ -109,11 +133,10 @@ Crossing SearchCrossing(const std::vector<char>& watched, const Vector& threshol
   if (!any) return crossing;
   // Depth-first, left half first, so that the first negative sample found lies in the
   // leftmost suspicious interval.
-  struct Node {
-    double a, b;
-    int depth;
-  };
-  std::vector<Node> stack{{0.0, 1.0, 0}};
+  using Node = CrossingWorkspace::Node;
+  std::vector<Node>& stack = workspace->stack;
+  stack.reserve(static_cast<std::size_t>(limits.max_depth) + 2);  // (Reserve's size)
+  stack.assign(1, Node{0.0, 1.0, 0});
   bool root = true;  // the whole step's bound is already known to be suspicious
   bool unresolved = false;
   double unresolved_at = 1.0;
@@ -166,7 +189,8 @@ Crossing SearchCrossing(const std::vector<char>& watched, const Vector& threshol
     // thresholds) and the sample on the minimum of the watched functions.
     // A function that starts at or below zero (within its threshold: a pair that has just
     // switched) counts as below once it is below minus its threshold, others once negative.
-    Vector levels = Vector::Zero(n);
+    Vector& levels = workspace->levels;
+    levels.setZero(n);
     if (functions.values(0.0, &values)) {
       for (Eigen::Index k = 0; k < n; ++k) levels[k] = values[k] <= 0.0 ? -thresholds[k] : 0.0;
     }
@@ -199,12 +223,23 @@ double HermiteMinimum(const std::vector<double>& nodes, const std::vector<double
                 "HermiteMinimum: one value and slope per node");
   // Divided differences on z = (x_0, x_0, x_1, x_1, ...): f[z_2i, z_2i+1] = f'(x_i).
   const std::size_t m = 2 * n;
-  std::vector<double> z(m), table(m);
+  // z, the divided-difference table and the coefficients: on the stack for the sizes an
+  // element has (its start and stages, s <= 7), as this runs per element.
+  constexpr std::size_t kStackNodes = 16;
+  std::array<double, 3 * 2 * kStackNodes> stack_storage;
+  std::vector<double> heap_storage;
+  double* storage = stack_storage.data();
+  if (n > kStackNodes) {
+    heap_storage.resize(3 * m);
+    storage = heap_storage.data();
+  }
+  double* const z = storage;
+  double* const table = storage + m;
+  double* const coefficients = storage + 2 * m;
   for (std::size_t i = 0; i < n; ++i) {
     z[2 * i] = z[2 * i + 1] = nodes[i];
     table[2 * i] = table[2 * i + 1] = values[i];
   }
-  std::vector<double> coefficients(m);
   coefficients[0] = table[0];
   for (std::size_t level = 1; level < m; ++level) {
     for (std::size_t i = m - 1; i >= level; --i) {

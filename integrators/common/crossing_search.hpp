@@ -16,6 +16,8 @@
 // dip there within 2^-30 of the step is not a crossing the step could resolve anyway.
 
 #include <functional>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "moreau/core/types.hpp"
@@ -66,12 +68,41 @@ struct Crossing {
   int bound_evaluations = 0;
 };
 
+// A non-owning reference to a callable (std::function_ref of C++26, reduced to what the search
+// needs): the search is called per element or step, and a std::function holding a lambda that
+// captures more than two pointers allocates on every construction. The callable must outlive
+// the reference: callers name their lambdas and build CrossingFunctions from them.
+template <typename Signature>
+class FunctionRef;
+template <typename R, typename... Args>
+class FunctionRef<R(Args...)> {
+ public:
+  template <typename F>
+  requires(!std::is_same_v<std::remove_cvref_t<F>, FunctionRef>)
+      FunctionRef(F& f)  // NOLINT(google-explicit-constructor): a parameter type, like a reference
+      : object_(const_cast<void*>(static_cast<const void*>(&f))),
+        call_([](void* object, Args... args) -> R {
+          return (*static_cast<std::remove_reference_t<F>*>(object))(std::forward<Args>(args)...);
+        }) {}
+  R operator()(Args... args) const { return call_(object_, std::forward<Args>(args)...); }
+
+ private:
+  void* object_;
+  R (*call_)(void*, Args...);
+};
+
 // The functions f_k(theta) along a path and their enclosures over intervals of theta.
 struct CrossingFunctions {
   // Values at theta into *values (all functions); false if not evaluable there.
   std::function<bool(double theta, Vector* values)> values;
   // Enclosures over [a, b] (entries -inf, +inf where none).
   std::function<void(double a, double b, Vector* lower, Vector* upper)> bounds;
+};
+// The same by non-owning reference, for callers that search every step (no std::function
+// made per search): the callables must outlive it.
+struct CrossingFunctionRefs {
+  FunctionRef<bool(double theta, Vector* values)> values;
+  FunctionRef<void(double a, double b, Vector* lower, Vector* upper)> bounds;
 };
 
 // Tuning of the search, with the reasons for each value.
@@ -87,6 +118,21 @@ struct CrossingSearchLimits {
   int bisections = 40;
 };
 
+// SearchCrossing's work storage, kept by a caller that searches every step so that the search
+// allocates nothing once the sizes are met (a default one is made per call otherwise).
+struct CrossingWorkspace {
+  struct Node {  // an interval [a, b] of theta at depth `depth` of the bisection tree
+    double a, b;
+    int depth;
+  };
+  Vector lower, upper, values, levels;
+  std::vector<char> bounded;
+  std::vector<Node> stack;
+  // Sizes the storage for `functions` watched functions and the depth of `limits` (an
+  // integrator's set-up: the first search of a run then allocates nothing either).
+  void Reserve(int functions, const CrossingSearchLimits& limits = {});
+};
+
 // Searches [0, 1] for the first theta where some watched function k (watched[k]) is below
 // -thresholds[k], given that every watched function is at least -thresholds[k] at theta = 0
 // and at theta = 1 (the step's ends are checked by the caller). Functions whose bound is
@@ -94,6 +140,10 @@ struct CrossingSearchLimits {
 Crossing SearchCrossing(const std::vector<char>& watched, const Vector& thresholds,
                         const CrossingFunctions& functions,
                         const CrossingSearchLimits& limits = {});
+// The same search with the functions by reference, in the caller's workspace.
+Crossing SearchCrossing(const std::vector<char>& watched, const Vector& thresholds,
+                        const CrossingFunctionRefs& functions, const CrossingSearchLimits& limits,
+                        CrossingWorkspace* workspace);
 
 // The smallest value of the Hermite interpolant through (nodes[i], values[i], slopes[i]) (degree
 // 2 n - 1 for n nodes, Newton's divided differences with doubled nodes) at `samples` equally

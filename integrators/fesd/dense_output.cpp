@@ -39,6 +39,15 @@ void FesdRun::PrepareOutputTimes() {
   std::sort(output_times_.begin(), output_times_.end());
   output_times_.erase(std::unique(output_times_.begin(), output_times_.end()), output_times_.end());
   dense_output_ = !options_.output_times.empty() || options_.output_step > 0.0;
+  if (dense_output_) {
+    // One point per output time (and t0): appended per element without regrowth.
+    Trajectory& out = result_.trajectory;
+    const std::size_t points = out.size() + output_times_.size() + 1;
+    out.t.reserve(points);
+    out.x.reserve(points);
+    out.algebraic.reserve(points);
+    out.step.reserve(points);
+  }
 }
 
 void FesdRun::DenseOutput(const ElementPolynomial& element) {

@@ -144,6 +144,11 @@ std::string FesdStats::Summary() const {
 }
 
 namespace internal {
+namespace {
+// Characters reserved for a kept Newton result's failure message (the longest, a line search
+// failure with its reason and residual, has about 110).
+constexpr std::size_t kNewtonMessageCapacity = 256;
+}  // namespace
 
 FesdResult FesdRun::Run() {
   RunClock run_clock;
@@ -198,6 +203,16 @@ FesdResult FesdRun::Run() {
   }
   if (options_.sensitivities) InitializeSensitivities();
   PrepareOutputTimes();
+  // Storage first used deep in the run (the first crossing search that halves, the first
+  // comparison element with the full system), sized now: the step loop allocates nothing.
+  inside_.search.Reserve(np_);
+  comparison_.setup.a_zero.reserve(static_cast<std::size_t>(np_));
+  // The kept Newton results: a failed solve (routine for trial elements and comparisons)
+  // writes its message in place, and a solve's history has at most max_iterations + 1 entries.
+  for (SemismoothNewtonResult* kept : {&advance_.solved, &comparison_.solved}) {
+    kept->message.reserve(kNewtonMessageCapacity);
+    kept->residual_history.reserve(static_cast<std::size_t>(options_.newton.max_iterations) + 1);
+  }
   estimating_ = !error_control && !replay && options_.estimate_error;
   if (error_control || estimating_) result_.stats.error_estimate = 0.0;
   keep_polynomials_ = error_control || dense_output_ || estimating_;
@@ -274,6 +289,11 @@ void FesdRun::Integrate() {
     if (StartsControlSegment(segment) && !smooth_ && !DecideAtBreakpoint()) break;
     const std::vector<double> grid =
         FixedStepGrid(segment_ends_[segment], segment_ends_[segment + 1], options_.step_size);
+    // Twice the nominal elements of the segment (switch groups add some): no regrowth per
+    // element (doubling would reach that capacity anyway).
+    result_.elements.reserve(result_.elements.size() +
+                             2 * (grid.size() - 1) *
+                                 static_cast<std::size_t>(options_.finite_elements));
     for (std::size_t index = 1; index < grid.size() && !failed(); ++index) {
       double step_end = grid[index];
       int remaining = options_.finite_elements;
@@ -318,6 +338,13 @@ void FesdRun::IntegrateTimeFreezing() {
     if (StartsControlSegment(segment) && !DecideAtBreakpoint()) break;
     const double target = segment_ends_[segment + 1];
     const double tolerance = kClockTolerance * std::max(1.0, std::fabs(target));
+    // Twice the nominal elements of the segment in physical time (frozen steps and switch
+    // groups add some; doubling would reach that capacity anyway; capped): little regrowth.
+    const double nominal_steps =
+        std::clamp(std::ceil((target - y_[clock]) / options_.step_size), 0.0, 1e6);
+    result_.elements.reserve(result_.elements.size() +
+                             2 * static_cast<std::size_t>(nominal_steps) *
+                                 static_cast<std::size_t>(options_.finite_elements));
     while (!failed() && target - y_[clock] > tolerance) {
       double length = options_.step_size;
       if (!system_.TimeFrozen(a_zero_)) {
@@ -346,7 +373,7 @@ void FesdRun::BeginFixedAdvance() {
   if (!estimating_) return;
   estimate_from_ = result_.elements.size();
   estimate_tau_ = tau_;
-  piece_.clear();
+  RecyclePolynomials(&piece_);
   capture_piece_ = true;
 }
 

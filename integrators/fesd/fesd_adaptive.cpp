@@ -107,7 +107,7 @@ void FesdRun::Save(Snapshot* snapshot) const {
   s.first_unresolved_time = first_unresolved_time_;
   s.have_last_w = have_last_w_;
   s.a_zero = a_zero_;
-  s.working = filter_.working();
+  filter_.working(&s.working);
   s.last_z_matrix = last_z_matrix_;
   s.sensitivity = sensitivity_;
   s.d_step_end = d_step_end_;
@@ -209,7 +209,7 @@ Violation FesdRun::JumpStageViolation(const CollocationStages& stages, const Vec
 
 void FesdRun::OnCommittedElement(ElementPolynomial&& element) {
   DenseOutput(element);  // (reads the element alone, not the piece)
-  if (capture_piece_) piece_.push_back(std::move(element));
+  (capture_piece_ ? piece_ : spare_polynomials_).push_back(std::move(element));
 }
 
 void FesdRun::IntegrateAdaptive(bool clock_targets) {
@@ -270,7 +270,7 @@ void FesdRun::IntegrateAdaptive(bool clock_targets) {
       // end is the segment end (a constant; with time-freezing the clock's target).
       if (options_.sensitivities) TrackStepStart(lands, clock_targets);
       capture_piece_ = keep_polynomials_;
-      piece_.clear();
+      RecyclePolynomials(&piece_);
       ProgressCallback progress;
       std::swap(progress, progress_);  // no progress reports from attempts that may be rejected
       int remaining = options_.finite_elements;
@@ -668,22 +668,24 @@ bool FesdRun::SolveComparisonElement(const Vector& y0, double t0, double h,
     }
     if (smooth_) return false;  // otherwise the full element system below
   }
-  GroupSetup setup;
+  GroupSetup& setup = comparison_.setup;  // only these members are ever set
   setup.y_start = y0;
   setup.a_zero = a_zero;
   setup.h_fixed = h;
   group_.Configure(setup);
   const CollocationStages& stages = group_.element(0);
-  Vector guess(group_.num_unknowns());
+  Vector& guess = comparison_.guess;
+  guess.resize(group_.num_unknowns());
   for (int i = 0; i < s_; ++i) {
     guess.segment(stages.state_offset(i), ny_) = states[static_cast<std::size_t>(i)] - base;
     guess.segment(stages.algebraic_offset(i), nz_) = algebraic[static_cast<std::size_t>(i)];
   }
-  const SemismoothNewtonResult solved = newton_.Solve(group_, guess);
+  SemismoothNewtonResult& solved = comparison_.solved;
+  newton_.Solve(group_, guess, &solved);
   CountNewton(solved);
   if (!solved.converged()) return false;
   comparison_residual_ = std::max(comparison_residual_, solved.residual_norm);
-  *y_end = group_.EndState(solved.solution);
+  group_.EndState(solved.solution, y_end);
   return true;
 }
 

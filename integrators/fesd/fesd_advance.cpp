@@ -77,6 +77,7 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
   std::vector<Vector>& trial_w = buffers.trial_w;
   std::size_t& num_records = buffers.num_records;
   num_records = 0;
+  for (Vector& w : trial_w) buffers.spare_w.push_back(std::move(w));  // recycled below
   trial_w.clear();
   records.reserve(static_cast<std::size_t>(*remaining));  // no regrowth per element
   trial_w.reserve(static_cast<std::size_t>(*remaining));
@@ -103,7 +104,8 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
                                      z_guess_, &guess);
     }
     solved_by_ = reduced ? &reduced_newton_ : &newton_;
-    SemismoothNewtonResult solved = (reduced ? reduced_newton_ : newton_).Solve(group_, guess);
+    SemismoothNewtonResult& solved = buffers.solved;
+    (reduced ? reduced_newton_ : newton_).Solve(group_, guess, &solved);
     if (reduced) {
       // The full element system held at the reduced solution (or its Newton went on from it).
       if (solved.converged() && solved.stats.iterations == 0) ++result_.stats.num_reduced_elements;
@@ -142,7 +144,10 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
              &records[num_records]);
       ++num_records;
     }
-    trial_w.push_back(std::move(solved.solution));  // its last use
+    if (buffers.spare_w.empty()) buffers.spare_w.emplace_back();
+    trial_w.push_back(std::move(buffers.spare_w.back()));  // a recycled vector's storage
+    buffers.spare_w.pop_back();
+    trial_w.back() = solved.solution;
     if (violation.found) break;
     y = y_next;
   }
@@ -208,7 +213,8 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
       guess = GroupGuess(trial_w, y_start, h_trial, m, h_try, v_end.v, trajectory_try);
     }
     solved_by_ = reduced ? &reduced_newton_ : &newton_;
-    SemismoothNewtonResult solved = (reduced ? reduced_newton_ : newton_).Solve(group_, guess);
+    SemismoothNewtonResult& solved = buffers.solved;
+    (reduced ? reduced_newton_ : newton_).Solve(group_, guess, &solved);
     if (reduced) {
       if (solved.converged() && solved.stats.iterations == 0) {
         result_.stats.num_reduced_elements += m;
@@ -398,7 +404,16 @@ void FesdRun::AdvanceSmooth(double step_end, int remaining) {
         result_.stage_trajectory.Append(yi[system_.clock_index()], yi.head(nx_), Vector(), h);
       }
     }
-    if (keep_polynomials_) OnCommittedElement({y_, smooth_z_, Matrix(0, s_), h, {}, false});
+    if (keep_polynomials_) {
+      ElementPolynomial polynomial = SparePolynomial();
+      polynomial.y0 = y_;
+      polynomial.increments = smooth_z_;
+      polynomial.algebraic.resize(0, s_);
+      polynomial.h = h;
+      polynomial.a_zero.clear();
+      polynomial.frozen = false;
+      OnCommittedElement(std::move(polynomial));
+    }
     y_ += smooth_z_.col(s_ - 1);
     FesdElement element;
     element.t_start = tau_;

@@ -52,17 +52,17 @@ Violation FesdRun::InsideViolation(const CollocationStages& stages, const Vector
   if (!any) return JumpDipViolation(stages, element);
   // Jump sides are not read for the watched pairs; the last stage's algebraic values fill v.
   const Vector& v = stages.stage_algebraic(s_ - 1);
-  CrossingFunctions functions;
-  functions.values = [&](double theta, Vector* values) {
+  auto values_at = [&](double theta, Vector* values) {
     b.path.Point(theta, &b.y);
     system_.EvaluateEventIndicators(b.y, v, a_zero_, Derivatives::kNone, &b.at);
     *values = b.at.values;
     return values->allFinite();
   };
-  functions.bounds = [&](double a, double c, Vector* lower, Vector* upper) {
+  auto bounds_over = [&](double a, double c, Vector* lower, Vector* upper) {
     b.path.Box(a, c, &b.box_lower, &b.box_upper);
     system_.BoundEventIndicators(b.box_lower, b.box_upper, a_zero_, lower, upper);
   };
+  const CrossingFunctionRefs functions{values_at, bounds_over};
   // Side k below minus its tolerance at theta (a crossing, then located between the start and
   // theta by bisection on the polynomial, as the bounded search would locate it).
   auto negative_at = [&](int k, double theta) {
@@ -125,7 +125,7 @@ Violation FesdRun::InsideViolation(const CollocationStages& stages, const Vector
   };
   for (int k = 0; k < np_; ++k) watched_any |= b.watched[static_cast<std::size_t>(k)] != 0;
   if (!watched_any) return with_end_dip(JumpDipViolation(stages, element));
-  Crossing crossing = SearchCrossing(b.watched, b.thresholds, functions);
+  Crossing crossing = SearchCrossing(b.watched, b.thresholds, functions, {}, &b.search);
   result_.stats.num_bound_evaluations += crossing.bound_evaluations;
   if (crossing.outcome == CrossingOutcome::kNone) {
     // Free sides without a bound (index-1 complementarity, functions without interval
@@ -133,12 +133,14 @@ Violation FesdRun::InsideViolation(const CollocationStages& stages, const Vector
     // derivatives at the element start and the stages, evaluated on the polynomial.
     functions.bounds(0.0, 1.0, &b.bound_lower, &b.bound_upper);  // (-inf: no bound)
     const std::vector<double>& nodes = Resolution().nodes;
+    bool have_node_values = false;  // the buffers keep their vectors across calls
     for (int k = 0; k < np_; ++k) {
       if (!b.watched[static_cast<std::size_t>(k)] || std::isfinite(b.bound_lower[k])) continue;
-      if (b.node_values.empty()) {
+      if (!have_node_values) {
         // Values and d/dtheta = d_y . y'(theta) at every node, for all pairs at once.
-        b.node_values.assign(nodes.size(), Vector());
-        b.node_slopes.assign(nodes.size(), Vector());
+        have_node_values = true;
+        b.node_values.resize(nodes.size());
+        b.node_slopes.resize(nodes.size());
         for (std::size_t j = 0; j < nodes.size(); ++j) {
           b.path.Point(nodes[j], &b.y);
           b.path.Derivative(nodes[j], &b.dy);
@@ -166,7 +168,6 @@ Violation FesdRun::InsideViolation(const CollocationStages& stages, const Vector
         break;
       }
     }
-    b.node_values.clear();
   }
   if (crossing.outcome == CrossingOutcome::kUnresolved) {
     ++result_.stats.num_unresolved_crossings;

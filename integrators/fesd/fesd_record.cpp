@@ -18,12 +18,28 @@ namespace moreau::internal {
 // `remaining` is the element count that fixed the lengths (h = rest / remaining).
 // Overwrites every part of *out that a record sets, reusing its vectors (a kept record: no
 // allocation per element once their sizes are reached).
+ElementPolynomial FesdRun::SparePolynomial() {
+  if (spare_polynomials_.empty()) return {};
+  ElementPolynomial polynomial = std::move(spare_polynomials_.back());
+  spare_polynomials_.pop_back();
+  return polynomial;
+}
+
+void FesdRun::RecyclePolynomials(std::vector<ElementPolynomial>* list) {
+  for (ElementPolynomial& polynomial : *list) {
+    // Moved-from ones (committed: their storage went on) have nothing to give.
+    if (polynomial.y0.size() > 0) spare_polynomials_.push_back(std::move(polynomial));
+  }
+  list->clear();
+}
+
 void FesdRun::Record(const Vector& w, double h, bool ends_at_switch,
                      const SemismoothNewtonResult& solved, int remaining, const Vector& a0,
                      const Vector& b0, SolveRecord* out) {
   const GroupSetup& setup = group_.setup();
   const int m = setup.elements;
   SolveRecord& record = *out;
+  RecyclePolynomials(&record.polynomials);
   record.ClearLists();
   record.length = 0.0;
   record.frozen = system_.TimeFrozen(a_zero_);
@@ -54,7 +70,7 @@ void FesdRun::Record(const Vector& w, double h, bool ends_at_switch,
     }
     record.elements.push_back(element);
     if (keep_polynomials_) {
-      ElementPolynomial polynomial;
+      ElementPolynomial polynomial = SparePolynomial();  // its storage, every member set here
       polynomial.y0 = y0;
       polynomial.increments.resize(ny_, s_);
       polynomial.algebraic.resize(nz_, s_);

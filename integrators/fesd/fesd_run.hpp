@@ -628,6 +628,7 @@ class FesdRun {
     IndicatorEvaluation at;
     std::vector<Vector> node_values, node_slopes;
     std::vector<double> values, slopes;
+    CrossingWorkspace search;
   };
   InsideBuffers inside_;
   // Advance's fallback: the state before the step, and the search switched off while the step
@@ -644,11 +645,19 @@ class FesdRun {
   bool check_jump_stages_ = false;        // JumpStageViolation in the trial pass and groups
   bool capture_piece_ = false;            // collect them in piece_ (adaptive attempts)
   std::vector<ElementPolynomial> piece_;  // elements committed by the current attempt
-  double comparison_residual_ = 0.0;      // largest Newton residual of comparison solves
-  struct ComparisonBuffers {  // SolveComparisonElement's vectors, kept across comparisons
+  // Polynomials no longer read (records cleared, pieces done), kept with their storage for the
+  // next elements' (Record): a steady step makes and drops them without allocating.
+  std::vector<ElementPolynomial> spare_polynomials_;
+  void RecyclePolynomials(std::vector<ElementPolynomial>* list);
+  ElementPolynomial SparePolynomial();  // a recycled one (members to overwrite), or a new one
+  double comparison_residual_ = 0.0;    // largest Newton residual of comparison solves
+  struct ComparisonBuffers {            // SolveComparisonElement's vectors, kept across comparisons
     Vector base, z;
     std::vector<Vector> states, algebraic;
     Matrix increments;
+    GroupSetup setup;
+    Vector guess;
+    SemismoothNewtonResult solved;
   };
   ComparisonBuffers comparison_;
   struct ResolutionBuffers {  // IndicatorResolution's workspace, kept across steps
@@ -717,6 +726,11 @@ class FesdRun {
     Vector guess;
     GroupSetup group_setup;  // a switch group's (every member set per attempt)
     Vector group_guess;
+    // The Newton result of the current element or group, kept so that its solution and
+    // history keep their storage across solves, and the trial solutions' vectors once
+    // trial_w is cleared, taken again for the next step's (a steady step allocates none).
+    SemismoothNewtonResult solved;
+    std::vector<Vector> spare_w;
   };
   AdvanceBuffers advance_;
 };

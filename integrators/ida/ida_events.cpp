@@ -154,49 +154,52 @@ bool IdaRun::BoundedHiddenRoot(double t_a, double t_b, double* t_negative) {
   // y(t_a + theta H) = sum_k D_k ((theta - 1) H)^k / k!, D_k the k-th derivative at t_b:
   // monomial coefficients a_d = sum_{k >= d} E_k binom(k, d) (-1)^(k - d), E_k = D_k H^k / k!.
   const double span = t_b - t_a;
-  internal::PolynomialPath path;
+  BoundedRootBuffers& b = bounded_root_;
+  internal::PolynomialPath& path = b.path;
   Matrix& a = path.coefficients();
   a.setZero(n_, order + 1);
   double scale = 1.0;  // H^k / k!
   for (int k = 0; k <= order; ++k) {
     if (k > 0) scale *= span / k;
     if (IDAGetDky(memory_, t_b, k, dky_->vector) < 0) return false;
-    const Vector e = View(dky_->vector) * scale;
+    Vector& e = b.e;
+    e.noalias() = View(dky_->vector) * scale;
     double binomial = 1.0;  // binom(k, d)
     for (int d = 0; d <= k; ++d) {
       if (d > 0) binomial = binomial * (k - d + 1) / d;
       a.col(d) += ((k - d) % 2 == 0 ? binomial : -binomial) * e;
     }
   }
-  std::vector<char> watched(static_cast<std::size_t>(m), 0);
+  std::vector<char>& watched = b.watched;
+  watched.assign(static_cast<std::size_t>(m), 0);
   for (int i = 0; i < m; ++i) watched[static_cast<std::size_t>(i)] = hidden_samples_(0, i) > 0.0;
-  const Vector thresholds = Vector::Constant(m, options_.event_tolerance);
-  Vector box_lower, box_upper, pair_lower, pair_upper, relay_lower, relay_upper;
-  internal::CrossingFunctions functions;
-  functions.values = [&](double theta, Vector* values) {
+  b.thresholds.setConstant(m, options_.event_tolerance);
+  auto values_at = [&](double theta, Vector* values) {
     return RootsAt(t_a + theta * span, values);
   };
-  functions.bounds = [&](double lo, double hi, Vector* lower, Vector* upper) {
-    path.Box(lo, hi, &box_lower, &box_upper);
+  auto bounds_over = [&](double lo, double hi, Vector* lower, Vector* upper) {
+    path.Box(lo, hi, &b.box_lower, &b.box_upper);
     lower->resize(m);
     upper->resize(m);
     if (np_ > 0) {
-      system_.BoundEventIndicators(box_lower.head(ny_), box_upper.head(ny_), a_zero_, &pair_lower,
-                                   &pair_upper);
+      system_.BoundEventIndicators(b.box_lower.head(ny_), b.box_upper.head(ny_), a_zero_,
+                                   &b.pair_lower, &b.pair_upper);
       for (int k = 0; k < np_; ++k) {
         const double offset = root_offset_[static_cast<std::size_t>(k)];
-        (*lower)[k] = pair_lower[k] + offset;
-        (*upper)[k] = pair_upper[k] + offset;
+        (*lower)[k] = b.pair_lower[k] + offset;
+        (*upper)[k] = b.pair_upper[k] + offset;
       }
     }
     if (nr_ > 0) {
-      system_.BoundMemorySwitchingFunctions(box_lower.head(ny_), box_upper.head(ny_), &relay_lower,
-                                            &relay_upper);
-      lower->tail(nr_) = relay_lower;
-      upper->tail(nr_) = relay_upper;
+      system_.BoundMemorySwitchingFunctions(b.box_lower.head(ny_), b.box_upper.head(ny_),
+                                            &b.relay_lower, &b.relay_upper);
+      lower->tail(nr_) = b.relay_lower;
+      upper->tail(nr_) = b.relay_upper;
     }
   };
-  const internal::Crossing crossing = internal::SearchCrossing(watched, thresholds, functions);
+  const internal::CrossingFunctionRefs functions{values_at, bounds_over};
+  const internal::Crossing crossing =
+      internal::SearchCrossing(watched, b.thresholds, functions, {}, &b.search);
   if (crossing.outcome == internal::CrossingOutcome::kUnresolved) {
     if (result_.stats.num_unresolved_crossings == 0) first_unresolved_time_ = t_a;
     ++result_.stats.num_unresolved_crossings;

@@ -20,6 +20,7 @@
 #include <string>
 #include <vector>
 
+#include "../common/crossing_search.hpp"
 #include "moreau/core/error.hpp"
 #include "moreau/integrators/ida.hpp"
 #include "moreau/model/lowered_system.hpp"
@@ -338,6 +339,14 @@ class IdaRun {
   Matrix hidden_samples_;
   Vector hidden_work_;
   std::vector<int> hidden_roots_;
+  // BoundedHiddenRoot's work storage, kept across steps (a step allocates nothing in it).
+  struct BoundedRootBuffers {
+    internal::PolynomialPath path;
+    std::vector<char> watched;
+    Vector e, thresholds, box_lower, box_upper, pair_lower, pair_upper, relay_lower, relay_upper;
+    internal::CrossingWorkspace search;
+  };
+  BoundedRootBuffers bounded_root_;
   double first_unresolved_time_ = 0.0;
   // The root functions without offsets at the end of the last scanned step, and its time
   // (NaN after a restart): the next step's first sample.

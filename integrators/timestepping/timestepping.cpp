@@ -197,6 +197,17 @@ bool StepTransfer(internal::CollocationStages* stages, const Vector& y0, const V
 // tolerance (FesdOptions::event_tolerance) counts them.
 constexpr double kInsideCrossingTolerance = 1e-9;
 
+// CrossesInsideStep's work storage, kept across the steps of a run (a step allocates nothing
+// once the sizes are met).
+struct InsideCheck {
+  internal::PolynomialPath path;
+  std::vector<char> watched;
+  IndicatorEvaluation at;
+  Vector thresholds, point, box_lower, box_upper, end;
+  Matrix increments;
+  internal::CrossingWorkspace search;
+};
+
 // True if a continuous free side of a pair whose status did not change over the step (from
 // `before` at its start to `after` at its end) falls below zero between the step's nodes, or
 // may (bounds that the search could not resolve): the crossing search of FESD
@@ -205,13 +216,15 @@ constexpr double kInsideCrossingTolerance = 1e-9;
 bool CrossesInsideStep(const LoweredSystem& system, const internal::CollocationStages& stages,
                        const RadauTableau& tableau, const Vector& y, const Vector& w,
                        const Vector& z, const std::vector<bool>& before,
-                       const std::vector<bool>& after, internal::PolynomialPath* path) {
+                       const std::vector<bool>& after, InsideCheck* check) {
   const int np = system.num_pairs(), ny = system.num_states(), s = tableau.stages;
-  std::vector<char> watched(static_cast<std::size_t>(np), 0);
+  std::vector<char>& watched = check->watched;
+  watched.assign(static_cast<std::size_t>(np), 0);
   bool any = false;
-  IndicatorEvaluation at;
+  IndicatorEvaluation& at = check->at;
   system.EvaluateEventIndicators(y, z, before, Derivatives::kNone, &at);
-  Vector thresholds(np);
+  Vector& thresholds = check->thresholds;
+  thresholds.resize(np);
   for (int k = 0; k < np; ++k) {
     const auto i = static_cast<std::size_t>(k);
     const ContinuousSide side = system.pairs()[i].continuous;
@@ -225,36 +238,42 @@ bool CrossesInsideStep(const LoweredSystem& system, const internal::CollocationS
     }
   }
   if (!any) return false;
-  Matrix increments(ny, s);
+  Matrix& increments = check->increments;
+  increments.resize(ny, s);
   for (int i = 0; i < s; ++i) increments.col(i) = w.segment(stages.state_offset(i), ny);
+  internal::PolynomialPath* path = &check->path;
   path->SetCollocation(tableau, y, increments);
-  Vector point, box_lower, box_upper;
-  internal::CrossingFunctions functions;
-  functions.values = [&](double theta, Vector* values) {
-    path->Point(theta, &point);
-    system.EvaluateEventIndicators(point, z, before, Derivatives::kNone, &at);
+  auto values_at = [&](double theta, Vector* values) {
+    path->Point(theta, &check->point);
+    system.EvaluateEventIndicators(check->point, z, before, Derivatives::kNone, &at);
     *values = at.values;
     return values->allFinite();
   };
-  functions.bounds = [&](double a, double c, Vector* lower, Vector* upper) {
-    path->Box(a, c, &box_lower, &box_upper);
-    system.BoundEventIndicators(box_lower, box_upper, before, lower, upper);
+  auto bounds_over = [&](double a, double c, Vector* lower, Vector* upper) {
+    path->Box(a, c, &check->box_lower, &check->box_upper);
+    system.BoundEventIndicators(check->box_lower, check->box_upper, before, lower, upper);
   };
+  const internal::CrossingFunctionRefs functions{values_at, bounds_over};
   // The end of the step must be above the thresholds too (else the status would have changed).
-  Vector end;
+  Vector& end = check->end;
   if (!functions.values(1.0, &end)) return false;
   for (int k = 0; k < np; ++k) {
     if (!(end[k] >= -thresholds[k])) watched[static_cast<std::size_t>(k)] = 0;
   }
-  return internal::SearchCrossing(watched, thresholds, functions).outcome !=
+  return internal::SearchCrossing(watched, thresholds, functions, {}, &check->search).outcome !=
          internal::CrossingOutcome::kNone;
 }
 
-std::vector<bool> PairStatuses(const PointEvaluation& e) {
-  std::vector<bool> status(static_cast<std::size_t>(e.A.size()));
+// The pair statuses at an evaluated point into *status (its storage reused).
+void PairStatuses(const PointEvaluation& e, std::vector<bool>* status) {
+  status->resize(static_cast<std::size_t>(e.A.size()));
   for (Eigen::Index k = 0; k < e.A.size(); ++k) {
-    status[static_cast<std::size_t>(k)] = PairStatusIsAZero(e.A[k], e.B[k]);
+    (*status)[static_cast<std::size_t>(k)] = PairStatusIsAZero(e.A[k], e.B[k]);
   }
+}
+std::vector<bool> PairStatuses(const PointEvaluation& e) {
+  std::vector<bool> status;
+  PairStatuses(e, &status);
   return status;
 }
 
@@ -369,13 +388,19 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
   if (derivatives) result.segment_starts = control_starts;
   Matrix transfer;
   const RadauTableau& tableau = RadauIIA(s);
-  internal::PolynomialPath path;
+  InsideCheck inside_check;
+  // The step's Newton result and its end statuses, kept across steps (their storage reused).
+  SemismoothNewtonResult solved;
+  std::vector<bool> now;
   double first_inside_crossing = 0.0;
   for (std::size_t segment = 0; segment + 1 < ends.size() && !failed; ++segment) {
     system.SetInputs(scene.InputValues(ends[segment]));
     previous_h = 0.0;  // no extrapolation across a control breakpoint
     const std::vector<double> grid =
         FixedStepGrid(ends[segment], ends[segment + 1], options.step_size);
+    // One certificate per step: no regrowth in the step loop.
+    result.step_complementarity_residual.reserve(result.step_complementarity_residual.size() +
+                                                 grid.size() - 1);
     for (std::size_t k = 0; k + 1 < grid.size(); ++k) {
       const double h = grid[k + 1] - grid[k];
       // Near-active filter: the working set for this step; the state moves to its layout.
@@ -395,13 +420,13 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
       // every stage, if the first did not converge.
       const Vector guess =
           stages.InitialGuess(y, h, previous_h > 0.0 ? &previous_w : nullptr, previous_h, z);
-      SemismoothNewtonResult solved = newton.Solve(step_system, guess);
+      newton.Solve(step_system, guess, &solved);
       AddNewtonStats(solved, &stats);
       if (!solved.converged()) {
         Vector retry = guess;
         for (int i = 0; i < s; ++i) retry.segment(stages.algebraic_offset(i), z.size()) = z;
         if (retry != guess) {
-          solved = newton.Solve(step_system, retry);
+          newton.Solve(step_system, retry, &solved);
           AddNewtonStats(solved, &stats);
         }
       }
@@ -464,9 +489,9 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
         }
         if (adjoint) tape->Add(control[segment], transfer);
       }
-      const std::vector<bool> now = PairStatuses(stages.stage(s - 1));
+      PairStatuses(stages.stage(s - 1), &now);
       if (system.num_pairs() > 0 &&
-          CrossesInsideStep(system, stages, tableau, y, w, z, statuses, now, &path)) {
+          CrossesInsideStep(system, stages, tableau, y, w, z, statuses, now, &inside_check)) {
         if (stats.num_inside_crossings == 0) first_inside_crossing = grid[k];
         ++stats.num_inside_crossings;
       }

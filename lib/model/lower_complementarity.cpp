@@ -27,7 +27,9 @@ namespace moreau::internal {
 namespace {
 
 // Row-major m x m (or n x m) matrix from a function's outputs.
-Matrix RowMajor(const Vector& values, int rows, int cols) {
+// A view (no copy): callers that need a Matrix construct one from it.
+Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> RowMajor(
+    const Vector& values, int rows, int cols) {
   return Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(
       values.data(), rows, cols);
 }
@@ -86,7 +88,7 @@ class ComplementarityBlock final : public LoweredBlock {
     } else {
       lambda_ = z.segment(z0, m_);
     }
-    const Matrix b = RowMajor(b_values_, nx_, m_);
+    const auto b = RowMajor(b_values_, nx_, m_);
     // x' += B lambda.
     out->F.head(nx_) += b * lambda_;
     // pair k: a = w_k = g_k + (D lambda)_k, b = lambda_k (the stage unknown, or its rate).
@@ -125,7 +127,8 @@ class ComplementarityBlock final : public LoweredBlock {
       return;
     }
     EvaluateFunctions(context, y, Derivatives::kNone);
-    const Matrix d = RowMajor(d_values_, m_, m_);
+    Matrix& d = d_matrix_;  // kept (a guess per element and output point)
+    d = RowMajor(d_values_, m_, m_);
     // The active set to try first: the previous values' when given, else the set of this
     // block's last guess (consecutive guesses, e.g. dense output along an element, mostly keep
     // their set). A guess only saves the LCP solve: a set is accepted only if its solution is
@@ -232,14 +235,17 @@ class ComplementarityBlock final : public LoweredBlock {
       }
       return;
     }
-    std::vector<PairRole> roles(static_cast<std::size_t>(m_));
+    std::vector<PairRole>& roles = roles_;
+    roles.resize(static_cast<std::size_t>(m_));
     for (int k = 0; k < m_; ++k) {
       roles[static_cast<std::size_t>(k)] =
           a_zero[static_cast<std::size_t>(k0 + k)] ? PairRole::kAZero : PairRole::kBZero;
     }
     ConsistentValues(roles, derivatives);
-    const Matrix d = RowMajor(d_values_, m_, m_);
-    const Vector w = g_ + d * lambda_bar_;
+    const auto d = RowMajor(d_values_, m_, m_);
+    Vector& w = w_;
+    w.noalias() = d * lambda_bar_;
+    w += g_;
     Matrix w_jacobian;
     if (with_states) w_jacobian = jac_g_ + ContractRows(jac_d_, lambda_bar_) + d * d_lambda_bar_;
     for (int k = 0; k < m_; ++k) {
@@ -281,9 +287,10 @@ class ComplementarityBlock final : public LoweredBlock {
   }
 
   // The block's slice of the system's pair roles.
-  std::vector<PairRole> Roles(const std::vector<PairRole>& roles) const {
+  const std::vector<PairRole>& Roles(const std::vector<PairRole>& roles) {
     const auto first = roles.begin() + layout.pair_offset;
-    return std::vector<PairRole>(first, first + m_);
+    roles_.assign(first, first + m_);
+    return roles_;
   }
 
   // g, B, D at (x, u, t, p), with Jacobians (columns x, [u], t, [p]) unless kNone.
@@ -352,26 +359,32 @@ class ComplementarityBlock final : public LoweredBlock {
   // lambda on the active set S: D_SS lambda_S = -g_S, lambda = 0 elsewhere; true if the result
   // is complementary (lambda_S >= 0, w >= 0 off S) up to round-off.
   bool SolveOnActiveSet(const Matrix& d, const std::vector<bool>& active, Vector* lambda) const {
-    std::vector<int> s;
+    std::vector<int>& s = active_indices_;
+    s.clear();
     for (int k = 0; k < m_; ++k) {
       if (active[static_cast<std::size_t>(k)]) s.push_back(k);
     }
     lambda->setZero(m_);
     const int n = static_cast<int>(s.size());
     if (n > 0) {
-      Matrix d_ss(n, n);
-      Vector rhs(n);
+      Matrix& d_ss = d_ss_;
+      Vector& rhs = rhs_;
+      d_ss.resize(n, n);
+      rhs.resize(n);
       for (int i = 0; i < n; ++i) {
         rhs[i] = -g_[s[static_cast<std::size_t>(i)]];
         for (int j = 0; j < n; ++j)
           d_ss(i, j) = d(s[static_cast<std::size_t>(i)], s[static_cast<std::size_t>(j)]);
       }
-      Eigen::FullPivLU<Matrix> lu(d_ss);
+      Eigen::FullPivLU<Matrix>& lu = lu_;
+      lu.compute(d_ss);
       if (!lu.isInvertible()) return false;
-      const Vector solved = lu.solve(rhs);
-      for (int i = 0; i < n; ++i) (*lambda)[s[static_cast<std::size_t>(i)]] = solved[i];
+      solved_ = lu.solve(rhs);
+      for (int i = 0; i < n; ++i) (*lambda)[s[static_cast<std::size_t>(i)]] = solved_[i];
     }
-    const Vector w = g_ + d * *lambda;
+    Vector& w = w_;
+    w.noalias() = d * *lambda;
+    w += g_;
     const double scale = 1.0 + g_.lpNorm<Eigen::Infinity>();
     for (int k = 0; k < m_; ++k) {
       const double free = active[static_cast<std::size_t>(k)] ? (*lambda)[k] : w[k];
@@ -386,31 +399,35 @@ class ComplementarityBlock final : public LoweredBlock {
   // g_S + D_SS lambda_S = 0). A singular D_SS gives NaN (the solver then reports failure).
   // Expects EvaluateFunctions at the same point and derivative level.
   void ConsistentValues(const std::vector<PairRole>& roles, Derivatives derivatives) {
-    std::vector<int> s;
+    std::vector<int>& s = active_indices_;
+    s.clear();
     for (int k = 0; k < m_; ++k) {
       if (roles[static_cast<std::size_t>(k)] == PairRole::kAZero) s.push_back(k);
     }
     const int n = static_cast<int>(s.size());
-    const Matrix d = RowMajor(d_values_, m_, m_);
+    const auto d = RowMajor(d_values_, m_, m_);
     lambda_bar_.setZero(m_);
     const bool with_states = derivatives != Derivatives::kNone;
     if (with_states) d_lambda_bar_.setZero(m_, jac_g_.cols());
     if (n == 0) return;
-    Matrix d_ss(n, n);
-    Vector rhs(n);
+    Matrix& d_ss = d_ss_;
+    Vector& rhs = rhs_;
+    d_ss.resize(n, n);
+    rhs.resize(n);
     for (int i = 0; i < n; ++i) {
       rhs[i] = -g_[s[static_cast<std::size_t>(i)]];
       for (int j = 0; j < n; ++j)
         d_ss(i, j) = d(s[static_cast<std::size_t>(i)], s[static_cast<std::size_t>(j)]);
     }
-    const Eigen::FullPivLU<Matrix> lu(d_ss);
+    Eigen::FullPivLU<Matrix>& lu = lu_;
+    lu.compute(d_ss);
     if (!lu.isInvertible()) {
       lambda_bar_.setConstant(std::numeric_limits<double>::quiet_NaN());
       if (with_states) d_lambda_bar_.setConstant(std::numeric_limits<double>::quiet_NaN());
       return;
     }
-    const Vector solved = lu.solve(rhs);
-    for (int i = 0; i < n; ++i) lambda_bar_[s[static_cast<std::size_t>(i)]] = solved[i];
+    solved_ = lu.solve(rhs);
+    for (int i = 0; i < n; ++i) lambda_bar_[s[static_cast<std::size_t>(i)]] = solved_[i];
     if (!with_states) return;
     const Matrix partial = jac_g_ + ContractRows(jac_d_, lambda_bar_);
     Matrix partial_s(n, partial.cols());
@@ -429,6 +446,15 @@ class ComplementarityBlock final : public LoweredBlock {
   Vector x_, g_, b_values_, d_values_, lambda_, lambda_bar_;
   Vector bound_lower_, bound_upper_;  // IndicatorBounds' enclosures of g
   std::vector<bool> guess_active_;    // InitialGuess: the active set of the last guess
+  // Scratch kept across evaluations (every element evaluates the block many times): the
+  // block's slice of the roles, and the indices of an active set.
+  std::vector<PairRole> roles_;
+  mutable std::vector<int> active_indices_;
+  // The active-set solves' matrices and LU (FullPivLU::compute reuses its storage).
+  Matrix d_matrix_;
+  mutable Matrix d_ss_;
+  mutable Vector rhs_, solved_, w_;
+  mutable Eigen::FullPivLU<Matrix> lu_;
   Matrix jac_g_, jac_b_, jac_d_, d_lambda_bar_, hessian_;
   ArgumentMatrix directions_;
 };

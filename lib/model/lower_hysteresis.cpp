@@ -459,6 +459,15 @@ class HysteresisBlock final : public RelayBlockBase {
     return targets;
   }
 
+  bool AnyMemoryTarget(const std::vector<bool>& a_zero, std::size_t offset) const override {
+    for (int i = 0; i < num_relays_; ++i) {
+      // RelayFrozen: neither mode's theta free (both kept at zero).
+      const std::size_t relay = offset + static_cast<std::size_t>(kRegions * i);
+      if (a_zero[relay + std::size_t{kModeA}] && a_zero[relay + std::size_t{kModeB}]) return true;
+    }
+    return false;
+  }
+
   // Some theta of every relay must be free: they sum to one.
   bool AdmitsRoles(const std::vector<PairRole>& roles) const override {
     for (int i = 0; i < num_relays_; ++i) {

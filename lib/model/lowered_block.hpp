@@ -195,6 +195,12 @@ class LoweredBlock {
   // Per relay of the block: -1 while it is in a mode (physical time runs), otherwise the
   // memory value (0 or 1) it is travelling to while physical time is frozen.
   virtual std::vector<int> MemoryTargets(const std::vector<bool>& /*a_zero*/) const { return {}; }
+  // True if some MemoryTargets entry is >= 0, read from the system's statuses `a_zero` at the
+  // block's pair offset `offset` (LoweredSystem::TimeFrozen asks this every element: without
+  // the block-local copy and the targets MemoryTargets allocates).
+  virtual bool AnyMemoryTarget(const std::vector<bool>& /*a_zero*/, std::size_t /*offset*/) const {
+    return false;
+  }
   // Events implied by the statuses decided at the initial time (a relay whose memory is
   // inconsistent with its input and is re-initialized while time is frozen).
   virtual std::vector<Event> InitialEvents(double /*t*/, const ConstVectorRef& /*y*/,

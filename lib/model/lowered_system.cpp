@@ -471,10 +471,10 @@ void LoweredSystem::SwitchMemory(int relay, Vector* y) const {
 }
 
 bool LoweredSystem::TimeFrozen(const std::vector<bool>& a_zero) const {
-  for (int target : MemoryTargets(a_zero)) {
-    if (target >= 0) return true;
-  }
-  return false;
+  MOREAU_ASSERT(static_cast<int>(a_zero.size()) == num_pairs_, "wrong number of statuses");
+  if (clock_rate_block_ < 0) return false;
+  const auto& block = *blocks_[static_cast<std::size_t>(clock_rate_block_)];
+  return block.AnyMemoryTarget(a_zero, static_cast<std::size_t>(block.layout.pair_offset));
 }
 
 std::vector<Event> LoweredSystem::InitialEvents(double t, const Vector& y,
@@ -550,6 +550,10 @@ std::vector<Event> LoweredSystem::StatusEvents(double t, const std::vector<bool>
                                                const std::vector<bool>& after) const {
   MOREAU_ASSERT(before.size() == pairs_.size() && after.size() == pairs_.size(),
                 "StatusEvents: wrong number of pair statuses");
+  // Every block's events are changes of its own statuses: none without a change (and no
+  // per-block copies of the statuses, which a step loop calling this every step would
+  // allocate).
+  if (before == after) return {};
   std::vector<Event> events;
   for (const auto& block : blocks_) {
     for (Event& event :

@@ -805,7 +805,8 @@ class VelocitySolver {
     problem_.Reset(y, v0, point);
     bool converged = false;
     if (!linear_ || !linear_step_.Solve(&problem_, newton_.options(), v0, v)) {
-      const SemismoothNewtonResult result = newton_.Solve(problem_, v0);
+      SemismoothNewtonResult& result = result_;
+      newton_.Solve(problem_, v0, &result);
       *v = result.solution;
       converged = result.converged();
       if (!converged && (result.status == NewtonStatus::kLineSearchFailed ||
@@ -845,6 +846,7 @@ class VelocitySolver {
   static constexpr int kEntries = 4;
   VelocitySystem problem_;
   SemismoothNewton newton_;
+  SemismoothNewtonResult result_;  // kept: its storage serves every solve
   const bool linear_;
   Entry entries_[kEntries];
   int next_ = 0;

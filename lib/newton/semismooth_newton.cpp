@@ -43,7 +43,9 @@ void SemismoothNewtonOptions::Validate() const {
                   polish_ratio);
 }
 
-std::string ToString(NewtonStatus status) {
+namespace {
+// The status's name (a literal: FailureMessage appends it without a temporary string).
+const char* StatusName(NewtonStatus status) {
   switch (status) {
     case NewtonStatus::kConverged:
       return "converged";
@@ -60,6 +62,9 @@ std::string ToString(NewtonStatus status) {
   }
   return "?";
 }
+}  // namespace
+
+std::string ToString(NewtonStatus status) { return StatusName(status); }
 
 SemismoothNewtonStats& SemismoothNewtonStats::operator+=(const SemismoothNewtonStats& other) {
   iterations += other.iterations;
@@ -87,19 +92,23 @@ namespace {
 // with precision 6 prints it (%.6g). Built with snprintf rather than an ostringstream: failed
 // solves are routine (the velocity-level enumeration's rejected trials, the FESD trial
 // elements), and the stream's construction cost more than the solve of a small system.
-std::string FailureMessage(NewtonStatus status, long iterations, std::string_view reason,
-                           double norm) {
+// Written into *message in place: a result kept across solves keeps the string's capacity, so
+// that a routine failure in a step loop does not allocate once the capacity suffices.
+void FailureMessage(NewtonStatus status, long iterations, std::string_view reason, double norm,
+                    std::string* message) {
   char number[32];
   std::snprintf(number, sizeof(number), "%.6g", norm);
-  std::string message = ToString(status);
-  message += " after ";
-  message += std::to_string(iterations);
-  message += " iterations: ";
-  message += reason;
-  message += " (||S Phi||_inf = ";
-  message += number;
-  message += ')';
-  return message;
+  char count[24];
+  std::snprintf(count, sizeof(count), "%ld", iterations);
+  message->clear();
+  *message += StatusName(status);
+  *message += " after ";
+  *message += count;
+  *message += " iterations: ";
+  *message += reason;
+  *message += " (||S Phi||_inf = ";
+  *message += number;
+  *message += ')';
 }
 
 // Relative decrease of the merit below which a window of iterations counts as no progress.
@@ -130,6 +139,7 @@ struct Point {
 struct SemismoothNewton::Workspace {
   Point current, trial;
   Vector scaled_phi, gradient, direction, trial_w;
+  Vector da_min, db_min, rhs;  // the active-set step's
   std::vector<double> history, merits;
 };
 
@@ -142,6 +152,13 @@ SemismoothNewton::~SemismoothNewton() = default;
 
 SemismoothNewtonResult SemismoothNewton::Solve(MixedComplementaritySystem& system,
                                                const Vector& initial_guess) {
+  SemismoothNewtonResult result;
+  Solve(system, initial_guess, &result);
+  return result;
+}
+
+void SemismoothNewton::Solve(MixedComplementaritySystem& system, const Vector& initial_guess,
+                             SemismoothNewtonResult* result_out) {
   const int n = system.num_unknowns();
   const int n_eq = system.num_equations();
   const int n_pairs = system.num_pairs();
@@ -151,7 +168,9 @@ SemismoothNewtonResult SemismoothNewton::Solve(MixedComplementaritySystem& syste
     solver_ = MakeLinearSolver(options_.linear_solver, n, system.EstimatedJacobianNonzeros());
     solver_size_ = n;
   }
-  SemismoothNewtonResult result;
+  SemismoothNewtonResult& result = *result_out;
+  result.stats = {};
+  result.message.clear();
   SemismoothNewtonStats& stats = result.stats;
 
   // Evaluates the residual with a given NCP function (the line search always measures the
@@ -193,6 +212,12 @@ SemismoothNewtonResult SemismoothNewton::Solve(MixedComplementaritySystem& syste
   std::vector<double>& merits = ws.merits;
   history.clear();
   merits.clear();
+  // One entry per iterate: sized for the longest solve at the first, so that no later solve
+  // of a step loop grows them (nor the result's copy of the history).
+  const auto most_iterates = static_cast<std::size_t>(options_.max_iterations) + 1;
+  history.reserve(most_iterates);
+  merits.reserve(most_iterates);
+  result.residual_history.reserve(most_iterates);
   auto finish = [&](NewtonStatus status, const Point& p, std::string_view reason) {
     result.status = status;
     result.solution = p.w;
@@ -206,11 +231,8 @@ SemismoothNewtonResult SemismoothNewton::Solve(MixedComplementaritySystem& syste
       }
     }
     if (status != NewtonStatus::kConverged) {
-      result.message = FailureMessage(status, stats.iterations, reason, p.norm);
+      FailureMessage(status, stats.iterations, reason, p.norm, &result.message);
     }
-    // Moved, not copied (every return of Solve is `return finish(...)`, the last use of
-    // result): copying would allocate the solution and the history once more per solve.
-    return std::move(result);
   };
   // Factorizes the generalized Jacobian for derivatives (da, db) at the last evaluated point.
   auto factorize = [&](const Vector& da, const Vector& db) {
@@ -268,16 +290,22 @@ SemismoothNewtonResult SemismoothNewton::Solve(MixedComplementaritySystem& syste
     if (static_cast<int>(merits.size()) > window &&
         current.merit > (1.0 - kStagnationDecrease) *
                             merits[merits.size() - 1 - static_cast<std::size_t>(window)]) {
-      return finish(
-          NewtonStatus::kStagnated, current,
-          "merit fell by less than a relative 1e-3 over " + std::to_string(window) + " iterations");
+      char reason[96];  // (on the stack: no temporary string)
+      std::snprintf(reason, sizeof(reason),
+                    "merit fell by less than a relative 1e-3 over %d iterations", window);
+      return finish(NewtonStatus::kStagnated, current, reason);
     }
     ++stats.iterations;
 
     // Active-set (min-map) step when FB-Newton contracts only linearly.
     const bool slow = last_step_full && current.norm > options_.polish_ratio * previous_norm;
     if (options_.active_set_polish && slow && n_pairs > 0) {
-      Vector da_min(n_pairs), db_min(n_pairs), rhs(n);
+      Vector& da_min = ws.da_min;
+      Vector& db_min = ws.db_min;
+      Vector& rhs = ws.rhs;
+      da_min.resize(n_pairs);
+      db_min.resize(n_pairs);
+      rhs.resize(n);
       rhs.head(n_eq) = -current.r;
       for (int i = 0; i < n_pairs; ++i) {
         const NcpValue v = MinMap(current.a[i], current.b[i]);
@@ -290,7 +318,8 @@ SemismoothNewtonResult SemismoothNewton::Solve(MixedComplementaritySystem& syste
         if (rhs.allFinite()) {
           // Values only: the system's derivatives must stay those of `current` unless the
           // step is accepted (AssembleJacobian uses the last point evaluated with them).
-          evaluate(current.w + rhs, false, options_.ncp_function, &trial);
+          trial_w.noalias() = current.w + rhs;
+          evaluate(trial_w, false, options_.ncp_function, &trial);
           if (trial.valid && trial.norm < options_.polish_ratio * current.norm) {
             evaluate(trial.w, true, options_.ncp_function, &trial);
             ++stats.polish_steps;
@@ -369,9 +398,10 @@ SemismoothNewtonResult SemismoothNewton::Solve(MixedComplementaritySystem& syste
       t *= options_.backtrack;
     }
     if (!accepted) {
-      return finish(NewtonStatus::kLineSearchFailed, current,
-                    "no step length >= " + std::to_string(options_.min_step) +
-                        " decreases the merit sufficiently");
+      char reason[96];  // std::to_string's %f, on the stack
+      std::snprintf(reason, sizeof(reason), "no step length >= %f decreases the merit sufficiently",
+                    options_.min_step);
+      return finish(NewtonStatus::kLineSearchFailed, current, reason);
     }
     previous_norm = current.norm;
     last_step_full = t == 1.0 && !use_gradient;

@@ -172,6 +172,12 @@ class SemismoothNewton {
   /// Solves from `initial_guess`. With options().factorize_at_solution the generalized
   /// Jacobian at the solution stays factorized (see last_jacobian_solver).
   SemismoothNewtonResult Solve(MixedComplementaritySystem& system, const Vector& initial_guess);
+  /// The same solve into `result`, whose members are overwritten (the same values as the
+  /// returned result of the overload above) but keep their storage: a step loop that holds one
+  /// result across solves of one size allocates nothing per solve (unless it fails: the
+  /// message is built then).
+  void Solve(MixedComplementaritySystem& system, const Vector& initial_guess,
+             SemismoothNewtonResult* result);
   /// The linear solver holding the last factorization (at the solution after a converged solve
   /// with factorize_at_solution).
   const LinearSolver* last_jacobian_solver() const { return solver_.get(); }
