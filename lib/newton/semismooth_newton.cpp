@@ -213,8 +213,11 @@ void SemismoothNewton::Solve(MixedComplementaritySystem& system, const Vector& i
   history.clear();
   merits.clear();
   // One entry per iterate: sized for the longest solve at the first, so that no later solve
-  // of a step loop grows them (nor the result's copy of the history).
-  const auto most_iterates = static_cast<std::size_t>(options_.max_iterations) + 1;
+  // of a step loop grows them (nor the result's copy of the history). Capped, so that a huge
+  // max_iterations does not reserve megabytes up front: longer solves grow them as they go.
+  constexpr std::size_t kReservedIterates = 1024;
+  const auto most_iterates =
+      std::min(static_cast<std::size_t>(options_.max_iterations) + 1, kReservedIterates);
   history.reserve(most_iterates);
   merits.reserve(most_iterates);
   result.residual_history.reserve(most_iterates);
