@@ -6,11 +6,13 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <iostream>
 
 #include "../problems/reference_problems.hpp"
 #include "moreau/core/convergence.hpp"
 #include "moreau/integrators/fesd.hpp"
 #include "moreau/integrators/ida.hpp"
+#include "moreau/integrators/simulate.hpp"
 #include "moreau/integrators/timestepping.hpp"
 
 namespace moreau {
@@ -77,6 +79,28 @@ TEST(RectifierTest, SwitchTimesMatchTheClosedFormWithFesd) {
   }
   // The final state too (FESD s = 3 with h = 1e-5 measured 1.3e-9 V; order 5).
   EXPECT_LE((result.final_state - exact.State(horizon)).lpNorm<Eigen::Infinity>(), 1e-7);
+}
+
+// Acceptance of right-by-default: `moreau run rectifier` with no options (error-controlled FESD
+// at the scene's own defaults) succeeds, and every diode switch over its horizon is within
+// kDefaultSwitchPeriods of a period of the closed form.
+constexpr double kDefaultSwitchPeriods = 1e-6;
+
+TEST(RectifierTest, DefaultRunSwitchesWithinAMillionthOfAPeriod) {
+  const Rectifier exact = Rectifier::OfScene();
+  const Scene scene = MakeScene("rectifier");
+  const SimulationResult result = Simulate(scene, SimulationSettings{});
+  ASSERT_TRUE(result.success) << result.status << ": " << result.message;
+  const std::vector<double> switches = exact.SwitchTimes(scene.final_time);
+  ASSERT_EQ(result.events.size(), switches.size());
+  double worst = 0.0;
+  for (std::size_t k = 0; k < switches.size(); ++k) {
+    EXPECT_EQ(result.events[k].what, "diode.D") << k;
+    worst = std::max(worst, std::fabs(result.events[k].t - switches[k]) / exact.Period());
+  }
+  EXPECT_LE(worst, kDefaultSwitchPeriods) << "largest switch-time error in periods";
+  std::cout << "default rectifier: " << switches.size() << " switches, largest error " << worst
+            << " periods\n";
 }
 
 struct OrderCase {
