@@ -298,6 +298,15 @@ void SemismoothNewton::Solve(MixedComplementaritySystem& system, const Vector& i
                     "merit fell by less than a relative 1e-3 over %d iterations", window);
       return finish(NewtonStatus::kStagnated, current, reason);
     }
+    // Checked before the next factorization, which a crawl would not use.
+    if (gradient_streak >= kMaxGradientStreak) {
+      char reason[96];
+      std::snprintf(reason, sizeof(reason),
+                    "no Newton descent direction in %d consecutive iterations (steepest descent "
+                    "only)",
+                    kMaxGradientStreak);
+      return finish(NewtonStatus::kStagnated, current, reason);
+    }
     ++stats.iterations;
 
     // Active-set (min-map) step when FB-Newton contracts only linearly.
@@ -369,11 +378,6 @@ void SemismoothNewton::Solve(MixedComplementaritySystem& system, const Vector& i
       }
     }
     gradient_streak = use_gradient ? gradient_streak + 1 : 0;
-    if (gradient_streak > kMaxGradientStreak) {
-      return finish(NewtonStatus::kStagnated, current,
-                    "no Newton descent direction in " + std::to_string(kMaxGradientStreak) +
-                        " consecutive iterations (steepest descent only)");
-    }
     if (use_gradient) {
       ++stats.gradient_steps;
       if (gradient.lpNorm<Eigen::Infinity>() <=
