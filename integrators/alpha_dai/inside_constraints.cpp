@@ -111,12 +111,11 @@ Crossing InsideConstraintSearch::Search(const AlphaStepPoint& start, const Alpha
   c.col(3).head(nx) = 2.0 * (x0 - x1) + h * (f0 + f1);
   c.col(0).tail(nq) = u0;
   c.col(1).tail(nq) = u1 - u0;
-  CrossingFunctions functions;
-  functions.values = [&](double theta, Vector* values) {
+  auto values_at = [&](double theta, Vector* values) {
     path_.Point(theta, &y_);
     return Values(y_.head(nx), y_.tail(nq), start.t + theta * h, values);
   };
-  functions.bounds = [&](double a, double b, Vector* lower, Vector* upper) {
+  auto bounds_over = [&](double a, double b, Vector* lower, Vector* upper) {
     path_.Box(a, b, &box_lower_, &box_upper_);
     x_lower_ = box_lower_.head(nx) - margin;
     x_upper_ = box_upper_.head(nx) + margin;
@@ -124,18 +123,18 @@ Crossing InsideConstraintSearch::Search(const AlphaStepPoint& start, const Alpha
     // in this interval.)
     Bounds(start.t + a * h, start.t + b * h, lower, upper);
   };
-  Vector lower, upper;
-  functions.bounds(0.0, 1.0, &lower, &upper);
+  const CrossingFunctionRefs functions{values_at, bounds_over};
+  functions.bounds(0.0, 1.0, &step_lower_, &step_upper_);
   bool suspicious = false;
   for (int k = 0; k < nphi_; ++k) {
-    suspicious |= watched[static_cast<std::size_t>(k)] && !(lower[k] >= -tolerance);
+    suspicious |= watched[static_cast<std::size_t>(k)] && !(step_lower_[k] >= -tolerance);
   }
   if (!suspicious) {
     Crossing none;
     none.bound_evaluations = 1;
     return none;
   }
-  Crossing crossing = SearchCrossing(watched, thresholds(), functions);
+  Crossing crossing = SearchCrossing(watched, thresholds(), functions, {}, &search_);
   ++crossing.bound_evaluations;  // the whole step's
   return crossing;
 }

@@ -66,6 +66,8 @@ class InsideConstraintSearch {
   int nphi_ = 0;
   PolynomialPath path_;
   Vector full_inputs_, y_, box_lower_, box_upper_, x_lower_, x_upper_, value_;
+  Vector step_lower_, step_upper_;  // the whole step's bound
+  CrossingWorkspace search_;
   std::vector<Interval> x_box_, u_box_, p_box_, out_box_;
 };
 

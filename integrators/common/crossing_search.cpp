@@ -91,14 +91,6 @@ void CrossingWorkspace::Reserve(int functions, const CrossingSearchLimits& limit
 }
 
 Crossing SearchCrossing(const std::vector<char>& watched, const Vector& thresholds,
-                        const CrossingFunctions& functions, const CrossingSearchLimits& limits) {
-  CrossingWorkspace workspace;
-  return SearchCrossing(watched, thresholds,
-                        CrossingFunctionRefs{functions.values, functions.bounds}, limits,
-                        &workspace);
-}
-
-Crossing SearchCrossing(const std::vector<char>& watched, const Vector& thresholds,
                         const CrossingFunctionRefs& functions, const CrossingSearchLimits& limits,
                         CrossingWorkspace* workspace) {
   Crossing crossing;

@@ -15,7 +15,6 @@
 // reported as unresolved, except next to the path's ends, where the values are known: a
 // dip there within 2^-30 of the step is not a crossing the step could resolve anyway.
 
-#include <functional>
 #include <type_traits>
 #include <utility>
 #include <vector>
@@ -71,7 +70,7 @@ struct Crossing {
 // A non-owning reference to a callable (std::function_ref of C++26, reduced to what the search
 // needs): the search is called per element or step, and a std::function holding a lambda that
 // captures more than two pointers allocates on every construction. The callable must outlive
-// the reference: callers name their lambdas and build CrossingFunctions from them.
+// the reference: callers name their lambdas and build CrossingFunctionRefs from them.
 template <typename Signature>
 class FunctionRef;
 template <typename R, typename... Args>
@@ -91,17 +90,13 @@ class FunctionRef<R(Args...)> {
   R (*call_)(void*, Args...);
 };
 
-// The functions f_k(theta) along a path and their enclosures over intervals of theta.
-struct CrossingFunctions {
-  // Values at theta into *values (all functions); false if not evaluable there.
-  std::function<bool(double theta, Vector* values)> values;
-  // Enclosures over [a, b] (entries -inf, +inf where none).
-  std::function<void(double a, double b, Vector* lower, Vector* upper)> bounds;
-};
-// The same by non-owning reference, for callers that search every step (no std::function
-// made per search): the callables must outlive it.
+// The functions f_k(theta) along a path and their enclosures over intervals of theta, by
+// non-owning reference (callers search every step or element: no std::function is made per
+// search); the callables must outlive it.
 struct CrossingFunctionRefs {
+  // Values at theta into *values (all functions); false if not evaluable there.
   FunctionRef<bool(double theta, Vector* values)> values;
+  // Enclosures over [a, b] (entries -inf, +inf where none).
   FunctionRef<void(double a, double b, Vector* lower, Vector* upper)> bounds;
 };
 
@@ -119,7 +114,7 @@ struct CrossingSearchLimits {
 };
 
 // SearchCrossing's work storage, kept by a caller that searches every step so that the search
-// allocates nothing once the sizes are met (a default one is made per call otherwise).
+// allocates nothing once the sizes are met.
 struct CrossingWorkspace {
   struct Node {  // an interval [a, b] of theta at depth `depth` of the bisection tree
     double a, b;
@@ -137,10 +132,8 @@ struct CrossingWorkspace {
 // -thresholds[k], given that every watched function is at least -thresholds[k] at theta = 0
 // and at theta = 1 (the step's ends are checked by the caller). Functions whose bound is
 // (-inf, +inf) everywhere are checked by the samples only.
-Crossing SearchCrossing(const std::vector<char>& watched, const Vector& thresholds,
-                        const CrossingFunctions& functions,
-                        const CrossingSearchLimits& limits = {});
-// The same search with the functions by reference, in the caller's workspace.
+// The search runs in the caller's workspace (kept across searches: no allocation once its
+// sizes are met).
 Crossing SearchCrossing(const std::vector<char>& watched, const Vector& thresholds,
                         const CrossingFunctionRefs& functions, const CrossingSearchLimits& limits,
                         CrossingWorkspace* workspace);
