@@ -451,6 +451,10 @@ FesdResult FesdRun::Finish(const RunClock& run_clock) {
     result_.warnings.push_back(warning.str());
   }
   if (result_.elements.empty()) result_.stats.min_element_length = 0.0;
+  // Error-controlled runs reserved their results for kReservedSteps steps
+  // (IntegrateAdaptive): a shorter run gives the rest back.
+  result_.elements.shrink_to_fit();
+  result_.step_sequence.shrink_to_fit();
   result_.stats.num_factorizations = factorizations_;
   result_.stats.cpu_seconds = run_clock.CpuSeconds();
   return std::move(result_);
