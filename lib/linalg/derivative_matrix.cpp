@@ -1,8 +1,6 @@
 #include "moreau/linalg/derivative_matrix.hpp"
 
-#include <cstddef>
-#include <vector>
-
+#include "compress_entries.hpp"
 #include "dense_columns.hpp"
 #include "moreau/core/error.hpp"
 
@@ -119,70 +117,10 @@ void DerivativeMatrix::Scale(double factor) {
   for (Entry& entry : entries_) entry.v *= factor;
 }
 
-namespace {
-// Finalize's scratch: entry positions sorted by row, then by column, and a count per row or
-// column. Per thread, not per matrix: evaluations hold dozens of derivative matrices and a
-// thread finalizes one at a time; kept, so that a steady sequence of evaluations does not
-// allocate.
-struct FinalizeScratch {
-  std::vector<int> count, by_row, by_column;
-};
-thread_local FinalizeScratch finalize_scratch;
-}  // namespace
-
 void DerivativeMatrix::Finalize() {
   if (!sparse_ || finalized_) return;
   if (!sparse_matrix_) sparse_matrix_.emplace();
-  // What Eigen's setFromTriplets computes (compressed columns, rows increasing in each
-  // column, duplicates summed from left to right in the order added), without its two
-  // temporary matrices per call: the matrix's storage is reused (its capacity kept).
-  // Two stable counting sorts order the entries by (column, row, order added).
-  FinalizeScratch& scratch = finalize_scratch;
-  const auto n = entries_.size();
-  scratch.by_row.resize(n);
-  scratch.by_column.resize(n);
-  std::vector<int>& count = scratch.count;
-  count.assign(static_cast<std::size_t>(rows_) + 1, 0);
-  for (const Entry& e : entries_) ++count[static_cast<std::size_t>(e.r) + 1];
-  for (int r = 0; r < rows_; ++r) count[r + 1] += count[r];
-  for (std::size_t i = 0; i < n; ++i) {
-    scratch.by_row[count[entries_[i].r]++] = static_cast<int>(i);
-  }
-  count.assign(static_cast<std::size_t>(cols_) + 1, 0);
-  for (const Entry& e : entries_) ++count[static_cast<std::size_t>(e.c) + 1];
-  for (int c = 0; c < cols_; ++c) count[c + 1] += count[c];
-  for (int i : scratch.by_row) scratch.by_column[count[entries_[i].c]++] = i;
-  // Distinct (column, row) entries per column, then the compressed matrix.
-  auto repeats = [&](std::size_t k) {  // the sorted entry k has the (column, row) of k - 1
-    if (k == 0) return false;
-    const Entry& a = entries_[scratch.by_column[k - 1]];
-    const Entry& b = entries_[scratch.by_column[k]];
-    return a.c == b.c && a.r == b.r;
-  };
-  SparseMatrix& m = *sparse_matrix_;
-  m.resize(rows_, cols_);  // outer indices zero, no entries (their storage kept)
-  int* outer = m.outerIndexPtr();
-  Eigen::Index distinct = 0;
-  for (std::size_t k = 0; k < n; ++k) {
-    if (repeats(k)) continue;
-    ++outer[entries_[scratch.by_column[k]].c + 1];
-    ++distinct;
-  }
-  for (int c = 0; c < cols_; ++c) outer[c + 1] += outer[c];
-  m.resizeNonZeros(distinct);
-  int* inner = m.innerIndexPtr();
-  double* values = m.valuePtr();
-  Eigen::Index last = -1;
-  for (std::size_t k = 0; k < n; ++k) {
-    const Entry& e = entries_[scratch.by_column[k]];
-    if (repeats(k)) {
-      values[last] += e.v;
-    } else {
-      ++last;
-      inner[last] = e.r;
-      values[last] = e.v;
-    }
-  }
+  internal::CompressEntries(entries_, rows_, cols_, &*sparse_matrix_);
   finalized_ = true;
 }
 
