@@ -227,9 +227,11 @@ const Options kNoTrajectory = {{"record_trajectory", SettingValue{false}}};
 // themselves, the status decisions and velocity-level problems of a switch, and the first
 // meeting of a working set (element systems configured anew, sparsity detection of a mode's
 // functions, solvers made for a new size). The crowd's element systems change their working
-// set and pattern with the agents' contacts, which makes new plans and factorization patterns
-// at almost every step. Fixed-step runs reserve their results (elements) for the grid,
-// error-controlled runs for their first 1024 steps (beyond, they grow by doubling).
+// set (near-active filter) and pattern with the agents' approach and contacts, which makes new
+// layouts, plans and factorization patterns at those steps (30 of fesd_crowd's 91 steady
+// steps, 33 of timestepping_crowd's 440); its steps with neither an event nor a working-set
+// change allocate nothing (asserted). Fixed-step runs reserve their results (elements) for the
+// grid, error-controlled runs for their first 1024 steps (beyond, they grow by doubling).
 Options With(Options options, const std::string& key, SettingValue value) {
   options[key] = std::move(value);
   return options;
@@ -242,7 +244,7 @@ INSTANTIATE_TEST_SUITE_P(
         Case{"fesd_S3", "S3", "fesd", With(kNoTrajectory, "h", 0.1), 0.78, true},
         Case{"fesd_H1", "H1", "fesd", With(kNoTrajectory, "h", 0.1), 0.56, true},
         Case{"fesd_rectifier", "rectifier", "fesd", With(kNoTrajectory, "h", 1e-4), 5.97, true},
-        Case{"fesd_crowd", "crowd:N=16", "fesd", With(kNoTrajectory, "h", 0.1), 1840.22},
+        Case{"fesd_crowd", "crowd:N=16", "fesd", With(kNoTrajectory, "h", 0.1), 579.57, false, 15},
         Case{"fesd_adaptive_F1", "F1", "fesd", kNoTrajectory, 8.79, true},
         Case{"fesd_adaptive_S3", "S3", "fesd", With(kNoTrajectory, "h_max", 0.05), 0.83, true},
         Case{"timestepping_S3", "S3", "timestepping", kNoTrajectory, 0.04, true},
