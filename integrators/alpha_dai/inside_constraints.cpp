@@ -61,21 +61,14 @@ void InsideConstraintSearch::Bounds(double t_lower, double t_upper, Vector* lowe
     // SmoothFunction::Bounds takes the inputs as a point; the algebraic inputs vary over the
     // step, so the function's interval evaluation is called with an input box.
     TypedFunction* typed = g.typed();
-    bool decided = false;
-    if (typed != nullptr) {
-      out_box_.assign(static_cast<std::size_t>(k), Interval(0.0));
-      IntervalFlags& flags = CurrentIntervalFlags();
-      flags = IntervalFlags{};
-      typed->Call(x_box_.data(), static_cast<int>(nx), u_box_.data(),
-                  static_cast<int>(u_box_.size()), t, p_box_.data(),
-                  static_cast<int>(p_box_.size()), out_box_.data());
-      decided = !flags.undecided;
-      flags = IntervalFlags{};
-    }
+    const bool decided =
+        typed != nullptr && typed->BoxBounds(x_box_.data(), static_cast<int>(nx), u_box_.data(),
+                                             static_cast<int>(u_box_.size()), t, p_box_.data(),
+                                             static_cast<int>(p_box_.size()), &out_box_);
+    constexpr double kInf = std::numeric_limits<double>::infinity();
     for (int r = 0; r < k; ++r) {
-      const Interval& out = out_box_[static_cast<std::size_t>(r)];
-      (*lower)[row + r] = decided ? -out.upper() : -std::numeric_limits<double>::infinity();
-      (*upper)[row + r] = decided ? -out.lower() : std::numeric_limits<double>::infinity();
+      (*lower)[row + r] = decided ? -out_box_[static_cast<std::size_t>(r)].upper() : -kInf;
+      (*upper)[row + r] = decided ? -out_box_[static_cast<std::size_t>(r)].lower() : kInf;
     }
     row += k;
   }

@@ -5,6 +5,7 @@
 #include <cstdint>
 
 #include "sparse_derivatives.hpp"
+#include "thread_pool.hpp"
 
 namespace moreau {
 
@@ -108,27 +109,24 @@ void TypedFunction::DenseHessianDirection(const ConstVectorRef& x, const ConstVe
 
 bool TypedFunction::Bounds(const ConstVectorRef& x_lower, const ConstVectorRef& x_upper,
                            const ConstVectorRef& u, double t_lower, double t_upper,
-                           const ConstVectorRef& p, Vector* lower, Vector* upper) {
+                           const ConstVectorRef& p, Vector* lower, Vector* upper,
+                           const std::vector<int>* rows) {
   MOREAU_ASSERT(x_lower.size() == x_upper.size(), "Bounds: state bounds of different sizes");
   Space<Interval>& space = interval_space_;
   space.x.resize(static_cast<std::size_t>(x_lower.size()));
   space.u.resize(static_cast<std::size_t>(u.size()));
   space.p.resize(static_cast<std::size_t>(p.size()));
-  space.out.assign(static_cast<std::size_t>(num_outputs_), Interval(0.0));
   for (Eigen::Index i = 0; i < x_lower.size(); ++i) {
     space.x[static_cast<std::size_t>(i)] = Interval(x_lower[i], x_upper[i]);
   }
   for (Eigen::Index i = 0; i < u.size(); ++i) space.u[static_cast<std::size_t>(i)] = Interval(u[i]);
   for (Eigen::Index i = 0; i < p.size(); ++i) space.p[static_cast<std::size_t>(i)] = Interval(p[i]);
   space.t = Interval(t_lower, t_upper);
-  IntervalFlags& flags = CurrentIntervalFlags();
-  flags = IntervalFlags{};
-  Call(space.x.data(), static_cast<int>(space.x.size()), space.u.data(),
-       static_cast<int>(space.u.size()), space.t, space.p.data(), static_cast<int>(space.p.size()),
-       space.out.data());
-  const bool decided = !flags.undecided;
-  flags = IntervalFlags{};
-  if (!decided) return false;
+  if (!BoxBounds(space.x.data(), static_cast<int>(space.x.size()), space.u.data(),
+                 static_cast<int>(space.u.size()), space.t, space.p.data(),
+                 static_cast<int>(space.p.size()), &space.out, rows)) {
+    return false;
+  }
   lower->resize(num_outputs_);
   upper->resize(num_outputs_);
   for (int k = 0; k < num_outputs_; ++k) {
@@ -136,6 +134,55 @@ bool TypedFunction::Bounds(const ConstVectorRef& x_lower, const ConstVectorRef& 
     (*upper)[k] = space.out[static_cast<std::size_t>(k)].upper();
   }
   return true;
+}
+
+bool TypedFunction::BoxBounds(const Interval* x, int nx, const Interval* u, int nu,
+                              const Interval& t, const Interval* p, int np,
+                              std::vector<Interval>* out, const std::vector<int>* rows) {
+  const int per_block = block_outputs();
+  if (rows == nullptr || per_block == 0) {
+    out->assign(static_cast<std::size_t>(num_outputs_), Interval(0.0));
+    IntervalFlags& flags = CurrentIntervalFlags();
+    flags = IntervalFlags{};
+    Call(x, nx, u, nu, t, p, np, out->data());
+    const bool decided = !flags.undecided;
+    flags = IntervalFlags{};
+    return decided;
+  }
+  // A function made of blocks: the blocks that hold the rows (rows sorted, so blocks are met in
+  // order); the other outputs are the entire line (no bound known).
+  out->assign(static_cast<std::size_t>(num_outputs_), Interval::Entire());
+  std::vector<int>& blocks = bound_blocks_;
+  blocks.clear();
+  blocks.reserve(static_cast<std::size_t>(num_outputs_ / per_block));  // once: no allocation later
+  for (const int row : *rows) {
+    const int block = row / per_block;
+    if (blocks.empty() || blocks.back() != block) blocks.push_back(block);
+  }
+  const int num_blocks = static_cast<int>(blocks.size());
+  // Threads where the blocks are many, as for sparse Jacobians of blocks (a parallel loop costs
+  // some microseconds). Each block writes its own outputs, so results do not depend on them.
+  const int threads = pool_ != nullptr && num_blocks >= kParallelMinBlocks ? pool_->threads() : 1;
+  bound_undecided_.assign(static_cast<std::size_t>(threads), 0);
+  auto body = [&](int begin, int end, int thread) {
+    IntervalFlags& flags = CurrentIntervalFlags();  // this thread's
+    flags = IntervalFlags{};
+    for (int b = begin; b < end; ++b) {
+      Interval* block_out =
+          out->data() +
+          static_cast<std::ptrdiff_t>(blocks[static_cast<std::size_t>(b)]) * per_block;
+      std::fill(block_out, block_out + per_block, Interval(0.0));
+      CallBlock(blocks[static_cast<std::size_t>(b)], x, nx, u, nu, t, p, np, block_out);
+    }
+    bound_undecided_[static_cast<std::size_t>(thread)] = flags.undecided ? 1 : 0;
+    flags = IntervalFlags{};
+  };
+  if (threads > 1) {
+    pool_->ParallelFor(num_blocks, body);
+  } else {
+    body(0, num_blocks, 0);
+  }
+  return std::find(bound_undecided_.begin(), bound_undecided_.end(), 1) == bound_undecided_.end();
 }
 
 // Only functions made of blocks (block_outputs() > 0) are evaluated block by block.
@@ -149,6 +196,10 @@ void TypedFunction::CallBlock(int, const Dual1*, int, const Dual1*, int, const D
 }
 void TypedFunction::CallBlock(int, const Dual2*, int, const Dual2*, int, const Dual2&, const Dual2*,
                               int, Dual2*) {
+  MOREAU_ASSERT(false, "CallBlock of a function that is not made of blocks");
+}
+void TypedFunction::CallBlock(int, const Interval*, int, const Interval*, int, const Interval&,
+                              const Interval*, int, Interval*) {
   MOREAU_ASSERT(false, "CallBlock of a function that is not made of blocks");
 }
 
@@ -511,9 +562,10 @@ SparseDerivativeStats SmoothFunction::sparse_derivative_stats() const {
 
 bool SmoothFunction::Bounds(const ConstVectorRef& x_lower, const ConstVectorRef& x_upper,
                             const ConstVectorRef& u, double t_lower, double t_upper,
-                            const ConstVectorRef& p, Vector* lower, Vector* upper) const {
+                            const ConstVectorRef& p, Vector* lower, Vector* upper,
+                            const std::vector<int>* rows) const {
   RequireNonEmpty(*this);
-  return impl_->Bounds(x_lower, x_upper, u, t_lower, t_upper, p, lower, upper);
+  return impl_->Bounds(x_lower, x_upper, u, t_lower, t_upper, p, lower, upper, rows);
 }
 
 bool SmoothFunction::has_sparse_state_jacobian() const {

@@ -137,9 +137,8 @@ class SparseDerivatives {
   // run on the pool's threads, each block's entries written to their own places; second
   // derivatives (Dual2 inputs are 2.3 kB each: one array, one thread) run in block order.
   bool UseBlocks(const TypedFunction& function) const;
-  // Block Jacobians with fewer blocks than this run on the calling thread (a parallel loop
-  // costs some microseconds of synchronization).
-  static constexpr int kParallelMinBlocks = 1024;
+  // Block Jacobians with fewer than kParallelMinBlocks blocks (thread_pool.hpp) run on the
+  // calling thread.
   void BlockJacobian(TypedFunction* function, const JacobianPlan& plan, Vector* out, double* values,
                      ThreadPool* pool);
   void BlockWeightedHessian(TypedFunction* function, const HessianPlan& plan,

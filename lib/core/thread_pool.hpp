@@ -20,6 +20,11 @@
 
 namespace moreau::internal {
 
+// Loops over the blocks of a function made of blocks (its sparse derivatives, its interval
+// enclosures) with fewer blocks than this run on the calling thread: a parallel loop costs some
+// microseconds of synchronization, a block's evaluation tens of nanoseconds.
+inline constexpr int kParallelMinBlocks = 1024;
+
 class ThreadPool {
  public:
   // `threads` >= 1 threads in all: the caller and threads - 1 workers.

@@ -40,11 +40,13 @@ void CopyToRows(const SparseMatrix& columns,
 
 bool FunctionBounds(const BlockContext& context, const SmoothFunction& function,
                     const ConstVectorRef& y_lower, const ConstVectorRef& y_upper, Vector* lower,
-                    Vector* upper) {
+                    Vector* upper, const std::vector<int>* rows) {
   const int nx = context.num_scene_states;
+  // The system's threads, as for the function's sparse derivatives (Jacobian below).
+  if (function.typed() != nullptr) function.typed()->set_thread_pool(context.pool);
   return function.Bounds(y_lower.head(nx), y_upper.head(nx), *context.inputs,
                          y_lower[context.clock_index], y_upper[context.clock_index],
-                         *context.parameters, lower, upper);
+                         *context.parameters, lower, upper, rows);
 }
 
 void ArgumentMatrix::Layout(const BlockContext& context, Derivatives derivatives) {

@@ -201,13 +201,21 @@ class MovingSetBlock final : public LoweredBlock {
     }
   }
 
-  // Inactive constraint: c_k over the box.
+  // Inactive constraint: c_k over the box (only the inactive working constraints' rows).
   void IndicatorBounds(const BlockContext& context, const ConstVectorRef& y_lower,
                        const ConstVectorRef& y_upper, const std::vector<bool>& a_zero,
                        VectorRef lower, VectorRef upper) override {
     const int k0 = layout.pair_offset;
-    if (!FunctionBounds(context, set_.constraints, y_lower, y_upper, &bound_lower_,
-                        &bound_upper_)) {
+    bound_rows_.clear();
+    bound_rows_.reserve(static_cast<std::size_t>(num_constraints_));  // once: no allocation later
+    for (int j = 0; j < num_working(); ++j) {
+      if (!a_zero[static_cast<std::size_t>(k0 + j)]) {
+        bound_rows_.push_back(working_[static_cast<std::size_t>(j)]);
+      }
+    }
+    if (bound_rows_.empty()) return;
+    if (!FunctionBounds(context, set_.constraints, y_lower, y_upper, &bound_lower_, &bound_upper_,
+                        &bound_rows_)) {
       return;
     }
     for (int j = 0; j < num_working(); ++j) {
@@ -261,6 +269,7 @@ class MovingSetBlock final : public LoweredBlock {
   int num_constraints_;
   std::vector<int> working_;          // constraints in the system, increasing
   Vector bound_lower_, bound_upper_;  // IndicatorBounds' enclosures of c
+  std::vector<int> bound_rows_;       // IndicatorBounds' rows: the inactive working ones
   std::vector<int> pushing_;          // working constraints with lambda != 0 (scratch)
   bool all_working_ = true;
   bool has_projection_ = false;

@@ -54,10 +54,11 @@ struct BlockContext {
 // lowered system: a model function's Jacobian, or its second derivatives along a direction.
 // Enclosure of a block's model function over a box of lowered states (x = the first n_x
 // entries, t = the clock's entry; inputs and parameters from the context): false if the
-// function has no interval evaluation there (SmoothFunction::Bounds).
+// function has no interval evaluation there (SmoothFunction::Bounds). Only the rows in `rows`
+// (sorted; nullptr: all) are needed; the others may be left unbounded.
 bool FunctionBounds(const BlockContext& context, const SmoothFunction& function,
                     const ConstVectorRef& y_lower, const ConstVectorRef& y_upper, Vector* lower,
-                    Vector* upper);
+                    Vector* upper, const std::vector<int>* rows = nullptr);
 
 class ArgumentMatrix {
  public:

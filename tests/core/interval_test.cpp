@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <functional>
 #include <limits>
 #include <string>
@@ -154,6 +155,41 @@ TEST(IntervalTest, ArithmeticIsOutwardRoundedAndSquaresAreSquares) {
   EXPECT_GE((x * x).lower(), -std::numeric_limits<double>::denorm_min());
   EXPECT_LE((x * y).lower(), -6.0);
   EXPECT_TRUE((Interval(1.0) / Interval(-1.0, 1.0)).lower() == -HUGE_VAL);
+}
+
+// The outward rounding steps bit patterns instead of calling std::nextafter: the same doubles at
+// every kind of operand (zeros of both signs, subnormals, the largest finite double, the
+// infinities), so that every enclosure is what it was with nextafter.
+TEST(IntervalTest, OutwardRoundingIsNextafter) {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  const double values[] = {0.0,
+                           -0.0,
+                           std::numeric_limits<double>::denorm_min(),
+                           -std::numeric_limits<double>::denorm_min(),
+                           std::numeric_limits<double>::min(),
+                           -std::numeric_limits<double>::min(),
+                           1.0,
+                           -1.0,
+                           0.1,
+                           -3.75e200,
+                           std::numeric_limits<double>::max(),
+                           -std::numeric_limits<double>::max(),
+                           kInf,
+                           -kInf};
+  for (const double v : values) {
+    const double up = internal::RoundUp(v), down = internal::RoundDown(v);
+    const double next_up = std::nextafter(v, kInf), next_down = std::nextafter(v, -kInf);
+    EXPECT_EQ(std::memcmp(&up, &next_up, sizeof(double)), 0) << "up from " << v;
+    EXPECT_EQ(std::memcmp(&down, &next_down, sizeof(double)), 0) << "down from " << v;
+  }
+  EXPECT_TRUE(std::isnan(internal::RoundUp(std::nan(""))));
+  EXPECT_TRUE(std::isnan(internal::RoundDown(std::nan(""))));
+  // A square's bounds are the squares of its end points' magnitudes, rounded outward.
+  const Interval x(-3.0, 0.1);
+  const Interval square = x * x;
+  EXPECT_EQ(square.upper(), std::nextafter(9.0, kInf));
+  EXPECT_EQ(square.lower(), -std::numeric_limits<double>::denorm_min());
+  EXPECT_EQ(pow(Interval(0.5, 3.0), 2.0).lower(), std::nextafter(0.25, -kInf));
 }
 
 TEST(IntervalTest, UndecidedComparisonsMarkTheEvaluation) {

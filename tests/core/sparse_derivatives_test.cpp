@@ -7,6 +7,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <random>
 #include <string>
 #include <type_traits>
@@ -726,6 +727,64 @@ TEST(BlockFunctionTest, JacobiansAreBitwiseTheSameOnAnyNumberOfThreads) {
     }
     f.typed()->set_thread_pool(nullptr);
   }
+}
+
+// Enclosures of some rows of a function made of blocks (Bounds with rows: only the blocks that
+// hold them) are those of the whole function's enclosure, bit for bit (the same interval
+// operations per block), on any number of threads; rows of blocks not asked for are unbounded.
+TEST(BlockFunctionTest, BoundsOfSomeRowsEqualTheWholeEnclosureOnAnyNumberOfThreads) {
+  const int blocks = 2000, agents = 700;
+  const SmoothFunction f = BlockFamily(blocks, agents);
+  const Point point = FamilyPoint(agents);
+  const Vector x_lower = point.x.array() - 0.01, x_upper = point.x.array() + 0.02;
+  Vector whole_lower, whole_upper;
+  ASSERT_TRUE(f.Bounds(x_lower, x_upper, point.u, 0.2, 0.4, point.p, &whole_lower, &whole_upper));
+  std::vector<int> subset;
+  for (int k = 1; k < 2 * blocks; k += 3) subset.push_back(k);  // both outputs of some blocks
+  for (int threads : {1, 2, 3, 5}) {
+    internal::ThreadPool pool(threads);
+    f.typed()->set_thread_pool(&pool);
+    Vector lower, upper;
+    ASSERT_TRUE(f.Bounds(x_lower, x_upper, point.u, 0.2, 0.4, point.p, &lower, &upper, &subset));
+    f.typed()->set_thread_pool(nullptr);
+    std::vector<bool> asked(2 * blocks, false);
+    for (int k : subset) asked[static_cast<std::size_t>(k)] = true;
+    int mismatches = 0, computed_unasked_blocks = 0;
+    for (int k = 0; k < 2 * blocks; ++k) {
+      const bool block_asked = asked[static_cast<std::size_t>(2 * (k / 2))] ||
+                               asked[static_cast<std::size_t>(2 * (k / 2) + 1)];
+      if (asked[static_cast<std::size_t>(k)]) {
+        mismatches += std::memcmp(&lower[k], &whole_lower[k], sizeof(double)) != 0 ||
+                      std::memcmp(&upper[k], &whole_upper[k], sizeof(double)) != 0;
+      } else if (!block_asked) {
+        computed_unasked_blocks += !(lower[k] == -HUGE_VAL && upper[k] == HUGE_VAL);
+      }
+    }
+    EXPECT_EQ(mismatches, 0) << threads << " threads";
+    EXPECT_EQ(computed_unasked_blocks, 0) << threads << " threads";
+  }
+}
+
+// A branch that the box does not decide makes the enclosure unavailable only where it is
+// evaluated: in the block that branches, not for rows of other blocks.
+TEST(BlockFunctionTest, AnUndecidedBranchMattersOnlyInItsOwnBlock) {
+  const SmoothFunction f =
+      MakeBlockFunction("relu_blocks", 3, 1,
+                        [](int b, const auto& x, const auto&, const auto&, const auto&, auto& out) {
+                          out[0] = b == 1 && ValueOf(x[b]) > 0.0 ? x[b] : 2.0 * x[b];
+                        });
+  const Vector x_lower{{-1.0, -1.0, -1.0}}, x_upper{{1.0, 1.0, 1.0}};
+  Vector lower, upper;
+  EXPECT_FALSE(f.Bounds(x_lower, x_upper, Vector(), 0.0, 0.0, Vector(), &lower, &upper));
+  const std::vector<int> with_branch = {0, 1}, without_branch = {0, 2};
+  EXPECT_FALSE(
+      f.Bounds(x_lower, x_upper, Vector(), 0.0, 0.0, Vector(), &lower, &upper, &with_branch));
+  ASSERT_TRUE(
+      f.Bounds(x_lower, x_upper, Vector(), 0.0, 0.0, Vector(), &lower, &upper, &without_branch));
+  // 2 x over [-1, 1]: [-2, 2] rounded outward by one ulp; block 1 was not evaluated.
+  EXPECT_EQ(lower[2], std::nextafter(-2.0, -3.0));
+  EXPECT_EQ(upper[2], std::nextafter(2.0, 3.0));
+  EXPECT_TRUE(lower[1] == -HUGE_VAL && upper[1] == HUGE_VAL);
 }
 
 }  // namespace

@@ -252,7 +252,7 @@ INSTANTIATE_TEST_SUITE_P(
         Case{"timestepping_S3", "S3", "timestepping", kNoTrajectory, 0.04, true},
         Case{"timestepping_rectifier", "rectifier", "timestepping", With(kNoTrajectory, "h", 2e-5),
              0.72, true},
-        Case{"timestepping_crowd", "crowd:N=16", "timestepping", kNoTrajectory, 24.72, false, 177},
+        Case{"timestepping_crowd", "crowd:N=16", "timestepping", kNoTrajectory, 24.73, false, 177},
         Case{"radau_hopf", "hopf", "radau", kNoTrajectory, 0, true},
         Case{"ida_S3", "S3", "ida", {{"record_steps", SettingValue{false}}}, 0.26, true}),
     [](const testing::TestParamInfo<Case>& param) { return param.param.name; });

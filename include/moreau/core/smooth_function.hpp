@@ -242,10 +242,14 @@ class SmoothFunction {
   /// x_lower <= x <= x_upper and every t in [t_lower, t_upper] (u and p fixed), by interval
   /// arithmetic (core/interval.hpp). Returns false, with lower and upper unspecified, if no
   /// bound is available: a hand-written function, or a branch (comparison) of the function that
-  /// the box does not decide.
+  /// the box does not decide. Only the rows listed in `rows` (sorted, unique; nullptr: every
+  /// row) are needed: a function made of blocks (MakeBlockFunction) encloses only the blocks
+  /// that hold them (in parallel over the function's threads where they are many), giving the
+  /// other rows the entire line (lower -inf, upper +inf), and a branch undecided in the other
+  /// blocks does not matter; other functions enclose every row.
   bool Bounds(const ConstVectorRef& x_lower, const ConstVectorRef& x_upper, const ConstVectorRef& u,
-              double t_lower, double t_upper, const ConstVectorRef& p, Vector* lower,
-              Vector* upper) const;
+              double t_lower, double t_upper, const ConstVectorRef& p, Vector* lower, Vector* upper,
+              const std::vector<int>* rows = nullptr) const;
   /// Counters of SparseJacobian and SparseWeightedHessian (all zero for functions without
   /// automatic differentiation).
   SparseDerivativeStats sparse_derivative_stats() const;
@@ -295,7 +299,8 @@ class SmoothFunction {
     /// See SmoothFunction::Bounds.
     virtual bool Bounds(const ConstVectorRef& /*x_lower*/, const ConstVectorRef& /*x_upper*/,
                         const ConstVectorRef& /*u*/, double /*t_lower*/, double /*t_upper*/,
-                        const ConstVectorRef& /*p*/, Vector* /*lower*/, Vector* /*upper*/) {
+                        const ConstVectorRef& /*p*/, Vector* /*lower*/, Vector* /*upper*/,
+                        const std::vector<int>* /*rows*/) {
       return false;
     }
     /// See SmoothFunction::has_sparse_state_jacobian.
@@ -355,8 +360,14 @@ class TypedFunction : public SmoothFunction::Concept {
                               SparseMatrix* rows_matrix, const std::vector<int>* rows) override;
   SparseDerivativeStats sparse_derivative_stats() const;
   bool Bounds(const ConstVectorRef& x_lower, const ConstVectorRef& x_upper, const ConstVectorRef& u,
-              double t_lower, double t_upper, const ConstVectorRef& p, Vector* lower,
-              Vector* upper) override;
+              double t_lower, double t_upper, const ConstVectorRef& p, Vector* lower, Vector* upper,
+              const std::vector<int>* rows) override;
+  // The enclosure over a box of every input (Bounds' u and p may be intervals here): out[k]
+  // for the rows in `rows` (nullptr: all; see SmoothFunction::Bounds), out sized
+  // num_outputs(). False if an evaluated block's branch is undecided.
+  bool BoxBounds(const Interval* x, int nx, const Interval* u, int nu, const Interval& t,
+                 const Interval* p, int np, std::vector<Interval>* out,
+                 const std::vector<int>* rows = nullptr);
   // The traced pattern and structure of this function for the sizes of x, u, p
   // (FunctionAnalysis, lib/core/sparse_derivatives.hpp): detected once and shared with every
   // clone, so that copies of a scene or lowered system do not trace again (*detected: this call
@@ -389,6 +400,8 @@ class TypedFunction : public SmoothFunction::Concept {
                          const Dual1* p, int np, Dual1* out);
   virtual void CallBlock(int block, const Dual2* x, int nx, const Dual2* u, int nu, const Dual2& t,
                          const Dual2* p, int np, Dual2* out);
+  virtual void CallBlock(int block, const Interval* x, int nx, const Interval* u, int nu,
+                         const Interval& t, const Interval* p, int np, Interval* out);
   // The threads that sparse derivatives of functions made of blocks may use (null: the
   // calling thread only). The pool must outlive the calls; results do not depend on it.
   void set_thread_pool(ThreadPool* pool) { pool_ = pool; }
@@ -423,6 +436,10 @@ class TypedFunction : public SmoothFunction::Concept {
                   const ConstVectorRef& p, Wrt wrt, Seed&& seed);
   Space<Dual1> space1_;
   Space<Interval> interval_space_;
+  // BoxBounds of functions made of blocks: the blocks of the rows asked for, and whether each
+  // thread's evaluations met an undecided branch (its flags are thread-local).
+  std::vector<int> bound_blocks_;
+  std::vector<char> bound_undecided_;
   // Made at the first dense WeightedHessian: its scalar t alone is a Dual2 (~2.3 kB), which
   // would make every function object, and every copy of a scene, a large allocation.
   std::unique_ptr<Space<Dual2>> space2_;
@@ -526,6 +543,10 @@ class BlockFunction final : public TypedFunctionFor<BlockFunction<F>> {
   }
   void CallBlock(int block, const Dual2* x, int nx, const Dual2* u, int nu, const Dual2& t,
                  const Dual2* p, int np, Dual2* out) override {
+    Block(block, x, nx, u, nu, t, p, np, out);
+  }
+  void CallBlock(int block, const Interval* x, int nx, const Interval* u, int nu, const Interval& t,
+                 const Interval* p, int np, Interval* out) override {
     Block(block, x, nx, u, nu, t, p, np, out);
   }
 
