@@ -5,8 +5,16 @@
 #include <limits>
 
 #include "moreau/core/error.hpp"
+#include "moreau/integrators/working_set.hpp"
 
-namespace moreau::internal {
+namespace moreau {
+namespace {
+thread_local long working_set_changes = 0;
+}  // namespace
+
+long WorkingSetChangesOnThisThread() { return working_set_changes; }
+
+namespace internal {
 
 NearActiveFilter::NearActiveFilter(LoweredSystem* system, ConstraintFilter mode, double safety)
     : system_(system), safety_(safety) {
@@ -28,9 +36,13 @@ bool NearActiveFilter::Update(const Vector& y, const std::vector<bool>& a_zero, 
       z.size() == system_->num_algebraic() ? z : Vector(Vector::Zero(system_->num_algebraic()));
   system_->Evaluate(y, z_point, Derivatives::kNone, &point_);
   system_->FilterableConstraints(y, point_.F.head(system_->num_scene_states()), &values_, &rates_);
-  std::vector<bool> keep(static_cast<std::size_t>(declared), true);
-  std::vector<bool> working(static_cast<std::size_t>(declared), false);
-  std::vector<bool> active(static_cast<std::size_t>(declared), false);
+  // (Kept flag vectors: a step allocates nothing.)
+  std::vector<bool>& keep = keep_;
+  std::vector<bool>& working = working_;
+  std::vector<bool>& active = active_;
+  keep.assign(static_cast<std::size_t>(declared), true);
+  working.assign(static_cast<std::size_t>(declared), false);
+  active.assign(static_cast<std::size_t>(declared), false);
   const std::vector<int>& pairs = system_->working_pairs();
   for (std::size_t j = 0; j < pairs.size(); ++j) {
     const auto k = static_cast<std::size_t>(pairs[j]);
@@ -47,9 +59,15 @@ bool NearActiveFilter::Update(const Vector& y, const std::vector<bool>& a_zero, 
     const double c = values_[k];
     keep[i] = forced_[i] || active[i] || !(c > margin) || (working[i] && !(c > 2.0 * margin));
   }
-  *previous = system_->working_layout();
-  const bool changed = system_->SetWorkingPairs(keep);
-  if (changed) ++stats_.changes;
+  // The same working set (most steps): nothing to set, and no layout to copy.
+  const bool changed = keep != working;
+  if (changed) {
+    *previous = system_->working_layout();
+    const bool set = system_->SetWorkingPairs(keep);
+    MOREAU_ASSERT(set, "a different working set left the system unchanged");
+    ++stats_.changes;
+    ++working_set_changes;
+  }
   stats_.max_working = std::max(stats_.max_working, system_->num_pairs());
   return changed;
 }
@@ -82,7 +100,10 @@ bool NearActiveFilter::Restore(const std::vector<bool>& working,
                                LoweredSystem::WorkingLayout* previous) {
   if (!enabled_) return false;
   *previous = system_->working_layout();
-  return system_->SetWorkingPairs(working);
+  const bool changed = system_->SetWorkingPairs(working);
+  if (changed) ++working_set_changes;
+  return changed;
 }
 
-}  // namespace moreau::internal
+}  // namespace internal
+}  // namespace moreau

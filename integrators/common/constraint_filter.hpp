@@ -61,7 +61,8 @@ class NearActiveFilter {
   LoweredSystem* system_;
   double safety_;
   bool enabled_ = false;
-  std::vector<bool> forced_;  // declared pairs that must join at the next Update
+  std::vector<bool> forced_;                   // declared pairs that must join at the next Update
+  std::vector<bool> keep_, working_, active_;  // Update's flags over the declared pairs
   Vector values_, rates_;
   PointEvaluation point_;
   Stats stats_;

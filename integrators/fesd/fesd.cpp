@@ -205,7 +205,9 @@ FesdResult FesdRun::Run() {
   PrepareOutputTimes();
   // Storage first used deep in the run (the first crossing search that halves, the first
   // comparison element with the full system), sized now: the step loop allocates nothing.
-  inside_.search.Reserve(np_);
+  // (Every declared pair: with the near-active filter np_ changes with the working set.)
+  inside_.search.Reserve(system_.num_declared_pairs());
+  inside_.watched.reserve(static_cast<std::size_t>(system_.num_declared_pairs()));
   comparison_.setup.a_zero.reserve(static_cast<std::size_t>(np_));
   // The kept Newton results: a failed solve (routine for trial elements and comparisons)
   // writes its message in place, and a solve's history has at most max_iterations + 1 entries.
@@ -451,6 +453,10 @@ FesdResult FesdRun::Finish(const RunClock& run_clock) {
     result_.warnings.push_back(warning.str());
   }
   if (result_.elements.empty()) result_.stats.min_element_length = 0.0;
+  // Error-controlled runs reserved their results for kReservedSteps steps
+  // (IntegrateAdaptive): a shorter run gives the rest back.
+  result_.elements.shrink_to_fit();
+  result_.step_sequence.shrink_to_fit();
   result_.stats.num_factorizations = factorizations_;
   result_.stats.cpu_seconds = run_clock.CpuSeconds();
   return std::move(result_);

@@ -389,6 +389,10 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
   Matrix transfer;
   const RadauTableau& tableau = RadauIIA(s);
   InsideCheck inside_check;
+  // Sized for every declared pair: with the near-active filter the pairs of the step systems
+  // grow and shrink with the working set, and a search in a larger one allocates nothing.
+  inside_check.search.Reserve(system.num_declared_pairs());
+  inside_check.watched.reserve(static_cast<std::size_t>(system.num_declared_pairs()));
   // The step's Newton result and its end statuses, kept across steps (their storage reused).
   SemismoothNewtonResult solved;
   std::vector<bool> now;

@@ -1,5 +1,6 @@
 #include "moreau/linalg/derivative_matrix.hpp"
 
+#include "compress_entries.hpp"
 #include "dense_columns.hpp"
 #include "moreau/core/error.hpp"
 
@@ -119,9 +120,7 @@ void DerivativeMatrix::Scale(double factor) {
 void DerivativeMatrix::Finalize() {
   if (!sparse_ || finalized_) return;
   if (!sparse_matrix_) sparse_matrix_.emplace();
-  sparse_matrix_->resize(rows_, cols_);
-  sparse_matrix_->setFromTriplets(entries_.begin(), entries_.end());
-  sparse_matrix_->makeCompressed();
+  internal::CompressEntries(entries_, rows_, cols_, &*sparse_matrix_);
   finalized_ = true;
 }
 

@@ -12,6 +12,7 @@
 #include <utility>
 #include <vector>
 
+#include "compress_entries.hpp"
 #include "dense_columns.hpp"
 #include "moreau/core/error.hpp"
 
@@ -198,9 +199,7 @@ void SystemMatrix::AddEntry(int row, int col, double value) {
 
 void SystemMatrix::Finalize() {
   if (!sparse_) return;
-  sparse_matrix_.resize(n_, n_);
-  sparse_matrix_.setFromTriplets(triplets_.begin(), triplets_.end());
-  sparse_matrix_.makeCompressed();
+  internal::CompressEntries(triplets_, n_, n_, &sparse_matrix_);
 }
 
 Vector SystemMatrix::Multiply(const Vector& x) const {

@@ -9,6 +9,34 @@
 #include "moreau/core/error.hpp"
 
 namespace moreau::internal {
+namespace {
+// *rows = columns (compressed rows, columns increasing in each row) in the storage *rows
+// already has: Eigen's assignment across storage orders builds a new matrix per call.
+void CopyToRows(const SparseMatrix& columns,
+                Eigen::SparseMatrix<double, Eigen::RowMajor, int>* rows) {
+  const auto n = static_cast<int>(columns.rows());
+  rows->resize(n, columns.cols());  // outer indices zero, no entries (their storage kept)
+  // outer[r + 1] becomes the start of row r (the count of row r goes to outer[r + 2]); filling
+  // advances it to the start of row r + 1.
+  int* outer = rows->outerIndexPtr();
+  for (Eigen::Index j = 0; j < columns.outerSize(); ++j) {
+    for (SparseMatrix::InnerIterator it(columns, j); it; ++it) {
+      if (it.row() + 1 < n) ++outer[it.row() + 2];
+    }
+  }
+  for (int r = 2; r <= n; ++r) outer[r] += outer[r - 1];
+  rows->resizeNonZeros(columns.nonZeros());
+  int* inner = rows->innerIndexPtr();
+  double* values = rows->valuePtr();
+  for (Eigen::Index j = 0; j < columns.outerSize(); ++j) {
+    for (SparseMatrix::InnerIterator it(columns, j); it; ++it) {
+      const int position = outer[it.row() + 1]++;
+      inner[position] = static_cast<int>(j);
+      values[position] = it.value();
+    }
+  }
+}
+}  // namespace
 
 bool FunctionBounds(const BlockContext& context, const SmoothFunction& function,
                     const ConstVectorRef& y_lower, const ConstVectorRef& y_upper, Vector* lower,
@@ -68,7 +96,7 @@ void ArgumentMatrix::Jacobian(const BlockContext& context, const SmoothFunction&
     // Only the rows in `rows` are differentiated (the near-active filter's working set).
     function.SparseJacobian(x_, *context.inputs, t, *context.parameters, wrt, values, &columns_,
                             rows);
-    rows_sparse_ = columns_;
+    CopyToRows(columns_, &rows_sparse_);
   } else {
     function.Jacobian(x_, *context.inputs, t, *context.parameters, wrt, values, &dense_);
   }
@@ -126,7 +154,7 @@ void ArgumentMatrix::HessianDirections(const BlockContext& context, const Smooth
   function.SparseHessianDirection(x_, *context.inputs, t, *context.parameters, wrt, direction_,
                                   &columns_, outputs);
   if (is_sparse_) {
-    rows_sparse_ = columns_;
+    CopyToRows(columns_, &rows_sparse_);
   } else {
     dense_ = Matrix(columns_);
   }
@@ -144,7 +172,7 @@ void ArgumentMatrix::WeightedHessian(const BlockContext& context, const SmoothFu
     // The pattern is that of the outputs in `rows` (the working set), whatever the weights.
     function.SparseWeightedHessian(x_, *context.inputs, t, *context.parameters, wrt, weights,
                                    &columns_, rows);
-    rows_sparse_ = columns_;
+    CopyToRows(columns_, &rows_sparse_);
   } else {
     function.WeightedHessian(x_, *context.inputs, t, *context.parameters, wrt, weights, &dense_);
   }

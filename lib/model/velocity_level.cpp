@@ -3,9 +3,14 @@
 // switching points (slow solution).
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <limits>
 #include <sstream>
+#include <vector>
 
 #include "lowered_block.hpp"
 #include "moreau/core/error.hpp"
@@ -360,6 +365,289 @@ static void AssembleVelocityLevelDense(const LoweredSystem& system, const PointE
   }
 }
 
+namespace {
+
+// Compressed columns in kept vectors (capacity reused from call to call), for the
+// allocation-free sparse assembly of the velocity-level values below.
+struct Columns {
+  int rows = 0, cols = 0;
+  std::vector<int> outer, inner;
+  std::vector<double> values;
+  void Start(int r, int c) {
+    rows = r;
+    cols = c;
+    outer.assign(static_cast<std::size_t>(c) + 1, 0);
+    inner.clear();
+    values.clear();
+  }
+  void Push(int i, double v) {
+    inner.push_back(i);
+    values.push_back(v);
+  }
+  void EndColumn(int j) { outer[static_cast<std::size_t>(j) + 1] = static_cast<int>(inner.size()); }
+};
+
+// A compressed-columns matrix to read: an Eigen one (compressed) or Columns.
+struct ColumnsView {
+  int rows, cols;
+  const int *outer, *inner;
+  const double* values;
+  explicit ColumnsView(const SparseMatrix& m)
+      : rows(static_cast<int>(m.rows())),
+        cols(static_cast<int>(m.cols())),
+        outer(m.outerIndexPtr()),
+        inner(m.innerIndexPtr()),
+        values(m.valuePtr()) {
+    MOREAU_ASSERT(m.isCompressed(), "uncompressed derivative block");
+  }
+  explicit ColumnsView(const Columns& m)
+      : rows(m.rows),
+        cols(m.cols),
+        outer(m.outer.data()),
+        inner(m.inner.data()),
+        values(m.values.data()) {}
+};
+
+// The workspace of AssembleVelocityValues (per thread: the assembly runs on the thread that
+// solves, one at a time).
+struct VelocityValuesWorkspace {
+  Vector cont_a, cont_b;
+  Columns x_y, x_z, product, scaled, scaled_b, d_v[5];
+  Vector value[5];
+  std::vector<char> touched;  // product: rows met in the current column
+  std::vector<double> accumulator;
+  std::vector<int> met;
+  std::vector<int> out_row;  // select: per source row, its row in the output (-1: none)
+};
+VelocityValuesWorkspace& ThisThreadsVelocityValuesWorkspace() {
+  thread_local VelocityValuesWorkspace workspace;
+  return workspace;
+}
+
+// Eigen's sparse sum A + B of the same shape: the union of the patterns, a + b where both
+// store an entry, a + 0 or 0 + b where one does (the same bits as Eigen's sum, which adds the
+// zero: -0 becomes +0).
+void SumColumns(const ColumnsView& a, const ColumnsView& b, Columns* out) {
+  out->Start(a.rows, a.cols);
+  for (int j = 0; j < a.cols; ++j) {
+    int p = a.outer[j], q = b.outer[j];
+    const int p_end = a.outer[j + 1], q_end = b.outer[j + 1];
+    while (p < p_end || q < q_end) {
+      if (p < p_end && q < q_end && a.inner[p] == b.inner[q]) {
+        out->Push(a.inner[p], a.values[p] + b.values[q]);
+        ++p;
+        ++q;
+      } else if (p < p_end && (q >= q_end || a.inner[p] < b.inner[q])) {
+        out->Push(a.inner[p], a.values[p] + 0.0);
+        ++p;
+      } else {
+        out->Push(b.inner[q], 0.0 + b.values[q]);
+        ++q;
+      }
+    }
+    out->EndColumn(j);
+  }
+}
+
+// D A (rows scaled, `rows` true) or A D (columns scaled) for a diagonal D, every stored entry
+// kept in its place, zero or not (Eigen's sparse-diagonal products, the same bits).
+void Scaled(const ColumnsView& a, const Vector& d, bool rows, Columns* out) {
+  out->Start(a.rows, a.cols);
+  for (int j = 0; j < a.cols; ++j) {
+    for (int p = a.outer[j]; p < a.outer[j + 1]; ++p) {
+      out->Push(a.inner[p], a.values[p] * d[rows ? a.inner[p] : j]);
+    }
+    out->EndColumn(j);
+  }
+}
+
+// D_a A + D_b B for diagonal D_a, D_b (Eigen's M(D_a A) + M(D_b B), the same bits).
+void DiagonalSum(const Vector& da, const SparseMatrix& a, const Vector& db, const SparseMatrix& b,
+                 VelocityValuesWorkspace* w, Columns* out) {
+  Scaled(ColumnsView(a), da, true, &w->scaled);
+  Scaled(ColumnsView(b), db, true, &w->scaled_b);
+  SumColumns(ColumnsView(w->scaled), ColumnsView(w->scaled_b), out);
+}
+
+// X F_z by Eigen's conservative sparse product (per result column j, the rows i met through
+// F_z's column j in order, each sum started by its first product: the same bits), rows
+// increasing in each column.
+void ProductColumns(const ColumnsView& x, const ColumnsView& f, VelocityValuesWorkspace* w,
+                    Columns* out) {
+  out->Start(x.rows, f.cols);
+  w->touched.assign(static_cast<std::size_t>(x.rows), 0);
+  w->accumulator.resize(static_cast<std::size_t>(x.rows));
+  for (int j = 0; j < f.cols; ++j) {
+    w->met.clear();
+    for (int q = f.outer[j]; q < f.outer[j + 1]; ++q) {
+      const double y = f.values[q];
+      const int k = f.inner[q];
+      for (int p = x.outer[k]; p < x.outer[k + 1]; ++p) {
+        const auto i = static_cast<std::size_t>(x.inner[p]);
+        if (!w->touched[i]) {
+          w->touched[i] = 1;
+          w->accumulator[i] = x.values[p] * y;
+          w->met.push_back(x.inner[p]);
+        } else {
+          w->accumulator[i] += x.values[p] * y;
+        }
+      }
+    }
+    std::sort(w->met.begin(), w->met.end());
+    for (int i : w->met) {
+      out->Push(i, w->accumulator[static_cast<std::size_t>(i)]);
+      w->touched[static_cast<std::size_t>(i)] = 0;
+    }
+    out->EndColumn(j);
+  }
+}
+
+// The rate rows X_y F + X_z v_c and their derivative X_y F_z + X_z diag(mask) (AssembleVelocity-
+// Level's `rate` without derivatives in y, u, p: the same bits).
+void RateRows(const ColumnsView& x_y, const ColumnsView& x_z, const PointEvaluation& e,
+              const Vector& mask, const Vector& rates, VelocityValuesWorkspace* w, Vector* value,
+              Columns* d_v) {
+  // value = x_y F, then += x_z rates (Eigen assigns the first product and adds the second).
+  value->setZero(x_y.rows);
+  for (int k = 0; k < x_y.cols; ++k) {
+    const double f_k = e.F[k];
+    for (int p = x_y.outer[k]; p < x_y.outer[k + 1]; ++p)
+      (*value)[x_y.inner[p]] += x_y.values[p] * f_k;
+  }
+  for (int j = 0; j < x_z.cols; ++j) {
+    const double r_j = rates[j];
+    for (int p = x_z.outer[j]; p < x_z.outer[j + 1]; ++p)
+      (*value)[x_z.inner[p]] += x_z.values[p] * r_j;
+  }
+  ProductColumns(x_y, ColumnsView(e.F_z.sparse()), w, &w->product);
+  Scaled(x_z, mask, false, &w->scaled);
+  SumColumns(ColumnsView(w->product), ColumnsView(w->scaled), d_v);
+}
+
+void CopyColumns(const SparseMatrix& m, Columns* out) {
+  const ColumnsView v(m);
+  out->Start(v.rows, v.cols);
+  out->inner.assign(v.inner, v.inner + v.outer[v.cols]);
+  out->values.assign(v.values, v.values + v.outer[v.cols]);
+  for (int j = 0; j <= v.cols; ++j) out->outer[static_cast<std::size_t>(j)] = v.outer[j];
+}
+
+}  // namespace
+
+// AssembleVelocityLevel<SparseMatrix> without derivatives in y, u, p (the velocity-level
+// solves of status decisions, certificates and free sides, every element): the same rows and
+// the same bits, computed in a kept workspace instead of through Eigen's sparse expressions,
+// which allocate their temporaries on every call.
+static void AssembleVelocityValues(const LoweredSystem& system, const PointEvaluation& e,
+                                   const Vector& mask, const Vector& rates,
+                                   const std::vector<PairRole>& roles,
+                                   VelocityLevelEvaluation* out) {
+  VelocityValuesWorkspace& w = ThisThreadsVelocityValuesWorkspace();
+  const int ng = system.num_equations(), np = system.num_pairs(), nz = system.num_algebraic();
+  const auto& pairs = system.pairs();
+  const auto& differentiated = system.differentiated_equations();
+  w.cont_a.resize(np);
+  w.cont_b.resize(np);
+  bool any_both = false;
+  for (int k = 0; k < np; ++k) {
+    const ContinuousSide side = pairs[static_cast<std::size_t>(k)].continuous;
+    w.cont_a[k] = side != ContinuousSide::kB ? 1.0 : 0.0;
+    w.cont_b[k] = 1.0 - w.cont_a[k];
+    any_both |= side == ContinuousSide::kBoth;
+  }
+  // Sources as in AssembleVelocityLevel: 0 G values, 1 G rates, 2 continuous-side rates,
+  // 3 jump-side values, 4 rates of b (kBoth pairs).
+  if (ng > 0) {
+    w.value[0] = e.G;
+    CopyColumns(e.G_z.sparse(), &w.d_v[0]);
+    RateRows(ColumnsView(e.G_y.sparse()), ColumnsView(e.G_z.sparse()), e, mask, rates, &w,
+             &w.value[1], &w.d_v[1]);
+  }
+  if (np > 0) {
+    DiagonalSum(w.cont_a, e.A_y.sparse(), w.cont_b, e.B_y.sparse(), &w, &w.x_y);
+    DiagonalSum(w.cont_a, e.A_z.sparse(), w.cont_b, e.B_z.sparse(), &w, &w.x_z);
+    RateRows(ColumnsView(w.x_y), ColumnsView(w.x_z), e, mask, rates, &w, &w.value[2], &w.d_v[2]);
+    Vector& j_value = w.value[3];
+    j_value.resize(np);
+    for (int k = 0; k < np; ++k) j_value[k] = w.cont_b[k] * e.A[k] + w.cont_a[k] * e.B[k];
+    DiagonalSum(w.cont_b, e.A_z.sparse(), w.cont_a, e.B_z.sparse(), &w, &w.d_v[3]);
+    if (any_both) {
+      RateRows(ColumnsView(e.B_y.sparse()), ColumnsView(e.B_z.sparse()), e, mask, rates, &w,
+               &w.value[4], &w.d_v[4]);
+    }
+  }
+  const int source_rows[5] = {ng, ng, np, np, any_both ? np : 0};
+  // One output: its rows (source, source row) in order; values 0 + the source's value (Eigen's
+  // selection product adds to zeros), derivative rows copied, with + 0 on every entry when
+  // more than one source contributes (Eigen's sum of the selections adds zeros).
+  struct Take {
+    int source, row;
+  };
+  auto select = [&](auto&& for_each_row, Vector* values, DerivativeMatrix* dv) {
+    int rows = 0;
+    int sources_used = 0;
+    bool used[5] = {false, false, false, false, false};
+    for_each_row([&](int source, int) {
+      ++rows;
+      if (!used[source]) ++sources_used;
+      used[source] = true;
+    });
+    values->setZero(rows);
+    dv->SetZero(rows, nz, true);
+    const bool add_zero = sources_used > 1;
+    for (int source = 0; source < 5; ++source) {
+      if (!used[source] || source_rows[source] == 0) continue;
+      w.out_row.assign(static_cast<std::size_t>(source_rows[source]), -1);
+      int row = 0;
+      for_each_row([&](int s, int r) {
+        if (s == source) w.out_row[static_cast<std::size_t>(r)] = row;
+        ++row;
+      });
+      const Vector& value = w.value[source];
+      for (int r = 0; r < source_rows[source]; ++r) {
+        const int i = w.out_row[static_cast<std::size_t>(r)];
+        if (i >= 0) (*values)[i] += value[r];
+      }
+      const Columns& d = w.d_v[source];
+      for (int j = 0; j < d.cols; ++j) {
+        for (int p = d.outer[static_cast<std::size_t>(j)];
+             p < d.outer[static_cast<std::size_t>(j) + 1]; ++p) {
+          const int i = w.out_row[static_cast<std::size_t>(d.inner[static_cast<std::size_t>(p)])];
+          if (i < 0) continue;
+          const double v = d.values[static_cast<std::size_t>(p)];
+          dv->Add(i, j, add_zero ? v + 0.0 : v);
+        }
+      }
+    }
+    dv->Finalize();
+  };
+  // The rows of each output, in AssembleVelocityLevel's order.
+  auto equations = [&](auto&& f) {
+    for (int r = 0; r < ng; ++r) f(differentiated[static_cast<std::size_t>(r)] ? 1 : 0, r);
+    for (int k = 0; k < np; ++k) {
+      const PairRole role = roles[static_cast<std::size_t>(k)];
+      if (role == PairRole::kComplementary) continue;
+      const ContinuousSide side = pairs[static_cast<std::size_t>(k)].continuous;
+      const bool continuous_a = side != ContinuousSide::kB;
+      const int jump_source = side == ContinuousSide::kBoth ? 4 : 3;
+      f((role == PairRole::kAZero) == continuous_a ? 2 : jump_source, k);
+    }
+  };
+  auto complementary = [&](bool a_side) {
+    return [&, a_side](auto&& f) {
+      for (int k = 0; k < np; ++k) {
+        if (roles[static_cast<std::size_t>(k)] != PairRole::kComplementary) continue;
+        const int jump_source =
+            pairs[static_cast<std::size_t>(k)].continuous == ContinuousSide::kBoth ? 4 : 3;
+        f(a_side ? jump_source : 2, k);
+      }
+    };
+  };
+  select(equations, &out->equations, &out->equations_v);
+  select(complementary(true), &out->a, &out->a_v);
+  select(complementary(false), &out->b, &out->b_v);
+}
+
 // The velocity-level rows from the evaluation e of the system at (y, v) (velocity roles set,
 // derivatives kStates, or kAll with Derivatives::kAll) and the curvature terms (with
 // derivatives with respect to y).
@@ -377,6 +665,10 @@ static void AssembleVelocityRows(const LoweredSystem& system, const PointEvaluat
   for (int i = 0; i < nz; ++i)
     mask[i] = system.continuous_algebraic()[static_cast<std::size_t>(i)] ? 1.0 : 0.0;
   const Vector rates = mask.cwiseProduct(v);
+  if (derivatives == Derivatives::kNone) {
+    AssembleVelocityValues(system, e, mask, rates, roles, out);
+    return;
+  }
   AssembleVelocityLevel<SparseMatrix>(system, e, curvature, mask, rates, roles, derivatives, out);
 }
 

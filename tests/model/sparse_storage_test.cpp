@@ -4,7 +4,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cstring>
 #include <random>
+#include <tuple>
 
 #include "../problems/test_scenes.hpp"
 #include "moreau/model/lowered_system.hpp"
@@ -33,6 +36,30 @@ void ExpectSame(const Vector& a, const Vector& b, const std::string& what) {
   ASSERT_EQ(a.size(), b.size()) << what;
   const double scale = std::max(1.0, a.lpNorm<Eigen::Infinity>());
   EXPECT_LE((a - b).lpNorm<Eigen::Infinity>(), kStorageAgreement * scale) << what;
+}
+
+// Bit for bit (signs of zeros included), and the same stored entries.
+void ExpectSameBits(const Vector& a, const Vector& b, const std::string& what) {
+  ASSERT_EQ(a.size(), b.size()) << what;
+  if (a.size() == 0) return;  // (no data pointers to compare)
+  EXPECT_EQ(std::memcmp(a.data(), b.data(), sizeof(double) * static_cast<std::size_t>(a.size())), 0)
+      << what;
+}
+void ExpectSameBits(const DerivativeMatrix& a, const DerivativeMatrix& b, const std::string& what) {
+  ASSERT_TRUE(a.is_sparse() && b.is_sparse()) << what;
+  const SparseMatrix& p = a.sparse();
+  const SparseMatrix& q = b.sparse();
+  ASSERT_EQ(p.rows(), q.rows()) << what;
+  ASSERT_EQ(p.cols(), q.cols()) << what;
+  ASSERT_EQ(p.nonZeros(), q.nonZeros()) << what;
+  ASSERT_TRUE(p.isCompressed() && q.isCompressed()) << what;
+  const auto n = static_cast<std::size_t>(p.nonZeros());
+  EXPECT_TRUE(
+      std::equal(p.outerIndexPtr(), p.outerIndexPtr() + p.outerSize() + 1, q.outerIndexPtr()))
+      << what;
+  if (n == 0) return;  // (no entries: Eigen may hold no storage)
+  EXPECT_TRUE(std::equal(p.innerIndexPtr(), p.innerIndexPtr() + n, q.innerIndexPtr())) << what;
+  EXPECT_EQ(std::memcmp(p.valuePtr(), q.valuePtr(), sizeof(double) * n), 0) << what;
 }
 
 struct Pair {
@@ -158,6 +185,18 @@ TEST(SparseStorage, EvaluationsEqualDenseOnEveryCatalogScene) {
           ExpectSame(va.b_v, vb.b_v, label + " b_v");
           ExpectSame(va.b_y, vb.b_y, label + " b_y");
           ExpectSame(va.b_p, vb.b_p, label + " b_p");
+          // Without derivatives in y, u, p the sparse rows are assembled in a kept workspace
+          // (the solves of every element): the same bits as the assembly with them.
+          VelocityLevelEvaluation with_y, without;
+          sparse.EvaluateVelocityLevel(y, z, roles, Derivatives::kStates, &with_y);
+          sparse.EvaluateVelocityLevel(y, z, roles, Derivatives::kNone, &without);
+          using V = VelocityLevelEvaluation;
+          for (const auto& [name, values, d_v] :
+               {std::tuple{"equations", &V::equations, &V::equations_v},
+                std::tuple{"a", &V::a, &V::a_v}, std::tuple{"b", &V::b, &V::b_v}}) {
+            ExpectSameBits(with_y.*values, without.*values, label + " velocity " + name);
+            ExpectSameBits(with_y.*d_v, without.*d_v, label + " velocity d/dv " + name);
+          }
           IndicatorEvaluation ia, ib;
           bool stewart_like = false;  // Stewart blocks need an active mode per block
           for (const PairInfo& info : dense.pairs())
