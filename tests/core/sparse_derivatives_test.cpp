@@ -733,7 +733,8 @@ TEST(BlockFunctionTest, JacobiansAreBitwiseTheSameOnAnyNumberOfThreads) {
 // hold them) are those of the whole function's enclosure, bit for bit (the same interval
 // operations per block), on any number of threads; rows of blocks not asked for are unbounded.
 TEST(BlockFunctionTest, BoundsOfSomeRowsEqualTheWholeEnclosureOnAnyNumberOfThreads) {
-  const int blocks = 2000, agents = 700;
+  // More blocks asked for than the enclosures' parallel threshold (8192 blocks).
+  const int blocks = 13000, agents = 700;
   const SmoothFunction f = BlockFamily(blocks, agents);
   const Point point = FamilyPoint(agents);
   const Vector x_lower = point.x.array() - 0.01, x_upper = point.x.array() + 0.02;

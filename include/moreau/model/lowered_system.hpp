@@ -408,10 +408,10 @@ class LoweredSystem {
   /// indicators' bounds) of model functions made of blocks (MakeBlockFunction) in parallel:
   /// `threads` > 0 threads (the calling one included), or every hardware thread for `threads`
   /// <= 0. Only systems stored sparse use them (small systems stay on the calling thread, where
-  /// their evaluations take microseconds); calls over fewer than 1024 blocks run on the calling
-  /// thread. Results are bitwise the same for any number of threads: each block's derivatives
-  /// and enclosures are computed alone and written to their own places, second derivatives in
-  /// block order. A copy of the system starts without threads.
+  /// their evaluations take microseconds); calls over fewer than 1024 blocks (8192 for
+  /// enclosures) run on the calling thread. Results are bitwise the same for any number of threads:
+  /// each block's derivatives and enclosures are computed alone and written to their own places,
+  /// second derivatives in block order. A copy of the system starts without threads.
   void SetThreads(int threads);
   /// The threads in use (1: the calling thread only).
   int threads() const;
