@@ -408,6 +408,7 @@ struct ColumnsView {
 // The workspace of AssembleVelocityValues (per thread: the assembly runs on the thread that
 // solves, one at a time).
 struct VelocityValuesWorkspace {
+  Vector mask, rates;  // AssembleVelocityRows' continuity mask and rates (either assembly)
   Vector cont_a, cont_b;
   Columns x_y, x_z, product, scaled, scaled_b, d_v[5];
   Vector value[5];
@@ -657,11 +658,15 @@ static void AssembleVelocityRows(const LoweredSystem& system, const PointEvaluat
     return;
   }
   // Rates of continuous variables sit in v's continuous slots; jump variables are values.
+  // (In the thread's kept workspace: this runs for every velocity-level solve.)
   const int nz = system.num_algebraic();
-  Vector mask(nz);
+  VelocityValuesWorkspace& w = ThisThreadsVelocityValuesWorkspace();
+  Vector& mask = w.mask;
+  mask.resize(nz);
   for (int i = 0; i < nz; ++i)
     mask[i] = system.continuous_algebraic()[static_cast<std::size_t>(i)] ? 1.0 : 0.0;
-  const Vector rates = mask.cwiseProduct(v);
+  Vector& rates = w.rates;
+  rates.noalias() = mask.cwiseProduct(v);
   if (derivatives == Derivatives::kNone) {
     AssembleVelocityValues(system, e, mask, rates, roles, out);
     return;
