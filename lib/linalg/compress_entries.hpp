@@ -1,11 +1,13 @@
 #pragma once
 // Triplets to a compressed-columns matrix in its kept storage, shared by DerivativeMatrix and
-// SystemMatrix (their Finalize).
+// SystemMatrix (their Finalize), replayed through a kept plan while the pattern stays.
 
 #include <cstddef>
+#include <cstdint>
 #include <vector>
 
 #include "moreau/core/types.hpp"
+#include "moreau/linalg/derivative_matrix.hpp"
 
 namespace moreau::internal {
 
@@ -20,15 +22,44 @@ inline CompressScratch& ThisThreadsCompressScratch() {
   return scratch;
 }
 
+// The key of a (row, column) position in CompressionPlan::keys.
+inline std::uint64_t EntryKey(int row, int col) {
+  return (static_cast<std::uint64_t>(static_cast<std::uint32_t>(row)) << 32) |
+         static_cast<std::uint32_t>(col);
+}
+
 // *m = the rows x cols matrix of `entries` (each with row(), col(), value()): what Eigen's
 // setFromTriplets computes (compressed columns, rows increasing in each column, duplicates
 // summed from left to right in the order given: the same bits), without its two temporary
-// matrices per call: m's storage is reused, its capacity kept. Two stable counting sorts order
-// the entries by (column, row, position).
+// matrices per call: m's storage is reused, its capacity kept.
+//
+// *plan describes how the previous call filled *m (its owner keeps both and resets the plan
+// when it changes *m otherwise). Entries at the positions of that call, in the same order,
+// are written through the plan in one pass: the same assignments and sums in the same order,
+// so the same bits. Otherwise two stable counting sorts order the entries by (column, row,
+// position) and the plan is recorded for the next call.
 template <class Entries>
-void CompressEntries(const Entries& entries, int rows, int cols, SparseMatrix* m) {
-  CompressScratch& scratch = ThisThreadsCompressScratch();
+void CompressEntries(const Entries& entries, int rows, int cols, SparseMatrix* m,
+                     CompressionPlan* plan) {
   const std::size_t n = entries.size();
+  if (plan->rows == rows && plan->cols == cols && plan->keys.size() == n && m->rows() == rows &&
+      m->cols() == cols && m->isCompressed() && m->nonZeros() == plan->nonzeros) {
+    double* values = m->valuePtr();
+    std::size_t i = 0;
+    for (; i < n; ++i) {
+      const auto& e = entries[i];
+      if (plan->keys[i] != EntryKey(static_cast<int>(e.row()), static_cast<int>(e.col()))) break;
+      const int slot = plan->slots[i];
+      if (slot >= 0) {
+        values[slot] = e.value();
+      } else {
+        values[~slot] += e.value();
+      }
+    }
+    if (i == n) return;
+    // Another pattern: compressed anew below (the values written so far are overwritten).
+  }
+  CompressScratch& scratch = ThisThreadsCompressScratch();
   scratch.by_row.resize(n);
   scratch.by_column.resize(n);
   std::vector<int>& count = scratch.count;
@@ -65,16 +96,28 @@ void CompressEntries(const Entries& entries, int rows, int cols, SparseMatrix* m
   m->resizeNonZeros(distinct);
   int* inner = m->innerIndexPtr();
   double* values = m->valuePtr();
+  plan->keys.resize(n);
+  plan->slots.resize(n);
   Eigen::Index last = -1;
   for (std::size_t k = 0; k < n; ++k) {
+    const auto position = static_cast<std::size_t>(scratch.by_column[k]);
     if (repeats(k)) {
       values[last] += entry(k).value();
+      plan->slots[position] = ~static_cast<int>(last);
     } else {
       ++last;
       inner[last] = static_cast<int>(entry(k).row());
       values[last] = entry(k).value();
+      plan->slots[position] = static_cast<int>(last);
     }
   }
+  for (std::size_t i = 0; i < n; ++i) {
+    plan->keys[i] =
+        EntryKey(static_cast<int>(entries[i].row()), static_cast<int>(entries[i].col()));
+  }
+  plan->rows = rows;
+  plan->cols = cols;
+  plan->nonzeros = distinct;
 }
 
 }  // namespace moreau::internal

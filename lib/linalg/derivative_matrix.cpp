@@ -102,6 +102,7 @@ void DerivativeMatrix::Assign(const SparseMatrix& m) {
     sparse_matrix_ = m;
     sparse_matrix_->makeCompressed();
     entries_.clear();
+    plan_.rows = -1;  // the stored pattern is no longer the plan's
   } else {
     dense_ = Matrix(m);
   }
@@ -120,7 +121,7 @@ void DerivativeMatrix::Scale(double factor) {
 void DerivativeMatrix::Finalize() {
   if (!sparse_ || finalized_) return;
   if (!sparse_matrix_) sparse_matrix_.emplace();
-  internal::CompressEntries(entries_, rows_, cols_, &*sparse_matrix_);
+  internal::CompressEntries(entries_, rows_, cols_, &*sparse_matrix_, &plan_);
   finalized_ = true;
 }
 

@@ -199,7 +199,7 @@ void SystemMatrix::AddEntry(int row, int col, double value) {
 
 void SystemMatrix::Finalize() {
   if (!sparse_) return;
-  internal::CompressEntries(triplets_, n_, n_, &sparse_matrix_);
+  internal::CompressEntries(triplets_, n_, n_, &sparse_matrix_, &plan_);
 }
 
 Vector SystemMatrix::Multiply(const Vector& x) const {

@@ -5,11 +5,13 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <random>
 #include <tuple>
 
 #include "../problems/test_scenes.hpp"
+#include "moreau/linalg/linear_solver.hpp"
 #include "moreau/model/lowered_system.hpp"
 #include "moreau/scenes/catalog.hpp"
 
@@ -120,6 +122,92 @@ TEST(SparseStorage, DerivativeMatrixSwitchesStorageAndCopies) {
   EXPECT_EQ(empty.ToDense(), Matrix::Zero(3, 2));
   const double visited = empty.Visit([](const auto& storage) { return storage.norm(); });
   EXPECT_EQ(visited, 0.0);
+}
+
+// A kept matrix finalized again (the plan of its last compression replayed while the entries
+// keep their positions, a new sort when they move) equals a fresh matrix bit for bit, and
+// both equal Eigen's setFromTriplets. The duplicates' values make their summation order
+// visible: (1e16 + 1) - 1e16 is 0 from left to right and 1 in another order; -0.0 alone stays
+// -0.0 only if the first entry of a position is assigned, not added to zero.
+TEST(SparseStorage, FinalizeAgainEqualsAFreshMatrixBitForBit) {
+  constexpr int kRows = 7, kCols = 5;
+  std::mt19937 random(17);
+  std::uniform_int_distribution<int> row(0, kRows - 1), col(0, kCols - 1);
+  std::uniform_real_distribution<double> value(-1.0, 1.0);
+  std::vector<DerivativeMatrix::Entry> entries;
+  for (int k = 0; k < 40; ++k) entries.push_back({row(random), col(random), value(random)});
+  entries.push_back({3, 2, 1e16});
+  entries.push_back({3, 2, 1.0});
+  entries.push_back({3, 2, -1e16});
+  entries.push_back({6, 4, -0.0});
+  auto fill = [](DerivativeMatrix* m, SystemMatrix* a,
+                 const std::vector<DerivativeMatrix::Entry>& list) {
+    m->SetZero(kRows, kCols, true);
+    a->Reset(kRows, true);
+    for (const auto& e : list) {
+      m->Add(e.r, e.c, e.v);
+      a->AddEntry(e.r, e.c, e.v);
+    }
+    m->Finalize();
+    a->Finalize();
+  };
+  auto expect_fresh = [&](const DerivativeMatrix& kept, const SystemMatrix& kept_system,
+                          const std::vector<DerivativeMatrix::Entry>& list,
+                          const std::string& what) {
+    DerivativeMatrix fresh;
+    SystemMatrix fresh_system;
+    fill(&fresh, &fresh_system, list);
+    ExpectSameBits(kept, fresh, what);
+    std::vector<Eigen::Triplet<double, int>> triplets;
+    for (const auto& e : list) triplets.emplace_back(e.r, e.c, e.v);
+    DerivativeMatrix eigen;
+    SparseMatrix expected(kRows, kCols);
+    expected.setFromTriplets(triplets.begin(), triplets.end());
+    eigen.SetZero(kRows, kCols, true);
+    eigen.Assign(expected);
+    ExpectSameBits(kept, eigen, what + " (setFromTriplets)");
+    DerivativeMatrix system_part, fresh_system_part;
+    system_part.SetZero(kRows, kRows, true);
+    system_part.Assign(kept_system.sparse_matrix());
+    fresh_system_part.SetZero(kRows, kRows, true);
+    fresh_system_part.Assign(fresh_system.sparse_matrix());
+    ExpectSameBits(system_part, fresh_system_part, what + " (system matrix)");
+  };
+  DerivativeMatrix kept;
+  SystemMatrix kept_system;
+  fill(&kept, &kept_system, entries);
+  expect_fresh(kept, kept_system, entries, "first");
+  ASSERT_EQ(kept.ToDense()(3, 2), 0.0);
+  ASSERT_TRUE(std::signbit(kept.ToDense()(6, 4)));
+  // The same positions with new values: the replay.
+  for (auto& e : entries) {
+    if (e.r != 3 || e.c != 2) e.v = value(random);
+  }
+  fill(&kept, &kept_system, entries);
+  expect_fresh(kept, kept_system, entries, "new values");
+  // One entry moved (same count, another position), then one entry fewer, then back.
+  entries[5].r = (entries[5].r + 1) % kRows;
+  fill(&kept, &kept_system, entries);
+  expect_fresh(kept, kept_system, entries, "an entry moved");
+  const DerivativeMatrix::Entry last = entries.back();
+  entries.pop_back();
+  fill(&kept, &kept_system, entries);
+  expect_fresh(kept, kept_system, entries, "an entry fewer");
+  entries.push_back(last);
+  fill(&kept, &kept_system, entries);
+  expect_fresh(kept, kept_system, entries, "back");
+  // A copy carries its plan with its matrix; Assign replaces the matrix and drops the plan.
+  DerivativeMatrix copy = kept;
+  SystemMatrix copy_system = kept_system;
+  entries[0].v = 2.5;
+  fill(&copy, &copy_system, entries);
+  expect_fresh(copy, copy_system, entries, "copy");
+  SparseMatrix other(kRows, kCols);
+  other.insert(0, 0) = 1.0;
+  kept.SetZero(kRows, kCols, true);
+  kept.Assign(other);
+  fill(&kept, &kept_system, entries);
+  expect_fresh(kept, kept_system, entries, "after Assign");
 }
 
 TEST(SparseStorage, EvaluationsEqualDenseOnEveryCatalogScene) {

@@ -13,12 +13,30 @@
 /// which the producer calls once all contributions are in. Capacity is kept across
 /// SetZero calls, so a steady sequence of evaluations does not allocate.
 
+#include <cstdint>
 #include <optional>
 #include <vector>
 
 #include "moreau/core/types.hpp"
 
 namespace moreau {
+
+namespace internal {
+/// How the last sparse Finalize of a DerivativeMatrix or SystemMatrix placed its entries (an
+/// implementation detail kept beside the compressed matrix): a Finalize whose entries come
+/// at the same (row, column) positions in the same order, as in every Newton iteration and
+/// step between pattern changes, writes the values through it in one pass instead of sorting
+/// the entries again. Entry i's value goes to the compressed matrix's value slot slots[i] if
+/// slots[i] >= 0 (the first entry at its position: assigned) and is added to slot ~slots[i]
+/// otherwise (a later duplicate: summed in entry order, as the sort does).
+struct CompressionPlan {
+  std::vector<std::uint64_t> keys;  ///< row << 32 | column of each entry, in order
+  std::vector<int> slots;           ///< value slot of each entry, as above
+  int rows = -1;                    ///< the compressed matrix's rows, -1: no plan
+  int cols = -1;                    ///< its columns
+  Eigen::Index nonzeros = 0;        ///< its stored entries
+};
+}  // namespace internal
 
 /// A derivative block (rows x cols) stored dense or sparse, filled by accumulation and then read:
 /// the storage of every Jacobian block of a lowered system (docs/sparse-systems.md).
@@ -124,6 +142,7 @@ class DerivativeMatrix {
   // evaluations hold dozens of dense derivative matrices (PointEvaluation,
   // VelocityLevelEvaluation), each constructed per run.
   std::optional<SparseMatrix> sparse_matrix_;
+  internal::CompressionPlan plan_;  // how Finalize last filled *sparse_matrix_
 };
 
 }  // namespace moreau

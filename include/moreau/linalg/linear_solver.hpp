@@ -96,6 +96,7 @@ class SystemMatrix {
   Matrix dense_;
   std::vector<Eigen::Triplet<double, int>> triplets_;
   SparseMatrix sparse_matrix_;
+  internal::CompressionPlan plan_;  // how Finalize last filled sparse_matrix_
 };
 
 /// Result of a factorization.
