@@ -622,13 +622,16 @@ class UmfpackSolver final : public LinearSolver {
 
 }  // namespace
 
+LinearSolverKind ResolveLinearSolverKind(LinearSolverKind kind, int n, double nonzeros) {
+  if (kind != LinearSolverKind::kAutomatic) return kind;
+  const double density = n == 0 ? 1.0 : nonzeros / (static_cast<double>(n) * n);
+  return (n <= kDenseSizeLimit || density > kSparseDensityLimit) ? LinearSolverKind::kDenseLu
+                                                                 : LinearSolverKind::kSparseLu;
+}
+
 std::unique_ptr<LinearSolver> MakeLinearSolver(LinearSolverKind kind, int n, double nonzeros) {
   RequireArgument(n >= 0, "linear system size must be non-negative, got ", n);
-  if (kind == LinearSolverKind::kAutomatic) {
-    const double density = n == 0 ? 1.0 : nonzeros / (static_cast<double>(n) * n);
-    kind = (n <= kDenseSizeLimit || density > kSparseDensityLimit) ? LinearSolverKind::kDenseLu
-                                                                   : LinearSolverKind::kSparseLu;
-  }
+  kind = ResolveLinearSolverKind(kind, n, nonzeros);
   if (kind == LinearSolverKind::kSparseLu) return std::make_unique<UmfpackSolver>();
   if (kind == LinearSolverKind::kKlu) return std::make_unique<KluSolver>();
   return std::make_unique<DenseLuSolver>();

@@ -136,11 +136,25 @@ struct Point {
 
 }  // namespace
 
+// Linear solvers kept for systems of other sizes than the current one (most recently used
+// last). A caller that alternates between two systems, as FESD's fixed steps do between the
+// step's element group and its error estimate's comparison element, then finds each size's
+// solver with its symbolic analysis, instead of making a new solver at every switch (a new
+// symbolic analysis and, with sparse storage, new UMFPACK objects twice per step). The
+// factorizations are the same: each solver refactorizes at every Newton iteration and
+// reuses only what depends on the pattern.
+constexpr std::size_t kMaxSpareSolvers = 2;
+
 struct SemismoothNewton::Workspace {
   Point current, trial;
   Vector scaled_phi, gradient, direction, trial_w;
   Vector da_min, db_min, rhs;  // the active-set step's
   std::vector<double> history, merits;
+  struct SpareSolver {
+    int size = 0;
+    std::unique_ptr<LinearSolver> solver;
+  };
+  std::vector<SpareSolver> spare_solvers;
 };
 
 SemismoothNewton::SemismoothNewton(const SemismoothNewtonOptions& options)
@@ -165,7 +179,24 @@ void SemismoothNewton::Solve(MixedComplementaritySystem& system, const Vector& i
   MOREAU_ASSERT(n_eq + n_pairs == n, "mixed complementarity system is not square");
   MOREAU_ASSERT(initial_guess.size() == n, "initial guess has the wrong size");
   if (solver_ == nullptr || solver_size_ != n) {
-    solver_ = MakeLinearSolver(options_.linear_solver, n, system.EstimatedJacobianNonzeros());
+    // A kept solver of this size and of the kind a new one would be, else a new one.
+    std::vector<Workspace::SpareSolver>& spare = workspace_->spare_solvers;
+    const double nonzeros = system.EstimatedJacobianNonzeros();
+    const LinearSolverKind kind = ResolveLinearSolverKind(options_.linear_solver, n, nonzeros);
+    std::unique_ptr<LinearSolver> solver;
+    for (auto it = spare.begin(); it != spare.end(); ++it) {
+      if (it->size == n && it->solver->kind() == kind) {
+        solver = std::move(it->solver);
+        spare.erase(it);
+        break;
+      }
+    }
+    if (solver == nullptr) solver = MakeLinearSolver(kind, n, nonzeros);
+    if (solver_ != nullptr) {
+      if (spare.size() == kMaxSpareSolvers) spare.erase(spare.begin());
+      spare.push_back({solver_size_, std::move(solver_)});
+    }
+    solver_ = std::move(solver);
     solver_size_ = n;
   }
   SemismoothNewtonResult& result = *result_out;

@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <random>
+#include <vector>
 
 #include "moreau/complementarity/ncp_function.hpp"
 
@@ -243,6 +244,74 @@ TEST(SemismoothNewtonTest, SparseAndDenseLinearAlgebraAgree) {
   ExpectSolved(dense, m, q, "dense");
   ExpectSolved(sparse, m, q, "sparse");
   EXPECT_LE((dense.z - sparse.z).lpNorm<Eigen::Infinity>(), 1e-12);
+}
+
+// The LCP 0 <= z _|_ M z + q >= 0 with the tridiagonal M of SparseAndDenseLinearAlgebraAgree
+// (n x n, strictly diagonally dominant: a P-matrix, so one solution) as a mixed complementarity
+// system, a = z and b = M z + q, with a sparse Jacobian.
+class TridiagonalLcp final : public MixedComplementaritySystem {
+ public:
+  explicit TridiagonalLcp(int n) : m_(n, n), q_(n) {
+    std::vector<Eigen::Triplet<double, int>> entries;
+    for (int i = 0; i < n; ++i) {
+      entries.emplace_back(i, i, 2.5);
+      if (i > 0) entries.emplace_back(i, i - 1, -1.0);
+      if (i + 1 < n) entries.emplace_back(i, i + 1, -0.8);
+      q_[i] = std::sin(0.37 * i);
+    }
+    m_.setFromTriplets(entries.begin(), entries.end());
+  }
+  int num_unknowns() const override { return static_cast<int>(q_.size()); }
+  int num_equations() const override { return 0; }
+  int num_pairs() const override { return num_unknowns(); }
+  double EstimatedJacobianNonzeros() const override { return static_cast<double>(m_.nonZeros()); }
+  bool Evaluate(const Vector& x, bool, Vector* r, Vector* a, Vector* b) override {
+    r->resize(0);
+    *a = x;
+    *b = m_ * x + q_;
+    return true;
+  }
+  void AssembleJacobian(const Vector& da, const Vector& db, SystemMatrix* jacobian) override {
+    const SparseMatrix weighted = db.asDiagonal() * m_;
+    jacobian->AddSparseBlock(0, 0, weighted);
+    jacobian->AddDiagonal(0, 0, num_unknowns(), 0.0);
+    for (int i = 0; i < num_unknowns(); ++i) jacobian->AddEntry(i, i, da[i]);
+  }
+
+ private:
+  SparseMatrix m_;
+  Vector q_;
+};
+
+// One solver alternating between systems of two sizes (as FESD's fixed steps alternate between
+// a step's elements and its error estimate's comparison element) keeps a linear solver per size:
+// back at a size, it factorizes with the solver it used there before, and every solve gives the
+// bits of a solver that never saw the other size.
+TEST(SemismoothNewtonTest, AlternatingSizesKeepTheirLinearSolvers) {
+  SemismoothNewtonOptions options;
+  options.linear_solver = LinearSolverKind::kSparseLu;
+  SemismoothNewton alternating(options);
+  TridiagonalLcp large(3000), small(1000);
+  long large_factorizations = 0, small_factorizations = 0;
+  for (int round = 0; round < 3; ++round) {
+    for (TridiagonalLcp* system : {&large, &small}) {
+      const Vector start = Vector::Zero(system->num_unknowns());
+      const SemismoothNewtonResult result = alternating.Solve(*system, start);
+      SemismoothNewton fresh(options);
+      const SemismoothNewtonResult expected = fresh.Solve(*system, start);
+      ASSERT_TRUE(expected.converged()) << expected.message;
+      ASSERT_TRUE(result.converged()) << result.message;
+      EXPECT_EQ(result.solution, expected.solution) << "round " << round;  // bitwise
+      EXPECT_EQ(result.residual_history, expected.residual_history) << "round " << round;
+      // The kept solver has counted this size's factorizations of every round so far (a new
+      // solver would count this round's only).
+      long& count = system == &large ? large_factorizations : small_factorizations;
+      count += expected.stats.factorizations;
+      ASSERT_NE(alternating.last_jacobian_solver(), nullptr);
+      EXPECT_EQ(alternating.last_jacobian_solver()->num_factorizations(), count)
+          << "round " << round;
+    }
+  }
 }
 
 // r(w) = (w_1 - 5, w_2 - 5) with a Jacobian reported as c [1 1; 1 1] (singular, c = 0.05):

@@ -141,6 +141,9 @@ class LinearSolver {
   int num_factorizations_ = 0;
 };
 
+/// The kind MakeLinearSolver makes for these arguments: `kind` itself unless kAutomatic,
+/// which resolves as documented in LinearSolverKind.
+LinearSolverKind ResolveLinearSolverKind(LinearSolverKind kind, int n, double nonzeros);
 /// Creates a solver for n-by-n systems with about `nonzeros` structural nonzeros
 /// (pass n * n if unknown). kAutomatic resolves as documented in LinearSolverKind.
 std::unique_ptr<LinearSolver> MakeLinearSolver(LinearSolverKind kind, int n, double nonzeros);
