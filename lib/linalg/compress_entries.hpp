@@ -3,7 +3,6 @@
 // SystemMatrix (their Finalize), replayed through a kept plan while the pattern stays.
 
 #include <cstddef>
-#include <cstdint>
 #include <vector>
 
 #include "moreau/core/types.hpp"
@@ -22,12 +21,6 @@ inline CompressScratch& ThisThreadsCompressScratch() {
   return scratch;
 }
 
-// The key of a (row, column) position in CompressionPlan::keys.
-inline std::uint64_t EntryKey(int row, int col) {
-  return (static_cast<std::uint64_t>(static_cast<std::uint32_t>(row)) << 32) |
-         static_cast<std::uint32_t>(col);
-}
-
 // *m = the rows x cols matrix of `entries` (each with row(), col(), value()): what Eigen's
 // setFromTriplets computes (compressed columns, rows increasing in each column, duplicates
 // summed from left to right in the order given: the same bits), without its two temporary
@@ -36,24 +29,31 @@ inline std::uint64_t EntryKey(int row, int col) {
 // *plan describes how the previous call filled *m (its owner keeps both and resets the plan
 // when it changes *m otherwise). Entries at the positions of that call, in the same order,
 // are written through the plan in one pass: the same assignments and sums in the same order,
-// so the same bits. Otherwise two stable counting sorts order the entries by (column, row,
-// position) and the plan is recorded for the next call.
+// so the same bits. Each entry's position is checked against its slot's in *m (the slot lies
+// in the entry's column and holds its row); the first entries of the plan's positions fill
+// every stored slot once (as many positions as stored entries), so no stale value survives.
+// Otherwise two stable counting sorts order the entries by (column, row, position) and the
+// plan is recorded for the next call.
 template <class Entries>
 void CompressEntries(const Entries& entries, int rows, int cols, SparseMatrix* m,
                      CompressionPlan* plan) {
   const std::size_t n = entries.size();
-  if (plan->rows == rows && plan->cols == cols && plan->keys.size() == n && m->rows() == rows &&
+  if (plan->rows == rows && plan->cols == cols && plan->slots.size() == n && m->rows() == rows &&
       m->cols() == cols && m->isCompressed() && m->nonZeros() == plan->nonzeros) {
+    const int* outer = m->outerIndexPtr();
+    const int* inner = m->innerIndexPtr();
     double* values = m->valuePtr();
     std::size_t i = 0;
     for (; i < n; ++i) {
       const auto& e = entries[i];
-      if (plan->keys[i] != EntryKey(static_cast<int>(e.row()), static_cast<int>(e.col()))) break;
       const int slot = plan->slots[i];
+      const int at = slot >= 0 ? slot : ~slot;
+      const auto col = static_cast<int>(e.col());
+      if (at < outer[col] || at >= outer[col + 1] || inner[at] != static_cast<int>(e.row())) break;
       if (slot >= 0) {
-        values[slot] = e.value();
+        values[at] = e.value();
       } else {
-        values[~slot] += e.value();
+        values[at] += e.value();
       }
     }
     if (i == n) return;
@@ -96,7 +96,6 @@ void CompressEntries(const Entries& entries, int rows, int cols, SparseMatrix* m
   m->resizeNonZeros(distinct);
   int* inner = m->innerIndexPtr();
   double* values = m->valuePtr();
-  plan->keys.resize(n);
   plan->slots.resize(n);
   Eigen::Index last = -1;
   for (std::size_t k = 0; k < n; ++k) {
@@ -110,10 +109,6 @@ void CompressEntries(const Entries& entries, int rows, int cols, SparseMatrix* m
       values[last] = entry(k).value();
       plan->slots[position] = static_cast<int>(last);
     }
-  }
-  for (std::size_t i = 0; i < n; ++i) {
-    plan->keys[i] =
-        EntryKey(static_cast<int>(entries[i].row()), static_cast<int>(entries[i].col()));
   }
   plan->rows = rows;
   plan->cols = cols;

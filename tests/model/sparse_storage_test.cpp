@@ -9,6 +9,7 @@
 #include <cstring>
 #include <random>
 #include <tuple>
+#include <utility>
 
 #include "../problems/test_scenes.hpp"
 #include "moreau/linalg/linear_solver.hpp"
@@ -125,8 +126,8 @@ TEST(SparseStorage, DerivativeMatrixSwitchesStorageAndCopies) {
 }
 
 // A kept matrix finalized again (the plan of its last compression replayed while the entries
-// keep their positions, a new sort when they move) equals a fresh matrix bit for bit, and
-// both equal Eigen's setFromTriplets. The duplicates' values make their summation order
+// keep their positions, a new sort when they move or change order) equals a fresh matrix bit for
+// bit, and both equal Eigen's setFromTriplets. The duplicates' values make their summation order
 // visible: (1e16 + 1) - 1e16 is 0 from left to right and 1 in another order; -0.0 alone stays
 // -0.0 only if the first entry of a position is assigned, not added to zero.
 TEST(SparseStorage, FinalizeAgainEqualsAFreshMatrixBitForBit) {
@@ -185,6 +186,25 @@ TEST(SparseStorage, FinalizeAgainEqualsAFreshMatrixBitForBit) {
   }
   fill(&kept, &kept_system, entries);
   expect_fresh(kept, kept_system, entries, "new values");
+  // Two entries swapped (the same positions in another order, so the same stored pattern):
+  // first two at different rows of one column, then two in one row and different columns.
+  auto swap_where = [&](const auto& differ) {
+    for (std::size_t a = 0; a < entries.size(); ++a) {
+      for (std::size_t b = a + 1; b < entries.size(); ++b) {
+        if (differ(entries[a], entries[b])) {
+          std::swap(entries[a], entries[b]);
+          return true;
+        }
+      }
+    }
+    return false;
+  };
+  ASSERT_TRUE(swap_where([](const auto& a, const auto& b) { return a.c == b.c && a.r != b.r; }));
+  fill(&kept, &kept_system, entries);
+  expect_fresh(kept, kept_system, entries, "swapped in a column");
+  ASSERT_TRUE(swap_where([](const auto& a, const auto& b) { return a.r == b.r && a.c != b.c; }));
+  fill(&kept, &kept_system, entries);
+  expect_fresh(kept, kept_system, entries, "swapped in a row");
   // One entry moved (same count, another position), then one entry fewer, then back.
   entries[5].r = (entries[5].r + 1) % kRows;
   fill(&kept, &kept_system, entries);

@@ -13,7 +13,6 @@
 /// which the producer calls once all contributions are in. Capacity is kept across
 /// SetZero calls, so a steady sequence of evaluations does not allocate.
 
-#include <cstdint>
 #include <optional>
 #include <vector>
 
@@ -28,13 +27,13 @@ namespace internal {
 /// step between pattern changes, writes the values through it in one pass instead of sorting
 /// the entries again. Entry i's value goes to the compressed matrix's value slot slots[i] if
 /// slots[i] >= 0 (the first entry at its position: assigned) and is added to slot ~slots[i]
-/// otherwise (a later duplicate: summed in entry order, as the sort does).
+/// otherwise (a later duplicate: summed in entry order, as the sort does). An entry's
+/// position is checked against its slot's row and column in the compressed matrix itself.
 struct CompressionPlan {
-  std::vector<std::uint64_t> keys;  ///< row << 32 | column of each entry, in order
-  std::vector<int> slots;           ///< value slot of each entry, as above
-  int rows = -1;                    ///< the compressed matrix's rows, -1: no plan
-  int cols = -1;                    ///< its columns
-  Eigen::Index nonzeros = 0;        ///< its stored entries
+  std::vector<int> slots;     ///< value slot of each entry, as above
+  int rows = -1;              ///< the compressed matrix's rows, -1: no plan
+  int cols = -1;              ///< its columns
+  Eigen::Index nonzeros = 0;  ///< its stored entries
 };
 }  // namespace internal
 
