@@ -225,17 +225,30 @@ TEST(SemismoothNewtonTest, MinMapSolvesTheSameProblems) {
   EXPECT_LE((fb.z - min.z).lpNorm<Eigen::Infinity>(), 1e-11);
 }
 
+// A sparse LCP: M tridiagonal (2.5 on the diagonal, -1 below, -0.8 above: strictly
+// diagonally dominant, a P-matrix, so one solution), q_i = sin(0.37 i).
+SparseMatrix TridiagonalMatrix(int n) {
+  std::vector<Eigen::Triplet<double, int>> entries;
+  for (int i = 0; i < n; ++i) {
+    entries.emplace_back(i, i, 2.5);
+    if (i > 0) entries.emplace_back(i, i - 1, -1.0);
+    if (i + 1 < n) entries.emplace_back(i, i + 1, -0.8);
+  }
+  SparseMatrix m(n, n);
+  m.setFromTriplets(entries.begin(), entries.end());
+  return m;
+}
+Vector TridiagonalRightSide(int n) {
+  Vector q(n);
+  for (int i = 0; i < n; ++i) q[i] = std::sin(0.37 * i);
+  return q;
+}
+
 TEST(SemismoothNewtonTest, SparseAndDenseLinearAlgebraAgree) {
   // A sparse monotone LCP (tridiagonal M, n = 2000) through KLU and through the dense LU.
   constexpr int n = 2000;
-  Matrix m = Matrix::Zero(n, n);
-  for (int i = 0; i < n; ++i) {
-    m(i, i) = 2.5;
-    if (i > 0) m(i, i - 1) = -1.0;
-    if (i + 1 < n) m(i, i + 1) = -0.8;
-  }
-  Vector q(n);
-  for (int i = 0; i < n; ++i) q[i] = std::sin(0.37 * i);
+  const Matrix m = Matrix(TridiagonalMatrix(n));
+  const Vector q = TridiagonalRightSide(n);
   SemismoothNewtonOptions dense_options, sparse_options;
   dense_options.linear_solver = LinearSolverKind::kDenseLu;
   sparse_options.linear_solver = LinearSolverKind::kSparseLu;
@@ -246,21 +259,11 @@ TEST(SemismoothNewtonTest, SparseAndDenseLinearAlgebraAgree) {
   EXPECT_LE((dense.z - sparse.z).lpNorm<Eigen::Infinity>(), 1e-12);
 }
 
-// The LCP 0 <= z _|_ M z + q >= 0 with the tridiagonal M of SparseAndDenseLinearAlgebraAgree
-// (n x n, strictly diagonally dominant: a P-matrix, so one solution) as a mixed complementarity
-// system, a = z and b = M z + q, with a sparse Jacobian.
+// The LCP 0 <= z _|_ M z + q >= 0 (TridiagonalMatrix, TridiagonalRightSide) as a mixed
+// complementarity system, a = z and b = M z + q, with a sparse Jacobian.
 class TridiagonalLcp final : public MixedComplementaritySystem {
  public:
-  explicit TridiagonalLcp(int n) : m_(n, n), q_(n) {
-    std::vector<Eigen::Triplet<double, int>> entries;
-    for (int i = 0; i < n; ++i) {
-      entries.emplace_back(i, i, 2.5);
-      if (i > 0) entries.emplace_back(i, i - 1, -1.0);
-      if (i + 1 < n) entries.emplace_back(i, i + 1, -0.8);
-      q_[i] = std::sin(0.37 * i);
-    }
-    m_.setFromTriplets(entries.begin(), entries.end());
-  }
+  explicit TridiagonalLcp(int n) : m_(TridiagonalMatrix(n)), q_(TridiagonalRightSide(n)) {}
   int num_unknowns() const override { return static_cast<int>(q_.size()); }
   int num_equations() const override { return 0; }
   int num_pairs() const override { return num_unknowns(); }
@@ -274,7 +277,6 @@ class TridiagonalLcp final : public MixedComplementaritySystem {
   void AssembleJacobian(const Vector& da, const Vector& db, SystemMatrix* jacobian) override {
     const SparseMatrix weighted = db.asDiagonal() * m_;
     jacobian->AddSparseBlock(0, 0, weighted);
-    jacobian->AddDiagonal(0, 0, num_unknowns(), 0.0);
     for (int i = 0; i < num_unknowns(); ++i) jacobian->AddEntry(i, i, da[i]);
   }
 
