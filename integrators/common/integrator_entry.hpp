@@ -173,8 +173,8 @@ template <class Options>
 OptionBinding<Options> BindLinearSolver(LinearSolverKind Options::*member) {
   return BindChoice("linear_solver", member, {"auto", "dense", "sparse", "klu"},
                     ParseLinearSolverKind, ToString,
-                    "LU backend (auto: dense up to 256 unknowns, sparse UMFPACK above; klu: "
-                    "SuiteSparse KLU)");
+                    "LU backend (auto: dense up to 256 unknowns, KLU above, handing over to "
+                    "UMFPACK where KLU fills in; sparse: SuiteSparse UMFPACK; klu: KLU alone)");
 }
 // Stop times of FESD, time-stepping, Radau and IDA: the user's breakpoints.
 template <class Options>

@@ -191,7 +191,8 @@ void SemismoothNewton::Solve(MixedComplementaritySystem& system, const Vector& i
         break;
       }
     }
-    if (solver == nullptr) solver = MakeLinearSolver(kind, n, nonzeros);
+    // (Made from the option, not the resolved kind: kAutomatic's KLU guards its fill.)
+    if (solver == nullptr) solver = MakeLinearSolver(options_.linear_solver, n, nonzeros);
     if (solver_ != nullptr) {
       if (spare.size() == kMaxSpareSolvers) spare.erase(spare.begin());
       spare.push_back({solver_size_, std::move(solver_)});

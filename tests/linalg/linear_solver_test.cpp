@@ -92,6 +92,78 @@ TEST(LinearSolverTest, SaddlePointSystems) {
   }
 }
 
+// The k x k grid's five-point pattern with O(1) neighbour couplings of random sign and
+// diagonal entries of 1e-6: KLU's threshold pivoting (0.001 of the column) refuses every
+// diagonal pivot the AMD ordering counted on, and fills in (k = 40: 6.4 times the entries
+// the ordering estimated).
+SystemMatrix GridWithSmallDiagonal(int k) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> magnitude(0.5, 1.0);
+  SystemMatrix a;
+  a.Reset(k * k, true);
+  for (int i = 0; i < k; ++i) {
+    for (int j = 0; j < k; ++j) {
+      const int row = i * k + j;
+      a.AddEntry(row, row, 1e-6);
+      for (const int column : {j > 0 ? row - 1 : -1, j + 1 < k ? row + 1 : -1, i > 0 ? row - k : -1,
+                               i + 1 < k ? row + k : -1}) {
+        if (column >= 0) a.AddEntry(row, column, (rng() % 2 == 0 ? 1.0 : -1.0) * magnitude(rng));
+      }
+    }
+  }
+  a.Finalize();
+  return a;
+}
+
+Vector SolveWith(LinearSolver* lu, const SystemMatrix& a, const Vector& b) {
+  EXPECT_EQ(lu->Factorize(a), FactorizationStatus::kSuccess);
+  Vector x = b;
+  lu->Solve(x);
+  return x;
+}
+
+// kAutomatic above kDenseSizeLimit: KLU while its factorizations keep to their ordering (the
+// same bits as KLU on request, first factorization), UMFPACK from the first that fills in
+// (the same bits as UMFPACK), and UMFPACK thereafter.
+TEST(LinearSolverTest, AutomaticSparseLuHandsOverToUmfpackWhenKluFillsIn) {
+  const SystemMatrix sound = RandomSparse(3000, true, 11);
+  const SystemMatrix filling = GridWithSmallDiagonal(40);
+  const int n_sound = sound.size(), n_filling = filling.size();
+  ASSERT_GT(n_filling, kDenseSizeLimit);
+  auto solve = [](LinearSolverKind kind, const SystemMatrix& a) {
+    auto lu = MakeLinearSolver(kind, a.size(), 5.0 * a.size());
+    return SolveWith(lu.get(), a, Vector::LinSpaced(a.size(), -1.0, 2.0));
+  };
+  const Vector b_sound = Vector::LinSpaced(n_sound, -1.0, 2.0);
+  const Vector b_filling = Vector::LinSpaced(n_filling, -1.0, 2.0);
+
+  auto automatic = MakeLinearSolver(LinearSolverKind::kAutomatic, n_sound, 5.0 * n_sound);
+  EXPECT_EQ(automatic->kind(), LinearSolverKind::kKlu);
+  const Vector x_sound = SolveWith(automatic.get(), sound, b_sound);
+  EXPECT_TRUE(x_sound == solve(LinearSolverKind::kKlu, sound));
+  EXPECT_LE((sound.Multiply(x_sound) - b_sound).lpNorm<Eigen::Infinity>(), kAgreement);
+
+  // The filling matrix: KLU's own solution differs from UMFPACK's (else the test could not
+  // tell them apart); the automatic solver gives UMFPACK's, with a small residual.
+  const Vector x_klu = solve(LinearSolverKind::kKlu, filling);
+  const Vector x_umfpack = solve(LinearSolverKind::kSparseLu, filling);
+  ASSERT_FALSE(x_klu == x_umfpack);
+  const Vector x_filling = SolveWith(automatic.get(), filling, b_filling);
+  EXPECT_TRUE(x_filling == x_umfpack);
+  EXPECT_LE((filling.Multiply(x_filling) - b_filling).lpNorm<Eigen::Infinity>(), 1e-9);
+  Vector t_filling = b_filling, t_umfpack = b_filling;
+  automatic->SolveTransposed(t_filling);
+  auto umfpack = MakeLinearSolver(LinearSolverKind::kSparseLu, n_filling, 5.0 * n_filling);
+  ASSERT_EQ(umfpack->Factorize(filling), FactorizationStatus::kSuccess);
+  umfpack->SolveTransposed(t_umfpack);
+  EXPECT_TRUE(t_filling == t_umfpack);
+
+  // The hand-over is kept: the sound matrix now goes to UMFPACK too.
+  EXPECT_TRUE(SolveWith(automatic.get(), sound, b_sound) ==
+              solve(LinearSolverKind::kSparseLu, sound));
+  EXPECT_EQ(automatic->num_factorizations(), 3);
+}
+
 TEST(LinearSolverTest, RefactorizationWithSamePattern) {
   constexpr int n = 500;
   for (LinearSolverKind kind : kSparseKinds) {
@@ -207,7 +279,7 @@ TEST(LinearSolverTest, AutomaticChoiceBySizeAndDensity) {
   EXPECT_EQ(MakeLinearSolver(LinearSolverKind::kAutomatic, 100, 1e4)->kind(),
             LinearSolverKind::kDenseLu);
   EXPECT_EQ(MakeLinearSolver(LinearSolverKind::kAutomatic, 5000, 5e4)->kind(),
-            LinearSolverKind::kSparseLu);
+            LinearSolverKind::kKlu);
   EXPECT_EQ(MakeLinearSolver(LinearSolverKind::kAutomatic, 5000, 5000.0 * 5000)->kind(),
             LinearSolverKind::kDenseLu);
   EXPECT_EQ(ParseLinearSolverKind("klu"), LinearSolverKind::kKlu);

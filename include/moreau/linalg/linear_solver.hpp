@@ -5,9 +5,9 @@
 /// Integrators assemble their (generalized) Jacobians block by block into a
 /// SystemMatrix, which stores them dense or sparse (CSC) depending on the solver chosen by
 /// MakeLinearSolver: a dense LU with partial pivoting (Eigen) for small or dense systems, a
-/// sparse LU (SuiteSparse KLU) for large sparse ones. Both report singular matrices through
-/// their return value (never by exception), so that integrators can turn them into
-/// statuses.
+/// sparse LU (SuiteSparse KLU, handing over to UMFPACK where its pivoting fills in) for large
+/// sparse ones. All report singular matrices through their return value (never by
+/// exception), so that integrators can turn them into statuses.
 
 #include <memory>
 #include <string>
@@ -20,13 +20,19 @@ namespace moreau {
 
 /// Which factorization backs a LinearSolver.
 enum class LinearSolverKind {
-  kAutomatic,  ///< dense LU if n <= kDenseSizeLimit or the matrix is dense, else sparse LU
-  kDenseLu,    ///< Eigen PartialPivLU on a dense matrix
+  /// Dense LU if n <= kDenseSizeLimit or the matrix is dense (more than kSparseDensityLimit
+  /// of its entries), else KLU with a fill guard: KLU pivots afresh at every factorization,
+  /// and once a factorization holds more than 4 times the entries its ordering estimated
+  /// (off-diagonal pivots, as zero diagonals of multipliers may force) this and every later
+  /// factorization of the solver go to UMFPACK.
+  kAutomatic,
+  kDenseLu,  ///< Eigen PartialPivLU on a dense matrix
   /// SuiteSparse UMFPACK on a CSC matrix (multifrontal, threshold pivoting; symbolic analysis
   /// reused while the pattern holds): robust on saddle-point structures
   kSparseLu,
-  /// SuiteSparse KLU (left-looking, BTF + AMD; symbolic analysis reused): fast on matrices
-  /// close to diagonally dominant (circuits, diffusion), poor on saddle points
+  /// SuiteSparse KLU (left-looking, BTF + AMD; symbolic analysis reused, and the previous
+  /// pivot order while the condition estimate holds): the fastest on very sparse systems
+  /// whose diagonal pivots are sound; no fill guard on request (kAutomatic has one)
   kKlu,
 };
 /// "auto", "dense", "sparse" or "klu".
