@@ -557,14 +557,18 @@ class KluSolver final : public LinearSolver {
     MOREAU_ASSERT(a.sparse(), "KLU needs sparse storage");
     ++num_factorizations_;
     if (umfpack_ != nullptr) return umfpack_->Factorize(a);
-    matrix_ = a.sparse_matrix();  // KLU keeps pointers into the values it factorizes
-    const int n = static_cast<int>(matrix_.rows());
-    for (int k = 0; k < matrix_.nonZeros(); ++k) {
-      if (!std::isfinite(matrix_.valuePtr()[k])) return FactorizationStatus::kNonFinite;
+    // KLU reads the matrix during klu_analyze, klu_factor and klu_refactor only (its factors
+    // hold their own copies), so it reads the SystemMatrix's arrays in place; its API takes
+    // non-const pointers but does not write through them.
+    const SparseMatrix& matrix = a.sparse_matrix();
+    MOREAU_ASSERT(matrix.isCompressed(), "KLU needs a compressed matrix");
+    const int n = static_cast<int>(matrix.rows());
+    for (int k = 0; k < matrix.nonZeros(); ++k) {
+      if (!std::isfinite(matrix.valuePtr()[k])) return FactorizationStatus::kNonFinite;
     }
-    int* col = matrix_.outerIndexPtr();
-    int* row = matrix_.innerIndexPtr();
-    double* values = matrix_.valuePtr();
+    int* col = const_cast<int*>(matrix.outerIndexPtr());
+    int* row = const_cast<int*>(matrix.innerIndexPtr());
+    double* values = const_cast<double*>(matrix.valuePtr());
     const bool same_pattern = symbolic_ != nullptr && n == n_ &&
                               std::equal(col, col + n + 1, col_pattern_.begin()) &&
                               static_cast<std::size_t>(col[n]) == row_pattern_.size() &&
@@ -655,7 +659,6 @@ class KluSolver final : public LinearSolver {
   klu_symbolic* symbolic_ = nullptr;
   klu_numeric* numeric_ = nullptr;
   std::unique_ptr<UmfpackSolver> umfpack_;  // kAutomatic after the fill guard fired
-  SparseMatrix matrix_;
   std::vector<int> col_pattern_, row_pattern_;
   int n_ = 0;
   double rcond_ = 0.0;
