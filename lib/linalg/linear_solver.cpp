@@ -438,11 +438,11 @@ class DenseLuSolver final : public LinearSolver {
 
 // ---- sparse LU (UMFPACK) -------------------------------------------------------------------
 // Multifrontal LU with threshold partial pivoting inside the frontal matrices (COLAMD
-// column ordering, unsymmetric strategy). The default sparse LU: on the saddle-point
-// structure of complementarity systems (multipliers of active constraints have zero
-// diagonals) KLU's left-looking elimination pivots off the diagonal thousands of times and
-// fills in (a crowd of 10^3 agents: L + U of 3.6e6 entries and 3 s per factorization against
-// 9.7e4 and 0.06 s with UMFPACK; docs/decisions.md).
+// column ordering, unsymmetric strategy). On request (kSparseLu), and behind the automatic
+// KLU's fill guard: its frontal pivoting weighs the fill, so saddle-point structures that
+// make KLU pivot off the diagonal (multipliers of active constraints have zero diagonals)
+// stay sparse (an earlier crowd of 10^3 agents: L + U of 3.6e6 entries and 3 s per
+// factorization with KLU against 9.7e4 and 0.06 s with UMFPACK; docs/decisions.md).
 class UmfpackSolver final : public LinearSolver {
  public:
   UmfpackSolver() {
