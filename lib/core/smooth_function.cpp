@@ -180,7 +180,8 @@ bool TypedFunction::BoxBounds(const Interval* x, int nx, const Interval* u, int 
       std::fill(block_out, block_out + per_block, Interval(0.0));
       CallBlock(blocks[static_cast<std::size_t>(b)], x, nx, u, nu, t, p, np, block_out);
     }
-    bound_undecided_[static_cast<std::size_t>(thread)] = flags.undecided ? 1 : 0;
+    // A thread may run several chunks: any undecided one makes the enclosure unavailable.
+    if (flags.undecided) bound_undecided_[static_cast<std::size_t>(thread)] = 1;
     flags = IntervalFlags{};
   };
   if (threads > 1) {

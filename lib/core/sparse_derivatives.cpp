@@ -1130,12 +1130,16 @@ void SparseDerivatives::BlockJacobian(TypedFunction* function, const JacobianPla
   if (static_cast<int>(block_workspaces_.size()) < threads) {
     block_workspaces_.resize(static_cast<std::size_t>(threads));
   }
+  for (BlockWorkspace& space : block_workspaces_) space.has_inputs = false;
   auto body = [&](int begin, int end, int thread) {
     BlockWorkspace& space = block_workspaces_[static_cast<std::size_t>(thread)];
     std::vector<Dual1>& inputs = thread == 0 ? inputs1_ : space.inputs1;
-    if (thread > 0) {  // this thread's constant copy of the inputs (thread 0's is inputs1_)
+    if (thread > 0 && !space.has_inputs) {
+      // This thread's constant copy of the inputs (thread 0's is inputs1_), made at its first
+      // chunk of this call: a worker that finds the chunks taken copies nothing.
       inputs.resize(input_values_.size());
       for (std::size_t i = 0; i < input_values_.size(); ++i) inputs[i] = Dual1(input_values_[i]);
+      space.has_inputs = true;
     }
     std::vector<Dual1>& outputs = space.outputs1;
     outputs.resize(static_cast<std::size_t>(per_block));

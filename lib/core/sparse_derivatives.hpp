@@ -176,6 +176,7 @@ class SparseDerivatives {
   // Block evaluations: per thread (thread 0: inputs1_) the Dual1 inputs and a block's outputs.
   struct BlockWorkspace {
     std::vector<Dual1> inputs1, outputs1;
+    bool has_inputs = false;  // inputs1 holds this call's input values (workers' copies)
   };
   std::vector<BlockWorkspace> block_workspaces_;
   std::vector<Dual2> block_outputs2_;

@@ -3,15 +3,18 @@
 // model functions made of blocks, docs/sparse-derivatives.md "Functions made of blocks"). Private
 // to moreau.
 //
-// ParallelFor splits [0, n) into contiguous ranges, one per thread (the caller computes the
-// first), and returns when all are done. Work is assigned by range, never by whoever is free,
-// so which thread computes what is a function of n and the thread count alone; callers make
-// results independent of the thread count by writing every result to its own place (or per
-// worker, then combining in a fixed order). Workers measure the CPU time they spend in tasks
+// ParallelFor splits [0, n) into contiguous chunks (several per thread) that the caller and the
+// workers claim in turn until none is left, and returns when all are done. Which thread runs a
+// chunk depends on timing, so callers make results independent of it: every result is written
+// to its own place, and per-thread state (workspaces, flags combined by OR) never carries a
+// value from one chunk into another's results. The caller starts at once and never sleeps: a
+// worker that wakes late finds the chunks taken and costs nothing, and the caller waits (spins)
+// only for chunks in flight. Workers measure the CPU time they spend in loops
 // (worker_cpu_seconds), which integrators add to their runs' cpu_seconds (RunClock).
 
 #include <atomic>
 #include <condition_variable>
+#include <cstdint>
 #include <exception>
 #include <functional>
 #include <mutex>
@@ -34,11 +37,14 @@ class ThreadPool {
   ThreadPool& operator=(const ThreadPool&) = delete;
 
   int threads() const { return static_cast<int>(workers_.size()) + 1; }
-  // body(begin, end, thread) for the thread-th of threads() contiguous ranges of [0, n)
-  // (ranges of equal length up to one; empty ranges are not run). Not reentrant: body must not
-  // call ParallelFor of the same pool.
+  // body(begin, end, thread) for contiguous chunks [begin, end) covering [0, n) once each,
+  // each on one thread (0 is the caller, 1..threads() - 1 the workers); a thread may run
+  // several chunks, or none. Not reentrant: body must not call ParallelFor of the same pool.
+  // If a body throws, no further chunk starts (the chunks below it, claimed before it, run to
+  // their ends) and the exception of the lowest chunk that threw is rethrown here, whichever
+  // thread met it: the same exception whatever the timing.
   void ParallelFor(int n, const std::function<void(int begin, int end, int thread)>& body);
-  // CPU time the workers spent in bodies since construction (the caller's share is its own).
+  // CPU time the workers spent in loops since construction (the caller's share is its own).
   double worker_cpu_seconds() const { return worker_seconds_.load(); }
 
   // The number of threads a `threads` option asks for: the value if positive, else every
@@ -46,18 +52,29 @@ class ThreadPool {
   static int Resolve(int threads);
 
  private:
+  // One ParallelFor: what the workers copy (under mutex_) when they wake for it.
+  struct Loop {
+    const std::function<void(int, int, int)>* body = nullptr;
+    int n = 0;
+    int chunks = 0;
+    std::uint32_t generation = 0;
+  };
   void Work(int index);
+  // Claims and runs chunks of `loop` on `thread` until none is left; false if none was run.
+  bool RunChunks(const Loop& loop, int thread);
 
   std::vector<std::thread> workers_;
   std::mutex mutex_;
-  std::condition_variable start_, done_;
-  const std::function<void(int, int, int)>* body_ = nullptr;
-  int n_ = 0;
-  long generation_ = 0;  // incremented per ParallelFor: workers run each generation once
-  int pending_ = 0;      // workers still running the current generation
-  bool stop_ = false;
-  std::exception_ptr worker_error_;  // the first (lowest range) exception of a generation
-  int worker_error_index_ = 0;
+  std::condition_variable start_;
+  Loop loop_;          // under mutex_: the current loop
+  bool stop_ = false;  // under mutex_
+  // The next chunk to claim: loop generation in the high 32 bits, chunk index in the low ones.
+  // A worker holding an older loop fails to claim, so it never runs a finished loop's body.
+  std::atomic<std::uint64_t> next_chunk_{0};
+  std::atomic<int> in_flight_{0};  // threads between their first claim attempt and their last
+  std::mutex error_mutex_;
+  std::exception_ptr error_;  // of the lowest chunk that threw in the current loop
+  int error_chunk_ = 0;
   std::atomic<double> worker_seconds_{0.0};
 };
 

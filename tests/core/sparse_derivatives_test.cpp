@@ -5,10 +5,12 @@
 // nonzeros (colours, not inputs).
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <limits>
 #include <random>
+#include <stdexcept>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -689,6 +691,127 @@ TEST(BlockFunctionTest, DerivativesEqualThoseOfTheSameOutputsWrittenAsOneLambda)
       ASSERT_TRUE(SamePattern(along_block, along_whole)) << what;
       ASSERT_NO_FATAL_FAILURE(
           ExpectClose(Matrix(along_block), Matrix(along_whole), what + " Hessian direction"));
+    }
+  }
+}
+
+// ---- workspaces kept between evaluations -------------------------------------------------
+
+// Counts down the evaluations of ThrowingFamily while positive; the one that brings it to zero
+// throws: a model that stops half-way through a derivative evaluation, its seeds set.
+std::atomic<int> g_evaluations_until_throw{0};
+
+// The outputs of BlockFamily as one lambda (derivatives by colour passes over all inputs), or
+// as blocks, either of which can throw.
+SmoothFunction ThrowingFamily(int blocks, int agents, bool as_blocks) {
+  const auto check = [] {
+    if (g_evaluations_until_throw.load() > 0 && --g_evaluations_until_throw == 0) {
+      throw std::runtime_error("the model throws");
+    }
+  };
+  if (as_blocks) {
+    return MakeBlockFunction("throwing", blocks, 2,
+                             [agents, check](int b, const auto& x, const auto&, const auto& t,
+                                             const auto& p, auto& out) {
+                               check();
+                               TestBlock(b, agents, x, t, p, out);
+                             });
+  }
+  return MakeSmoothFunction(
+      "throwing", 2 * blocks,
+      [blocks, agents, check](const auto& x, const auto&, const auto& t, const auto& p, auto& out) {
+        check();
+        using T = std::decay_t<decltype(t)>;
+        for (int b = 0; b < blocks; ++b) {
+          T values[2] = {T(0.0), T(0.0)};
+          TestBlock(b, agents, x, t, p, values);
+          out[2 * b] = values[0];
+          out[2 * b + 1] = values[1];
+        }
+      });
+}
+
+bool SameBits(const Vector& a, const Vector& b) {
+  return a.size() == b.size() &&
+         std::memcmp(a.data(), b.data(), sizeof(double) * static_cast<std::size_t>(a.size())) == 0;
+}
+bool SameBits(const SparseMatrix& a, const SparseMatrix& b) {
+  return SamePattern(a, b) &&
+         std::memcmp(a.valuePtr(), b.valuePtr(),
+                     sizeof(double) * static_cast<std::size_t>(a.nonZeros())) == 0;
+}
+
+// A function keeps its dual-number inputs (and, on threads, each worker's copy) between
+// evaluations. Derivatives at a point that differs from the last in a few entries, and at the
+// same point after evaluations that threw with their seeds set, equal those of a fresh
+// function bit for bit: Jacobians (Dual1 inputs), Hessian directions and weighted Hessians
+// (Dual2 inputs), as one lambda and as blocks (on 1 and 3 threads: more blocks than the
+// parallel threshold, so the workers' copies are tested too).
+TEST(SparseDerivativesTest, KeptInputsGiveTheBitsOfAFreshFunctionAfterChangesAndThrows) {
+  const int blocks = 1100, agents = 300;
+  const Point x0 = FamilyPoint(agents);
+  Point x1 = x0;
+  // Three states and a parameter change, the other inputs keep their bits. The parameter is
+  // never seeded (derivatives with respect to x and t): only refreshing the kept inputs brings
+  // its new value.
+  for (int k : {0, 17, 301}) x1.x[k] += 0.125;
+  x1.p[0] += 0.25;
+  Vector direction = Vector::Zero(x0.x.size() + 1);
+  for (Eigen::Index k = 0; k < direction.size(); ++k) direction[k] = 0.25 + 0.01 * k;
+  Vector weights = Vector::Zero(2 * blocks);  // outputs of weight zero cost nothing: some
+  for (int k = 0; k < 2 * blocks; ++k) weights[k] = k % 5 == 2 ? 0.0 : 1.0 + 0.5 * k;
+  struct Results {
+    Vector value;
+    SparseMatrix jac, along, hess;
+  };
+  const auto evaluate = [&](const SmoothFunction& f, const Point& at) {
+    Results r;
+    f.SparseJacobian(at.x, at.u, at.t, at.p, Wrt::XT(), &r.value, &r.jac);
+    f.SparseHessianDirection(at.x, at.u, at.t, at.p, Wrt::XT(), direction, &r.along);
+    f.SparseWeightedHessian(at.x, at.u, at.t, at.p, Wrt::XT(), weights, &r.hess);
+    return r;
+  };
+  const auto expect_same = [](const Results& a, const Results& b, const std::string& what) {
+    EXPECT_TRUE(SameBits(a.value, b.value)) << what << ": values";
+    EXPECT_TRUE(SameBits(a.jac, b.jac)) << what << ": Jacobian";
+    EXPECT_TRUE(SameBits(a.along, b.along)) << what << ": Hessian direction";
+    EXPECT_TRUE(SameBits(a.hess, b.hess)) << what << ": weighted Hessian";
+  };
+  for (bool as_blocks : {false, true}) {
+    const Results fresh0 = evaluate(ThrowingFamily(blocks, agents, as_blocks), x0);
+    const Results fresh1 = evaluate(ThrowingFamily(blocks, agents, as_blocks), x1);
+    // The test can fail: the three inputs' change shows in every kind of result.
+    ASSERT_FALSE(SameBits(fresh0.value, fresh1.value));
+    ASSERT_FALSE(SameBits(fresh0.jac, fresh1.jac));
+    ASSERT_FALSE(SameBits(fresh0.along, fresh1.along));
+    ASSERT_FALSE(SameBits(fresh0.hess, fresh1.hess));
+    for (int threads : {1, 3}) {
+      const std::string what = std::string(as_blocks ? "blocks" : "one lambda") + ", " +
+                               std::to_string(threads) + " threads";
+      internal::ThreadPool pool(threads);
+      const SmoothFunction f = ThrowingFamily(blocks, agents, as_blocks);
+      f.typed()->set_thread_pool(&pool);
+      expect_same(evaluate(f, x0), fresh0, what + ", x0");
+      expect_same(evaluate(f, x1), fresh1, what + ", x1 after x0");
+      Vector value;
+      SparseMatrix matrix;
+      // The second evaluation of each call throws: one lambda, its second colour pass (its
+      // first seeds stay set); blocks, the second block.
+      g_evaluations_until_throw = 2;
+      EXPECT_THROW(f.SparseJacobian(x1.x, x1.u, x1.t, x1.p, Wrt::XT(), &value, &matrix),
+                   std::runtime_error)
+          << what;
+      g_evaluations_until_throw = 2;
+      EXPECT_THROW(f.SparseHessianDirection(x1.x, x1.u, x1.t, x1.p, Wrt::XT(), direction, &matrix),
+                   std::runtime_error)
+          << what;
+      g_evaluations_until_throw = 2;
+      EXPECT_THROW(f.SparseWeightedHessian(x1.x, x1.u, x1.t, x1.p, Wrt::XT(), weights, &matrix),
+                   std::runtime_error)
+          << what;
+      g_evaluations_until_throw = 0;
+      expect_same(evaluate(f, x1), fresh1, what + ", x1 after throws at x1");
+      f.typed()->set_thread_pool(nullptr);
     }
   }
 }
