@@ -3,7 +3,9 @@
 // compressed AD: docs/sparse-derivatives.md), scattered into the lowered system's blocks.
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <cmath>
+#include <vector>
 
 #include "lowered_block.hpp"
 #include "moreau/core/error.hpp"
@@ -12,9 +14,29 @@ namespace moreau::internal {
 namespace {
 // *rows = columns (compressed rows, columns increasing in each row) in the storage *rows
 // already has: Eigen's assignment across storage orders builds a new matrix per call.
+// (*source)[k] is the position in columns of entry k of *rows, and *outer_kept, *inner_kept
+// keep columns' pattern: a call with the same pattern only gathers the values, the same
+// assignments as the full copy.
 void CopyToRows(const SparseMatrix& columns,
-                Eigen::SparseMatrix<double, Eigen::RowMajor, int>* rows) {
+                Eigen::SparseMatrix<double, Eigen::RowMajor, int>* rows,
+                std::vector<int>* outer_kept, std::vector<int>* inner_kept,
+                std::vector<int>* source) {
   const auto n = static_cast<int>(columns.rows());
+  const auto nnz = static_cast<std::size_t>(columns.nonZeros());
+  const auto outer_size = static_cast<std::size_t>(columns.outerSize()) + 1;
+  const int* col_outer = columns.outerIndexPtr();
+  const int* col_inner = columns.innerIndexPtr();
+  const double* col_values = columns.valuePtr();
+  if (columns.isCompressed() && rows->rows() == n && rows->cols() == columns.cols() &&
+      static_cast<std::size_t>(rows->nonZeros()) == nnz && source->size() == nnz &&
+      outer_kept->size() == outer_size && inner_kept->size() == nnz &&
+      std::equal(col_outer, col_outer + outer_size, outer_kept->begin()) &&
+      std::equal(col_inner, col_inner + nnz, inner_kept->begin())) {
+    double* values = rows->valuePtr();
+    const int* from = source->data();
+    for (std::size_t k = 0; k < nnz; ++k) values[k] = col_values[from[k]];
+    return;
+  }
   rows->resize(n, columns.cols());  // outer indices zero, no entries (their storage kept)
   // outer[r + 1] becomes the start of row r (the count of row r goes to outer[r + 2]); filling
   // advances it to the start of row r + 1.
@@ -28,12 +50,21 @@ void CopyToRows(const SparseMatrix& columns,
   rows->resizeNonZeros(columns.nonZeros());
   int* inner = rows->innerIndexPtr();
   double* values = rows->valuePtr();
+  source->resize(nnz);
   for (Eigen::Index j = 0; j < columns.outerSize(); ++j) {
     for (SparseMatrix::InnerIterator it(columns, j); it; ++it) {
       const int position = outer[it.row() + 1]++;
       inner[position] = static_cast<int>(j);
       values[position] = it.value();
+      (*source)[static_cast<std::size_t>(position)] = static_cast<int>(&it.value() - col_values);
     }
+  }
+  if (columns.isCompressed()) {
+    outer_kept->assign(col_outer, col_outer + outer_size);
+    inner_kept->assign(col_inner, col_inner + nnz);
+  } else {
+    outer_kept->clear();  // never replayed: an uncompressed matrix has gaps
+    inner_kept->clear();
   }
 }
 }  // namespace
@@ -96,7 +127,7 @@ void ArgumentMatrix::Jacobian(const BlockContext& context, const SmoothFunction&
     // Only the rows in `rows` are differentiated (the near-active filter's working set).
     function.SparseJacobian(x_, *context.inputs, t, *context.parameters, wrt, values, &columns_,
                             rows);
-    CopyToRows(columns_, &rows_sparse_);
+    CopyToRows(columns_, &rows_sparse_, &copied_outer_, &copied_inner_, &row_entry_source_);
   } else {
     function.Jacobian(x_, *context.inputs, t, *context.parameters, wrt, values, &dense_);
   }
@@ -154,7 +185,7 @@ void ArgumentMatrix::HessianDirections(const BlockContext& context, const Smooth
   function.SparseHessianDirection(x_, *context.inputs, t, *context.parameters, wrt, direction_,
                                   &columns_, outputs);
   if (is_sparse_) {
-    CopyToRows(columns_, &rows_sparse_);
+    CopyToRows(columns_, &rows_sparse_, &copied_outer_, &copied_inner_, &row_entry_source_);
   } else {
     dense_ = Matrix(columns_);
   }
@@ -172,7 +203,7 @@ void ArgumentMatrix::WeightedHessian(const BlockContext& context, const SmoothFu
     // The pattern is that of the outputs in `rows` (the working set), whatever the weights.
     function.SparseWeightedHessian(x_, *context.inputs, t, *context.parameters, wrt, weights,
                                    &columns_, rows);
-    CopyToRows(columns_, &rows_sparse_);
+    CopyToRows(columns_, &rows_sparse_, &copied_outer_, &copied_inner_, &row_entry_source_);
   } else {
     function.WeightedHessian(x_, *context.inputs, t, *context.parameters, wrt, weights, &dense_);
   }

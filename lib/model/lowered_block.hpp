@@ -110,6 +110,10 @@ class ArgumentMatrix {
   Matrix dense_;
   SparseMatrix columns_;                                           // sparse AD result
   Eigen::SparseMatrix<double, Eigen::RowMajor, int> rows_sparse_;  // the same, by rows
+  // How rows_sparse_ was filled from columns_: the pattern of columns_ then (outer and inner
+  // indices), and for each entry of rows_sparse_ the position of its value in columns_.
+  // While the pattern repeats (most evaluations), only the values are gathered again.
+  std::vector<int> copied_outer_, copied_inner_, row_entry_source_;
   Vector x_, direction_, weights_;
   mutable Vector gradient_;
 };
