@@ -213,6 +213,16 @@ void ArgumentMatrix::AddRow(int k, double weight, int row, DerivativeMatrix* dy,
                             DerivativeMatrix* du, DerivativeMatrix* dp) const {
   DerivativeMatrix* targets[3] = {dy, du, dp};
   int index = 0;
+  if (is_sparse_ && !all_) {
+    // Columns x, then the clock (Wrt::XT): all into dy, in the order of the general loop below.
+    const int* inner = rows_sparse_.innerIndexPtr();
+    const double* values = rows_sparse_.valuePtr();
+    const int end = rows_sparse_.outerIndexPtr()[k + 1];
+    for (int e = rows_sparse_.outerIndexPtr()[k]; e < end; ++e) {
+      dy->Add(row, inner[e] < nx_ ? inner[e] : clock_, weight * values[e]);
+    }
+    return;
+  }
   if (is_sparse_) {
     for (decltype(rows_sparse_)::InnerIterator it(rows_sparse_, k); it; ++it) {
       const int target = Target(static_cast<int>(it.col()), &index);
@@ -242,14 +252,21 @@ void ArgumentMatrix::AddRows(int first, int count, double weight, int row0, Deri
 }
 
 void ArgumentMatrix::AddStateGradientProduct(const ConstVectorRef& weights,
-                                             const Matrix* projection, VectorRef target) const {
+                                             const Matrix* projection, VectorRef target,
+                                             const std::vector<int>* rows) const {
   gradient_.setZero(nx_);
   if (is_sparse_) {
-    for (int k = 0; k < rows_; ++k) {
-      if (weights[k] == 0.0) continue;
+    // In increasing row order, as over all rows: the same sums.
+    const auto add_row = [&](int k) {
+      if (weights[k] == 0.0) return;
       for (decltype(rows_sparse_)::InnerIterator it(rows_sparse_, k); it; ++it) {
         if (it.col() < nx_) gradient_[it.col()] += it.value() * weights[k];
       }
+    };
+    if (rows != nullptr) {
+      for (int k : *rows) add_row(k);
+    } else {
+      for (int k = 0; k < rows_; ++k) add_row(k);
     }
   } else {
     gradient_.noalias() = dense_.leftCols(nx_).transpose() * weights;

@@ -84,8 +84,9 @@ class ArgumentMatrix {
   void AddRows(int first, int count, double weight, int row0, DerivativeMatrix* dy,
                DerivativeMatrix* du, DerivativeMatrix* dp) const;
   // target += P (dg/dx)^T weights (moving sets: x' += P grad c lambda); P null: identity.
+  // `rows` (sorted; nullptr: all) lists the rows whose weights may be nonzero.
   void AddStateGradientProduct(const ConstVectorRef& weights, const Matrix* projection,
-                               VectorRef target) const;
+                               VectorRef target, const std::vector<int>* rows = nullptr) const;
   // Column col of target (rows 0..n_x): P (dg_k/dx)^T (P null: identity).
   void AddStateGradient(int k, int col, const Matrix* projection, DerivativeMatrix* target) const;
   // The x columns transposed, premultiplied by P (null: identity) and weighted:
