@@ -601,18 +601,23 @@ SmoothFunction BlockFamily(int blocks, int agents) {
                                     auto& out) { TestBlock(b, agents, x, t, p, out); });
 }
 
+// All blocks' outputs in order (the family written as one function).
+template <class X, class T, class P, class Out>
+void AllTestBlocks(int blocks, int agents, const X& x, const T& t, const P& p, Out& out) {
+  for (int b = 0; b < blocks; ++b) {
+    T values[2] = {T(0.0), T(0.0)};
+    TestBlock(b, agents, x, t, p, values);
+    out[2 * b] = values[0];
+    out[2 * b + 1] = values[1];
+  }
+}
+
 // The same outputs as one lambda.
 SmoothFunction WholeFamily(int blocks, int agents) {
   return MakeSmoothFunction(
       "family", 2 * blocks,
       [blocks, agents](const auto& x, const auto&, const auto& t, const auto& p, auto& out) {
-        using T = std::decay_t<decltype(t)>;
-        for (int b = 0; b < blocks; ++b) {
-          T values[2] = {T(0.0), T(0.0)};
-          TestBlock(b, agents, x, t, p, values);
-          out[2 * b] = values[0];
-          out[2 * b + 1] = values[1];
-        }
+        AllTestBlocks(blocks, agents, x, t, p, out);
       });
 }
 
@@ -721,13 +726,7 @@ SmoothFunction ThrowingFamily(int blocks, int agents, bool as_blocks) {
       "throwing", 2 * blocks,
       [blocks, agents, check](const auto& x, const auto&, const auto& t, const auto& p, auto& out) {
         check();
-        using T = std::decay_t<decltype(t)>;
-        for (int b = 0; b < blocks; ++b) {
-          T values[2] = {T(0.0), T(0.0)};
-          TestBlock(b, agents, x, t, p, values);
-          out[2 * b] = values[0];
-          out[2 * b + 1] = values[1];
-        }
+        AllTestBlocks(blocks, agents, x, t, p, out);
       });
 }
 
