@@ -681,17 +681,45 @@ SparseDerivatives::HessianPlan& SparseDerivatives::FindHessianPlan(const TypedFu
   return *hessian_plans_.back();
 }
 
-void SparseDerivatives::FillInputs1(const ConstVectorRef& x, const ConstVectorRef& u, double t,
-                                    const ConstVectorRef& p) {
-  const std::size_t n = static_cast<std::size_t>(pattern_.num_inputs);
-  input_values_.resize(n);
+void SparseDerivatives::GatherInputValues(const ConstVectorRef& x, const ConstVectorRef& u,
+                                          double t, const ConstVectorRef& p) {
+  input_values_.resize(static_cast<std::size_t>(pattern_.num_inputs));
   std::size_t i = 0;
   for (Eigen::Index k = 0; k < x.size(); ++k) input_values_[i++] = x[k];
   for (Eigen::Index k = 0; k < u.size(); ++k) input_values_[i++] = u[k];
   input_values_[i++] = t;
   for (Eigen::Index k = 0; k < p.size(); ++k) input_values_[i++] = p[k];
+}
+
+void SparseDerivatives::FillInputs1(const ConstVectorRef& x, const ConstVectorRef& u, double t,
+                                    const ConstVectorRef& p) {
+  GatherInputValues(x, u, t, p);
+  const std::size_t n = static_cast<std::size_t>(pattern_.num_inputs);
   inputs1_.resize(n);
   for (std::size_t k = 0; k < n; ++k) inputs1_[k] = Dual1(input_values_[k]);
+}
+
+void SparseDerivatives::FillBlockInputs1(unsigned wrt_bits, std::vector<Dual1>* inputs,
+                                         bool clean) const {
+  const std::size_t n = input_values_.size();
+  if (!clean || inputs->size() != n) {
+    inputs->resize(n);
+    for (std::size_t k = 0; k < n; ++k) (*inputs)[k] = Dual1(input_values_[k]);
+    return;
+  }
+  // Argument blocks x | u | t | p; those not differentiated are read as constants.
+  const std::size_t sizes[4] = {static_cast<std::size_t>(pattern_.nx),
+                                static_cast<std::size_t>(pattern_.nu), 1,
+                                static_cast<std::size_t>(pattern_.np)};
+  std::size_t first = 0;
+  for (unsigned block = 0; block < 4; ++block) {
+    if (((wrt_bits >> block) & 1u) == 0) {
+      for (std::size_t k = first; k < first + sizes[block]; ++k) {
+        (*inputs)[k] = Dual1(input_values_[k]);
+      }
+    }
+    first += sizes[block];
+  }
 }
 
 void SparseDerivatives::FillInputs2(const ConstVectorRef& x, const ConstVectorRef& u, double t,
@@ -719,8 +747,11 @@ void SparseDerivatives::Jacobian(TypedFunction* function, const ConstVectorRef& 
   stats_.jacobian_colors = plan.num_colors;
   stats_.jacobian_passes = plan.num_passes;
   if (UseBlocks(*function)) {
-    FillInputs1(x, u, t, p);
+    GatherInputValues(x, u, t, p);
+    FillBlockInputs1(plan.wrt_bits, &inputs1_, inputs1_clean_);
+    inputs1_clean_ = false;  // until every block's seeds are reset
     BlockJacobian(function, plan, out, jac->valuePtr(), pool);
+    inputs1_clean_ = true;
     return;
   }
   if (plan.num_passes == 0) {  // nothing to differentiate: the value only
@@ -732,6 +763,7 @@ void SparseDerivatives::Jacobian(TypedFunction* function, const ConstVectorRef& 
   out->resize(m);
   double* values = jac->valuePtr();
   FillInputs1(x, u, t, p);
+  inputs1_clean_ = false;  // until the last pass's seeds are reset
   outputs1_.resize(static_cast<std::size_t>(m));
   for (int q = 0; q < plan.num_passes; ++q) {
     // One direction per colour of this chunk; every other input is a constant.
@@ -762,6 +794,7 @@ void SparseDerivatives::Jacobian(TypedFunction* function, const ConstVectorRef& 
       inputs1_[i] = Dual1(input_values_[i]);
     }
   }
+  inputs1_clean_ = true;
 }
 
 // ---- weighted Hessian ---------------------------------------------------------------------
@@ -1135,12 +1168,12 @@ void SparseDerivatives::BlockJacobian(TypedFunction* function, const JacobianPla
     BlockWorkspace& space = block_workspaces_[static_cast<std::size_t>(thread)];
     std::vector<Dual1>& inputs = thread == 0 ? inputs1_ : space.inputs1;
     if (thread > 0 && !space.has_inputs) {
-      // This thread's constant copy of the inputs (thread 0's is inputs1_), made at its first
-      // chunk of this call: a worker that finds the chunks taken copies nothing.
-      inputs.resize(input_values_.size());
-      for (std::size_t i = 0; i < input_values_.size(); ++i) inputs[i] = Dual1(input_values_[i]);
+      // This thread's constant copy of the inputs (thread 0's is inputs1_), brought up to date
+      // at its first chunk of this call: a worker that finds the chunks taken copies nothing.
+      FillBlockInputs1(plan.wrt_bits, &inputs, space.clean);
       space.has_inputs = true;
     }
+    if (thread > 0) space.clean = false;  // until this chunk's seeds are reset
     std::vector<Dual1>& outputs = space.outputs1;
     outputs.resize(static_cast<std::size_t>(per_block));
     const Dual1* base = inputs.data();
@@ -1149,6 +1182,13 @@ void SparseDerivatives::BlockJacobian(TypedFunction* function, const JacobianPla
       const int first_input = plan.block_input_start[ub];
       const int count = plan.block_input_start[ub + 1] - first_input;
       const int first_output = plan.blocks[ub] * per_block;
+      // Inputs beyond the first chunk are constants in it: current values (FillBlockInputs1
+      // leaves the differentiated inputs as they were).
+      for (int j = kChunk; j < count; ++j) {
+        const auto i =
+            static_cast<std::size_t>(plan.block_input[static_cast<std::size_t>(first_input + j)]);
+        inputs[i] = Dual1(input_values_[i]);
+      }
       // At least one pass (the values), chunks of kChunk directions.
       for (int c0 = 0; c0 == 0 || c0 < count; c0 += kChunk) {
         const int directions = std::min(kChunk, count - c0);
@@ -1182,6 +1222,7 @@ void SparseDerivatives::BlockJacobian(TypedFunction* function, const JacobianPla
         }
       }
     }
+    if (thread > 0) space.clean = true;
   };
   if (threads > 1) {
     pool->ParallelFor(num_blocks, body);

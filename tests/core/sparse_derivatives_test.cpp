@@ -750,21 +750,28 @@ TEST(SparseDerivativesTest, KeptInputsGiveTheBitsOfAFreshFunctionAfterChangesAnd
   const int blocks = 1100, agents = 300;
   const Point x0 = FamilyPoint(agents);
   Point x1 = x0;
-  // Three states and a parameter change, the other inputs keep their bits. The parameter is
+  // Four states and a parameter change, the other inputs keep their bits. The parameter is
   // never seeded (derivatives with respect to x and t): only refreshing the kept inputs brings
-  // its new value.
-  for (int k : {0, 17, 301}) x1.x[k] += 0.125;
+  // its new value. State 111 (agent 55) is among the last inputs of block 0, which has 28:
+  // beyond its first chunk of 16 directions, a constant in that chunk's pass.
+  for (int k : {0, 17, 111, 301}) x1.x[k] += 0.125;
   x1.p[0] += 0.25;
   Vector direction = Vector::Zero(x0.x.size() + 1);
   for (Eigen::Index k = 0; k < direction.size(); ++k) direction[k] = 0.25 + 0.01 * k;
   Vector weights = Vector::Zero(2 * blocks);  // outputs of weight zero cost nothing: some
   for (int k = 0; k < 2 * blocks; ++k) weights[k] = k % 5 == 2 ? 0.0 : 1.0 + 0.5 * k;
+  // The first output of every block: its inputs are a subset of the second's (TestBlock), so
+  // a block asked for these rows reads inputs it is not differentiated in.
+  std::vector<int> first_outputs;
+  for (int b = 0; b < blocks; ++b) first_outputs.push_back(2 * b);
   struct Results {
-    Vector value;
-    SparseMatrix jac, along, hess;
+    Vector value, first_value;
+    SparseMatrix jac, first_jac, along, hess;
   };
   const auto evaluate = [&](const SmoothFunction& f, const Point& at) {
     Results r;
+    f.SparseJacobian(at.x, at.u, at.t, at.p, Wrt::XT(), &r.first_value, &r.first_jac,
+                     &first_outputs);
     f.SparseJacobian(at.x, at.u, at.t, at.p, Wrt::XT(), &r.value, &r.jac);
     f.SparseHessianDirection(at.x, at.u, at.t, at.p, Wrt::XT(), direction, &r.along);
     f.SparseWeightedHessian(at.x, at.u, at.t, at.p, Wrt::XT(), weights, &r.hess);
@@ -773,6 +780,8 @@ TEST(SparseDerivativesTest, KeptInputsGiveTheBitsOfAFreshFunctionAfterChangesAnd
   const auto expect_same = [](const Results& a, const Results& b, const std::string& what) {
     EXPECT_TRUE(SameBits(a.value, b.value)) << what << ": values";
     EXPECT_TRUE(SameBits(a.jac, b.jac)) << what << ": Jacobian";
+    EXPECT_TRUE(SameBits(a.first_value, b.first_value)) << what << ": values of some rows";
+    EXPECT_TRUE(SameBits(a.first_jac, b.first_jac)) << what << ": Jacobian of some rows";
     EXPECT_TRUE(SameBits(a.along, b.along)) << what << ": Hessian direction";
     EXPECT_TRUE(SameBits(a.hess, b.hess)) << what << ": weighted Hessian";
   };
@@ -800,6 +809,13 @@ TEST(SparseDerivativesTest, KeptInputsGiveTheBitsOfAFreshFunctionAfterChangesAnd
       EXPECT_THROW(f.SparseJacobian(x1.x, x1.u, x1.t, x1.p, Wrt::XT(), &value, &matrix),
                    std::runtime_error)
           << what;
+      if (as_blocks) {  // (one lambda differentiates these rows in one colour pass)
+        g_evaluations_until_throw = 2;
+        EXPECT_THROW(
+            f.SparseJacobian(x1.x, x1.u, x1.t, x1.p, Wrt::XT(), &value, &matrix, &first_outputs),
+            std::runtime_error)
+            << what;
+      }
       g_evaluations_until_throw = 2;
       EXPECT_THROW(f.SparseHessianDirection(x1.x, x1.u, x1.t, x1.p, Wrt::XT(), direction, &matrix),
                    std::runtime_error)
