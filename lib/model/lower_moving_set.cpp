@@ -63,6 +63,10 @@ class MovingSetBlock final : public LoweredBlock {
   bool Filterable() const override { return true; }
   std::vector<int> WorkingPairs() const override { return working_; }
   void SetWorkingPairs(const std::vector<int>& working) override {
+    // lambda_ is zero outside the working set (ScatterMultipliers): clear the leaving entries.
+    if (!lambda_full_ && lambda_.size() == num_constraints_) {
+      for (int k : working_) lambda_[k] = 0.0;
+    }
     working_ = working;
     all_working_ = num_working() == num_constraints_;
   }
@@ -114,7 +118,7 @@ class MovingSetBlock final : public LoweredBlock {
     const int k0 = layout.pair_offset;
     const Matrix* projection = has_projection_ ? &projection_ : nullptr;
     // Multipliers of every constraint (zero for those left out).
-    Scatter(z.segment(z0, nw), &lambda_);
+    ScatterMultipliers(z.segment(z0, nw));
     // grad c is needed for the values too (x' += P grad c lambda); only the working rows.
     jacobian_.Jacobian(context, set_.constraints, y,
                        derivatives == Derivatives::kNone ? Derivatives::kStates : derivatives, &c_,
@@ -247,25 +251,21 @@ class MovingSetBlock final : public LoweredBlock {
   std::string LambdaName(int k) const {
     return set_.name + ".lambda_" + set_.constraint_names[static_cast<std::size_t>(k)];
   }
-  // Working-set multipliers into lambda_, a vector over every constraint (zeros elsewhere).
-  // Only the entries of the last working set are cleared: zeroing all declared constraints
-  // per evaluation was O(declared), 1 MB per call for the crowd of 10^4.
-  void Scatter(const ConstVectorRef& working_values, Vector* all) {
+  // Working-set multipliers into lambda_, a vector over every constraint, zero outside the
+  // working set: SetWorkingPairs clears the entries of a set that leaves, so an evaluation
+  // writes only the working entries (zeroing all declared constraints per evaluation was
+  // O(declared), 1 MB per call for the crowd of 10^4).
+  void ScatterMultipliers(const ConstVectorRef& working_values) {
     if (all_working_) {
-      *all = working_values;
-      scattered_all_ = true;
+      lambda_ = working_values;
+      lambda_full_ = true;
       return;
     }
-    if (scattered_all_ || all->size() != num_constraints_) {
-      all->setZero(num_constraints_);
-    } else {
-      for (int k : scattered_) (*all)[k] = 0.0;
-    }
+    if (lambda_full_ || lambda_.size() != num_constraints_) lambda_.setZero(num_constraints_);
+    lambda_full_ = false;
     for (std::size_t j = 0; j < working_.size(); ++j) {
-      (*all)[working_[j]] = working_values[static_cast<Eigen::Index>(j)];
+      lambda_[working_[j]] = working_values[static_cast<Eigen::Index>(j)];
     }
-    scattered_ = working_;
-    scattered_all_ = false;
   }
   void EvaluateValues(const BlockContext& context, const ConstVectorRef& y) {
     x_ = y.head(num_states_);
@@ -284,10 +284,8 @@ class MovingSetBlock final : public LoweredBlock {
   bool has_projection_ = false;
   Matrix projection_;  // P = E E^T (only with a projection basis E; P = I otherwise)
   Vector c_, x_, lambda_;
-  // The entries of lambda_ that Scatter last wrote: those of scattered_ (the working set then),
-  // or all of them.
-  std::vector<int> scattered_;
-  bool scattered_all_ = true;
+  // lambda_ was last written whole (every constraint working): it may be nonzero anywhere.
+  bool lambda_full_ = true;
   ArgumentMatrix jacobian_, hessian_, directions_, all_;
 };
 
