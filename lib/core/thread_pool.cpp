@@ -100,11 +100,7 @@ void ThreadPool::ParallelFor(int n, const std::function<void(int, int, int)>& bo
     loop.n = n;
     loop.chunks = std::min(n, parts * kChunksPerThread);
     loop.generation = loop_.generation + 1;
-    loop_ = loop;
-    {
-      const std::lock_guard<std::mutex> error_lock(error_mutex_);
-      error_ = nullptr;
-    }
+    loop_ = loop;  // (error_ is null: the last loop took its exception)
     // Published last: from here on the chunks of this loop can be claimed.
     next_chunk_.store(static_cast<std::uint64_t>(loop.generation) << 32);
   }
