@@ -411,6 +411,7 @@ struct VelocityValuesWorkspace {
   Vector mask, rates;  // AssembleVelocityRows' continuity mask and rates (either assembly)
   Vector cont_a, cont_b;
   Columns x_y, x_z, product, scaled, scaled_b, d_v[5];
+  Columns product_y, d_y[5];  // with derivatives in y: X_y F_y, and each source's rows
   Vector value[5];
   std::vector<char> touched;  // product: rows met in the current column
   std::vector<double> accumulator;
@@ -503,11 +504,12 @@ void ProductColumns(const ColumnsView& x, const ColumnsView& f, VelocityValuesWo
   }
 }
 
-// The rate rows X_y F + X_z v_c and their derivative X_y F_z + X_z diag(mask) (AssembleVelocity-
-// Level's `rate` without derivatives in y, u, p: the same bits).
+// The rate rows X_y F + X_z v_c and their derivative X_y F_z + X_z diag(mask); with `d_y`,
+// also X_y F_y + C_y (C_y: the curvature rows `c_y`, null for none). AssembleVelocityLevel's
+// `rate` without derivatives in u, p: the same bits.
 void RateRows(const ColumnsView& x_y, const ColumnsView& x_z, const PointEvaluation& e,
               const Vector& mask, const Vector& rates, VelocityValuesWorkspace* w, Vector* value,
-              Columns* d_v) {
+              Columns* d_v, const DerivativeMatrix* c_y = nullptr, Columns* d_y = nullptr) {
   // value = x_y F, then += x_z rates (Eigen assigns the first product and adds the second).
   value->setZero(x_y.rows);
   for (int k = 0; k < x_y.cols; ++k) {
@@ -523,6 +525,14 @@ void RateRows(const ColumnsView& x_y, const ColumnsView& x_z, const PointEvaluat
   ProductColumns(x_y, ColumnsView(e.F_z.sparse()), w, &w->product);
   Scaled(x_z, mask, false, &w->scaled);
   SumColumns(ColumnsView(w->product), ColumnsView(w->scaled), d_v);
+  if (d_y == nullptr) return;
+  // d_y = M(X_y F_y), then += C_y (Eigen's sparse sum: a + 0 where C_y stores nothing).
+  if (c_y == nullptr) {
+    ProductColumns(x_y, ColumnsView(e.F_y.sparse()), w, d_y);
+  } else {
+    ProductColumns(x_y, ColumnsView(e.F_y.sparse()), w, &w->product_y);
+    SumColumns(ColumnsView(w->product_y), ColumnsView(c_y->sparse()), d_y);
+  }
 }
 
 void CopyColumns(const SparseMatrix& m, Columns* out) {
@@ -535,15 +545,19 @@ void CopyColumns(const SparseMatrix& m, Columns* out) {
 
 }  // namespace
 
-// AssembleVelocityLevel<SparseMatrix> without derivatives in y, u, p (the velocity-level
-// solves of status decisions, certificates and free sides, every element): the same rows and
+// AssembleVelocityLevel<SparseMatrix> without derivatives in u, p (the velocity-level solves
+// of status decisions, certificates and free sides, every element; with `curvature`, also the
+// derivatives in y of the event's velocity rows in FESD's Newton Jacobian): the same rows and
 // the same bits, computed in a kept workspace instead of through Eigen's sparse expressions,
 // which allocate their temporaries on every call.
 static void AssembleVelocityValues(const LoweredSystem& system, const PointEvaluation& e,
                                    const Vector& mask, const Vector& rates,
                                    const std::vector<PairRole>& roles,
+                                   const CurvatureTerms* curvature,
                                    VelocityLevelEvaluation* out) {
   VelocityValuesWorkspace& w = ThisThreadsVelocityValuesWorkspace();
+  const bool with_y = curvature != nullptr;
+  const int ny = system.num_states();
   const int ng = system.num_equations(), np = system.num_pairs(), nz = system.num_algebraic();
   const auto& pairs = system.pairs();
   const auto& differentiated = system.differentiated_equations();
@@ -558,23 +572,28 @@ static void AssembleVelocityValues(const LoweredSystem& system, const PointEvalu
   }
   // Sources as in AssembleVelocityLevel: 0 G values, 1 G rates, 2 continuous-side rates,
   // 3 jump-side values, 4 rates of b (kBoth pairs).
+  // (d_y of source s, or null without derivatives in y)
+  auto d_y = [&](int source) { return with_y ? &w.d_y[source] : nullptr; };
   if (ng > 0) {
     w.value[0] = e.G;
     CopyColumns(e.G_z.sparse(), &w.d_v[0]);
+    if (with_y) CopyColumns(e.G_y.sparse(), &w.d_y[0]);
     RateRows(ColumnsView(e.G_y.sparse()), ColumnsView(e.G_z.sparse()), e, mask, rates, &w,
-             &w.value[1], &w.d_v[1]);
+             &w.value[1], &w.d_v[1], with_y ? &curvature->equation_y : nullptr, d_y(1));
   }
   if (np > 0) {
     DiagonalSum(w.cont_a, e.A_y.sparse(), w.cont_b, e.B_y.sparse(), &w, &w.x_y);
     DiagonalSum(w.cont_a, e.A_z.sparse(), w.cont_b, e.B_z.sparse(), &w, &w.x_z);
-    RateRows(ColumnsView(w.x_y), ColumnsView(w.x_z), e, mask, rates, &w, &w.value[2], &w.d_v[2]);
+    RateRows(ColumnsView(w.x_y), ColumnsView(w.x_z), e, mask, rates, &w, &w.value[2], &w.d_v[2],
+             with_y ? &curvature->pair_y : nullptr, d_y(2));
     Vector& j_value = w.value[3];
     j_value.resize(np);
     for (int k = 0; k < np; ++k) j_value[k] = w.cont_b[k] * e.A[k] + w.cont_a[k] * e.B[k];
     DiagonalSum(w.cont_b, e.A_z.sparse(), w.cont_a, e.B_z.sparse(), &w, &w.d_v[3]);
+    if (with_y) DiagonalSum(w.cont_b, e.A_y.sparse(), w.cont_a, e.B_y.sparse(), &w, &w.d_y[3]);
     if (any_both) {
       RateRows(ColumnsView(e.B_y.sparse()), ColumnsView(e.B_z.sparse()), e, mask, rates, &w,
-               &w.value[4], &w.d_v[4]);
+               &w.value[4], &w.d_v[4], nullptr, d_y(4));
     }
   }
   const int source_rows[5] = {ng, ng, np, np, any_both ? np : 0};
@@ -584,7 +603,8 @@ static void AssembleVelocityValues(const LoweredSystem& system, const PointEvalu
   struct Take {
     int source, row;
   };
-  auto select = [&](auto&& for_each_row, Vector* values, DerivativeMatrix* dv) {
+  auto select = [&](auto&& for_each_row, Vector* values, DerivativeMatrix* dv,
+                    DerivativeMatrix* dy) {
     int rows = 0;
     int sources_used = 0;
     bool used[5] = {false, false, false, false, false};
@@ -595,7 +615,20 @@ static void AssembleVelocityValues(const LoweredSystem& system, const PointEvalu
     });
     values->setZero(rows);
     dv->SetZero(rows, nz, true);
+    if (with_y) dy->SetZero(rows, ny, true);
     const bool add_zero = sources_used > 1;
+    // The rows of derivative block d that this output takes (source rows mapped by out_row).
+    auto take_rows = [&](const Columns& d, DerivativeMatrix* target) {
+      for (int j = 0; j < d.cols; ++j) {
+        for (int p = d.outer[static_cast<std::size_t>(j)];
+             p < d.outer[static_cast<std::size_t>(j) + 1]; ++p) {
+          const int i = w.out_row[static_cast<std::size_t>(d.inner[static_cast<std::size_t>(p)])];
+          if (i < 0) continue;
+          const double v = d.values[static_cast<std::size_t>(p)];
+          target->Add(i, j, add_zero ? v + 0.0 : v);
+        }
+      }
+    };
     for (int source = 0; source < 5; ++source) {
       if (!used[source] || source_rows[source] == 0) continue;
       w.out_row.assign(static_cast<std::size_t>(source_rows[source]), -1);
@@ -609,18 +642,11 @@ static void AssembleVelocityValues(const LoweredSystem& system, const PointEvalu
         const int i = w.out_row[static_cast<std::size_t>(r)];
         if (i >= 0) (*values)[i] += value[r];
       }
-      const Columns& d = w.d_v[source];
-      for (int j = 0; j < d.cols; ++j) {
-        for (int p = d.outer[static_cast<std::size_t>(j)];
-             p < d.outer[static_cast<std::size_t>(j) + 1]; ++p) {
-          const int i = w.out_row[static_cast<std::size_t>(d.inner[static_cast<std::size_t>(p)])];
-          if (i < 0) continue;
-          const double v = d.values[static_cast<std::size_t>(p)];
-          dv->Add(i, j, add_zero ? v + 0.0 : v);
-        }
-      }
+      take_rows(w.d_v[source], dv);
+      if (with_y) take_rows(w.d_y[source], dy);
     }
     dv->Finalize();
+    if (with_y) dy->Finalize();
   };
   // The rows of each output, in AssembleVelocityLevel's order.
   auto equations = [&](auto&& f) {
@@ -644,9 +670,9 @@ static void AssembleVelocityValues(const LoweredSystem& system, const PointEvalu
       }
     };
   };
-  select(equations, &out->equations, &out->equations_v);
-  select(complementary(true), &out->a, &out->a_v);
-  select(complementary(false), &out->b, &out->b_v);
+  select(equations, &out->equations, &out->equations_v, &out->equations_y);
+  select(complementary(true), &out->a, &out->a_v, &out->a_y);
+  select(complementary(false), &out->b, &out->b_v, &out->b_y);
 }
 
 // The velocity-level rows from the evaluation e of the system at (y, v) (velocity roles set,
@@ -670,8 +696,9 @@ static void AssembleVelocityRows(const LoweredSystem& system, const PointEvaluat
     mask[i] = system.continuous_algebraic()[static_cast<std::size_t>(i)] ? 1.0 : 0.0;
   Vector& rates = w.rates;
   rates.noalias() = mask.cwiseProduct(v);
-  if (derivatives == Derivatives::kNone) {
-    AssembleVelocityValues(system, e, mask, rates, roles, out);
+  if (derivatives != Derivatives::kAll) {
+    AssembleVelocityValues(system, e, mask, rates, roles,
+                           derivatives == Derivatives::kStates ? &curvature : nullptr, out);
     return;
   }
   AssembleVelocityLevel<SparseMatrix>(system, e, curvature, mask, rates, roles, derivatives, out);

@@ -64,6 +64,13 @@ void ExpectSameBits(const DerivativeMatrix& a, const DerivativeMatrix& b, const 
   EXPECT_TRUE(std::equal(p.innerIndexPtr(), p.innerIndexPtr() + n, q.innerIndexPtr())) << what;
   EXPECT_EQ(std::memcmp(p.valuePtr(), q.valuePtr(), sizeof(double) * n), 0) << what;
 }
+// The same values, entry for entry (stored or not; a zero's sign aside).
+void ExpectSameValues(const DerivativeMatrix& a, const DerivativeMatrix& b,
+                      const std::string& what) {
+  ASSERT_EQ(a.rows(), b.rows()) << what;
+  ASSERT_EQ(a.cols(), b.cols()) << what;
+  EXPECT_TRUE((a.ToDense().array() == b.ToDense().array()).all()) << what;
+}
 
 struct Pair {
   LoweredSystem dense, sparse;
@@ -293,17 +300,23 @@ TEST(SparseStorage, EvaluationsEqualDenseOnEveryCatalogScene) {
           ExpectSame(va.b_v, vb.b_v, label + " b_v");
           ExpectSame(va.b_y, vb.b_y, label + " b_y");
           ExpectSame(va.b_p, vb.b_p, label + " b_p");
-          // Without derivatives in y, u, p the sparse rows are assembled in a kept workspace
-          // (the solves of every element): the same bits as the assembly with them.
+          // Without derivatives in u, p the sparse rows are assembled in a kept workspace
+          // (the solves of every element, and FESD's Jacobian rows of an event): the same bits
+          // as the assembly through Eigen's sparse expressions, which kAll uses. (d/dy: the
+          // same values; kAll's evaluation may store explicit zeros that kStates' does not.)
           VelocityLevelEvaluation with_y, without;
           sparse.EvaluateVelocityLevel(y, z, roles, Derivatives::kStates, &with_y);
           sparse.EvaluateVelocityLevel(y, z, roles, Derivatives::kNone, &without);
           using V = VelocityLevelEvaluation;
-          for (const auto& [name, values, d_v] :
-               {std::tuple{"equations", &V::equations, &V::equations_v},
-                std::tuple{"a", &V::a, &V::a_v}, std::tuple{"b", &V::b, &V::b_v}}) {
-            ExpectSameBits(with_y.*values, without.*values, label + " velocity " + name);
-            ExpectSameBits(with_y.*d_v, without.*d_v, label + " velocity d/dv " + name);
+          for (const auto& [name, values, d_v, d_y] :
+               {std::tuple{"equations", &V::equations, &V::equations_v, &V::equations_y},
+                std::tuple{"a", &V::a, &V::a_v, &V::a_y},
+                std::tuple{"b", &V::b, &V::b_v, &V::b_y}}) {
+            ExpectSameBits(vb.*values, with_y.*values, label + " velocity " + name);
+            ExpectSameBits(vb.*d_v, with_y.*d_v, label + " velocity d/dv " + name);
+            ExpectSameValues(vb.*d_y, with_y.*d_y, label + " velocity d/dy " + name);
+            ExpectSameBits(vb.*values, without.*values, label + " velocity " + name);
+            ExpectSameBits(vb.*d_v, without.*d_v, label + " velocity d/dv " + name);
           }
           IndicatorEvaluation ia, ib;
           bool stewart_like = false;  // Stewart blocks need an active mode per block
