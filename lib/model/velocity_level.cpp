@@ -553,8 +553,7 @@ void CopyColumns(const SparseMatrix& m, Columns* out) {
 static void AssembleVelocityValues(const LoweredSystem& system, const PointEvaluation& e,
                                    const Vector& mask, const Vector& rates,
                                    const std::vector<PairRole>& roles,
-                                   const CurvatureTerms* curvature,
-                                   VelocityLevelEvaluation* out) {
+                                   const CurvatureTerms* curvature, VelocityLevelEvaluation* out) {
   VelocityValuesWorkspace& w = ThisThreadsVelocityValuesWorkspace();
   const bool with_y = curvature != nullptr;
   const int ny = system.num_states();
