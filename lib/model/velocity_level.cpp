@@ -411,7 +411,9 @@ struct VelocityValuesWorkspace {
   Vector mask, rates;  // AssembleVelocityRows' continuity mask and rates (either assembly)
   Vector cont_a, cont_b;
   Columns x_y, x_z, product, scaled, scaled_b, d_v[5];
-  Columns product_y, d_y[5];  // with derivatives in y: X_y F_y, and each source's rows
+  Columns product_y, d_y[5];    // with derivatives in y: X_y F_y, and each source's rows
+  Columns kept_y, kept_z;       // RateRows' X_y, X_z restricted to the rows an output takes
+  std::vector<char> needed[5];  // per source row: taken by an output
   Vector value[5];
   std::vector<char> touched;  // product: rows met in the current column
   std::vector<double> accumulator;
@@ -507,9 +509,30 @@ void ProductColumns(const ColumnsView& x, const ColumnsView& f, VelocityValuesWo
 // The rate rows X_y F + X_z v_c and their derivative X_y F_z + X_z diag(mask); with `d_y`,
 // also X_y F_y + C_y (C_y: the curvature rows `c_y`, null for none). AssembleVelocityLevel's
 // `rate` without derivatives in u, p: the same bits.
-void RateRows(const ColumnsView& x_y, const ColumnsView& x_z, const PointEvaluation& e,
-              const Vector& mask, const Vector& rates, VelocityValuesWorkspace* w, Vector* value,
-              Columns* d_v, const DerivativeMatrix* c_y = nullptr, Columns* d_y = nullptr) {
+// The entries of `a` in the rows where keep[row] (the others dropped, rows keep their
+// indices).
+void KeepRows(const ColumnsView& a, const std::vector<char>& keep, Columns* out) {
+  out->Start(a.rows, a.cols);
+  for (int j = 0; j < a.cols; ++j) {
+    for (int p = a.outer[j]; p < a.outer[j + 1]; ++p) {
+      if (keep[static_cast<std::size_t>(a.inner[p])]) out->Push(a.inner[p], a.values[p]);
+    }
+    out->EndColumn(j);
+  }
+}
+
+// Every row of a product, sum or diagonal scaling below depends on the same row of X_y and
+// X_z only (and a row's sums run in the same order whatever the other rows hold), so RateRows
+// computes the rows an output takes (`keep`; FESD's velocity level takes the rates of active
+// constraints, a few in a hundred of a crowd's working pairs): those rows bit for bit, the
+// others empty.
+void RateRows(const ColumnsView& all_x_y, const ColumnsView& all_x_z, const std::vector<char>& keep,
+              const PointEvaluation& e, const Vector& mask, const Vector& rates,
+              VelocityValuesWorkspace* w, Vector* value, Columns* d_v,
+              const DerivativeMatrix* c_y = nullptr, Columns* d_y = nullptr) {
+  KeepRows(all_x_y, keep, &w->kept_y);
+  KeepRows(all_x_z, keep, &w->kept_z);
+  const ColumnsView x_y(w->kept_y), x_z(w->kept_z);
   // value = x_y F, then += x_z rates (Eigen assigns the first product and adds the second).
   value->setZero(x_y.rows);
   for (int k = 0; k < x_y.cols; ++k) {
@@ -569,39 +592,65 @@ static void AssembleVelocityValues(const LoweredSystem& system, const PointEvalu
     w.cont_b[k] = 1.0 - w.cont_a[k];
     any_both |= side == ContinuousSide::kBoth;
   }
+  // The rows of each output, in AssembleVelocityLevel's order.
+  auto equations = [&](auto&& f) {
+    for (int r = 0; r < ng; ++r) f(differentiated[static_cast<std::size_t>(r)] ? 1 : 0, r);
+    for (int k = 0; k < np; ++k) {
+      const PairRole role = roles[static_cast<std::size_t>(k)];
+      if (role == PairRole::kComplementary) continue;
+      const ContinuousSide side = pairs[static_cast<std::size_t>(k)].continuous;
+      const bool continuous_a = side != ContinuousSide::kB;
+      const int jump_source = side == ContinuousSide::kBoth ? 4 : 3;
+      f((role == PairRole::kAZero) == continuous_a ? 2 : jump_source, k);
+    }
+  };
+  auto complementary = [&](bool a_side) {
+    return [&, a_side](auto&& f) {
+      for (int k = 0; k < np; ++k) {
+        if (roles[static_cast<std::size_t>(k)] != PairRole::kComplementary) continue;
+        const int jump_source =
+            pairs[static_cast<std::size_t>(k)].continuous == ContinuousSide::kBoth ? 4 : 3;
+        f(a_side ? jump_source : 2, k);
+      }
+    };
+  };
+  const int source_rows[5] = {ng, ng, np, np, any_both ? np : 0};
+  for (int source = 0; source < 5; ++source)
+    w.needed[source].assign(static_cast<std::size_t>(source_rows[source]), 0);
+  auto need = [&](int source, int row) { w.needed[source][static_cast<std::size_t>(row)] = 1; };
+  equations(need);
+  complementary(true)(need);
+  complementary(false)(need);
   // Sources as in AssembleVelocityLevel: 0 G values, 1 G rates, 2 continuous-side rates,
-  // 3 jump-side values, 4 rates of b (kBoth pairs).
+  // 3 jump-side values, 4 rates of b (kBoth pairs). The rate sources hold the rows an output
+  // takes (RateRows).
   // (d_y of source s, or null without derivatives in y)
   auto d_y = [&](int source) { return with_y ? &w.d_y[source] : nullptr; };
   if (ng > 0) {
     w.value[0] = e.G;
     CopyColumns(e.G_z.sparse(), &w.d_v[0]);
     if (with_y) CopyColumns(e.G_y.sparse(), &w.d_y[0]);
-    RateRows(ColumnsView(e.G_y.sparse()), ColumnsView(e.G_z.sparse()), e, mask, rates, &w,
-             &w.value[1], &w.d_v[1], with_y ? &curvature->equation_y : nullptr, d_y(1));
+    RateRows(ColumnsView(e.G_y.sparse()), ColumnsView(e.G_z.sparse()), w.needed[1], e, mask, rates,
+             &w, &w.value[1], &w.d_v[1], with_y ? &curvature->equation_y : nullptr, d_y(1));
   }
   if (np > 0) {
     DiagonalSum(w.cont_a, e.A_y.sparse(), w.cont_b, e.B_y.sparse(), &w, &w.x_y);
     DiagonalSum(w.cont_a, e.A_z.sparse(), w.cont_b, e.B_z.sparse(), &w, &w.x_z);
-    RateRows(ColumnsView(w.x_y), ColumnsView(w.x_z), e, mask, rates, &w, &w.value[2], &w.d_v[2],
-             with_y ? &curvature->pair_y : nullptr, d_y(2));
+    RateRows(ColumnsView(w.x_y), ColumnsView(w.x_z), w.needed[2], e, mask, rates, &w, &w.value[2],
+             &w.d_v[2], with_y ? &curvature->pair_y : nullptr, d_y(2));
     Vector& j_value = w.value[3];
     j_value.resize(np);
     for (int k = 0; k < np; ++k) j_value[k] = w.cont_b[k] * e.A[k] + w.cont_a[k] * e.B[k];
     DiagonalSum(w.cont_b, e.A_z.sparse(), w.cont_a, e.B_z.sparse(), &w, &w.d_v[3]);
     if (with_y) DiagonalSum(w.cont_b, e.A_y.sparse(), w.cont_a, e.B_y.sparse(), &w, &w.d_y[3]);
     if (any_both) {
-      RateRows(ColumnsView(e.B_y.sparse()), ColumnsView(e.B_z.sparse()), e, mask, rates, &w,
-               &w.value[4], &w.d_v[4], nullptr, d_y(4));
+      RateRows(ColumnsView(e.B_y.sparse()), ColumnsView(e.B_z.sparse()), w.needed[4], e, mask,
+               rates, &w, &w.value[4], &w.d_v[4], nullptr, d_y(4));
     }
   }
-  const int source_rows[5] = {ng, ng, np, np, any_both ? np : 0};
   // One output: its rows (source, source row) in order; values 0 + the source's value (Eigen's
   // selection product adds to zeros), derivative rows copied, with + 0 on every entry when
   // more than one source contributes (Eigen's sum of the selections adds zeros).
-  struct Take {
-    int source, row;
-  };
   auto select = [&](auto&& for_each_row, Vector* values, DerivativeMatrix* dv,
                     DerivativeMatrix* dy) {
     int rows = 0;
@@ -646,28 +695,6 @@ static void AssembleVelocityValues(const LoweredSystem& system, const PointEvalu
     }
     dv->Finalize();
     if (with_y) dy->Finalize();
-  };
-  // The rows of each output, in AssembleVelocityLevel's order.
-  auto equations = [&](auto&& f) {
-    for (int r = 0; r < ng; ++r) f(differentiated[static_cast<std::size_t>(r)] ? 1 : 0, r);
-    for (int k = 0; k < np; ++k) {
-      const PairRole role = roles[static_cast<std::size_t>(k)];
-      if (role == PairRole::kComplementary) continue;
-      const ContinuousSide side = pairs[static_cast<std::size_t>(k)].continuous;
-      const bool continuous_a = side != ContinuousSide::kB;
-      const int jump_source = side == ContinuousSide::kBoth ? 4 : 3;
-      f((role == PairRole::kAZero) == continuous_a ? 2 : jump_source, k);
-    }
-  };
-  auto complementary = [&](bool a_side) {
-    return [&, a_side](auto&& f) {
-      for (int k = 0; k < np; ++k) {
-        if (roles[static_cast<std::size_t>(k)] != PairRole::kComplementary) continue;
-        const int jump_source =
-            pairs[static_cast<std::size_t>(k)].continuous == ContinuousSide::kBoth ? 4 : 3;
-        f(a_side ? jump_source : 2, k);
-      }
-    };
   };
   select(equations, &out->equations, &out->equations_v, &out->equations_y);
   select(complementary(true), &out->a, &out->a_v, &out->a_y);
