@@ -455,21 +455,25 @@ void SumColumns(const ColumnsView& a, const ColumnsView& b, Columns* out) {
 
 // D A (rows scaled, `rows` true) or A D (columns scaled) for a diagonal D, every stored entry
 // kept in its place, zero or not (Eigen's sparse-diagonal products, the same bits).
-void Scaled(const ColumnsView& a, const Vector& d, bool rows, Columns* out) {
+// With `keep`, only the entries of rows where keep[row] (the others dropped).
+void Scaled(const ColumnsView& a, const Vector& d, bool rows, Columns* out,
+            const std::vector<char>* keep = nullptr) {
   out->Start(a.rows, a.cols);
   for (int j = 0; j < a.cols; ++j) {
     for (int p = a.outer[j]; p < a.outer[j + 1]; ++p) {
+      if (keep != nullptr && !(*keep)[static_cast<std::size_t>(a.inner[p])]) continue;
       out->Push(a.inner[p], a.values[p] * d[rows ? a.inner[p] : j]);
     }
     out->EndColumn(j);
   }
 }
 
-// D_a A + D_b B for diagonal D_a, D_b (Eigen's M(D_a A) + M(D_b B), the same bits).
+// D_a A + D_b B for diagonal D_a, D_b (Eigen's M(D_a A) + M(D_b B), the same bits), in the
+// rows where keep[row] (the others empty: each row is its own).
 void DiagonalSum(const Vector& da, const SparseMatrix& a, const Vector& db, const SparseMatrix& b,
-                 VelocityValuesWorkspace* w, Columns* out) {
-  Scaled(ColumnsView(a), da, true, &w->scaled);
-  Scaled(ColumnsView(b), db, true, &w->scaled_b);
+                 const std::vector<char>& keep, VelocityValuesWorkspace* w, Columns* out) {
+  Scaled(ColumnsView(a), da, true, &w->scaled, &keep);
+  Scaled(ColumnsView(b), db, true, &w->scaled_b, &keep);
   SumColumns(ColumnsView(w->scaled), ColumnsView(w->scaled_b), out);
 }
 
@@ -526,13 +530,17 @@ void KeepRows(const ColumnsView& a, const std::vector<char>& keep, Columns* out)
 // computes the rows an output takes (`keep`; FESD's velocity level takes the rates of active
 // constraints, a few in a hundred of a crowd's working pairs): those rows bit for bit, the
 // others empty.
-void RateRows(const ColumnsView& all_x_y, const ColumnsView& all_x_z, const std::vector<char>& keep,
+// (`keep` null: x_y and x_z hold those rows only already.)
+void RateRows(const ColumnsView& all_x_y, const ColumnsView& all_x_z, const std::vector<char>* keep,
               const PointEvaluation& e, const Vector& mask, const Vector& rates,
               VelocityValuesWorkspace* w, Vector* value, Columns* d_v,
               const DerivativeMatrix* c_y = nullptr, Columns* d_y = nullptr) {
-  KeepRows(all_x_y, keep, &w->kept_y);
-  KeepRows(all_x_z, keep, &w->kept_z);
-  const ColumnsView x_y(w->kept_y), x_z(w->kept_z);
+  if (keep != nullptr) {
+    KeepRows(all_x_y, *keep, &w->kept_y);
+    KeepRows(all_x_z, *keep, &w->kept_z);
+  }
+  const ColumnsView x_y = keep != nullptr ? ColumnsView(w->kept_y) : all_x_y;
+  const ColumnsView x_z = keep != nullptr ? ColumnsView(w->kept_z) : all_x_z;
   // value = x_y F, then += x_z rates (Eigen assigns the first product and adds the second).
   value->setZero(x_y.rows);
   for (int k = 0; k < x_y.cols; ++k) {
@@ -630,21 +638,23 @@ static void AssembleVelocityValues(const LoweredSystem& system, const PointEvalu
     w.value[0] = e.G;
     CopyColumns(e.G_z.sparse(), &w.d_v[0]);
     if (with_y) CopyColumns(e.G_y.sparse(), &w.d_y[0]);
-    RateRows(ColumnsView(e.G_y.sparse()), ColumnsView(e.G_z.sparse()), w.needed[1], e, mask, rates,
+    RateRows(ColumnsView(e.G_y.sparse()), ColumnsView(e.G_z.sparse()), &w.needed[1], e, mask, rates,
              &w, &w.value[1], &w.d_v[1], with_y ? &curvature->equation_y : nullptr, d_y(1));
   }
   if (np > 0) {
-    DiagonalSum(w.cont_a, e.A_y.sparse(), w.cont_b, e.B_y.sparse(), &w, &w.x_y);
-    DiagonalSum(w.cont_a, e.A_z.sparse(), w.cont_b, e.B_z.sparse(), &w, &w.x_z);
-    RateRows(ColumnsView(w.x_y), ColumnsView(w.x_z), w.needed[2], e, mask, rates, &w, &w.value[2],
+    DiagonalSum(w.cont_a, e.A_y.sparse(), w.cont_b, e.B_y.sparse(), w.needed[2], &w, &w.x_y);
+    DiagonalSum(w.cont_a, e.A_z.sparse(), w.cont_b, e.B_z.sparse(), w.needed[2], &w, &w.x_z);
+    RateRows(ColumnsView(w.x_y), ColumnsView(w.x_z), nullptr, e, mask, rates, &w, &w.value[2],
              &w.d_v[2], with_y ? &curvature->pair_y : nullptr, d_y(2));
     Vector& j_value = w.value[3];
     j_value.resize(np);
     for (int k = 0; k < np; ++k) j_value[k] = w.cont_b[k] * e.A[k] + w.cont_a[k] * e.B[k];
-    DiagonalSum(w.cont_b, e.A_z.sparse(), w.cont_a, e.B_z.sparse(), &w, &w.d_v[3]);
-    if (with_y) DiagonalSum(w.cont_b, e.A_y.sparse(), w.cont_a, e.B_y.sparse(), &w, &w.d_y[3]);
+    DiagonalSum(w.cont_b, e.A_z.sparse(), w.cont_a, e.B_z.sparse(), w.needed[3], &w, &w.d_v[3]);
+    if (with_y) {
+      DiagonalSum(w.cont_b, e.A_y.sparse(), w.cont_a, e.B_y.sparse(), w.needed[3], &w, &w.d_y[3]);
+    }
     if (any_both) {
-      RateRows(ColumnsView(e.B_y.sparse()), ColumnsView(e.B_z.sparse()), w.needed[4], e, mask,
+      RateRows(ColumnsView(e.B_y.sparse()), ColumnsView(e.B_z.sparse()), &w.needed[4], e, mask,
                rates, &w, &w.value[4], &w.d_v[4], nullptr, d_y(4));
     }
   }

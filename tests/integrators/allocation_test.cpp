@@ -249,7 +249,7 @@ INSTANTIATE_TEST_SUITE_P(
         Case{"fesd_S3", "S3", "fesd", With(kNoTrajectory, "h", 0.1), 0.72, true},
         Case{"fesd_H1", "H1", "fesd", With(kNoTrajectory, "h", 0.1), 0.52, true},
         Case{"fesd_rectifier", "rectifier", "fesd", With(kNoTrajectory, "h", 1e-4), 5.30, true},
-        Case{"fesd_crowd", "crowd:N=16", "fesd", With(kNoTrajectory, "h", 0.1), 398.73, false, 15},
+        Case{"fesd_crowd", "crowd:N=16", "fesd", With(kNoTrajectory, "h", 0.1), 398.95, false, 15},
         Case{"fesd_adaptive_F1", "F1", "fesd", kNoTrajectory, 8.79, true},
         Case{"fesd_adaptive_S3", "S3", "fesd", With(kNoTrajectory, "h_max", 0.05), 0.77, true},
         Case{"timestepping_S3", "S3", "timestepping", kNoTrajectory, 0.04, true},
