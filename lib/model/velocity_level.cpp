@@ -510,9 +510,6 @@ void ProductColumns(const ColumnsView& x, const ColumnsView& f, VelocityValuesWo
   }
 }
 
-// The rate rows X_y F + X_z v_c and their derivative X_y F_z + X_z diag(mask); with `d_y`,
-// also X_y F_y + C_y (C_y: the curvature rows `c_y`, null for none). AssembleVelocityLevel's
-// `rate` without derivatives in u, p: the same bits.
 // The entries of `a` in the rows where keep[row] (the others dropped, rows keep their
 // indices).
 void KeepRows(const ColumnsView& a, const std::vector<char>& keep, Columns* out) {
@@ -525,12 +522,15 @@ void KeepRows(const ColumnsView& a, const std::vector<char>& keep, Columns* out)
   }
 }
 
+// The rate rows X_y F + X_z v_c and their derivative X_y F_z + X_z diag(mask); with `d_y`,
+// also X_y F_y + C_y (C_y: the curvature rows `c_y`, null for none). AssembleVelocityLevel's
+// `rate` without derivatives in u, p: the same bits.
+//
 // Every row of a product, sum or diagonal scaling below depends on the same row of X_y and
 // X_z only (and a row's sums run in the same order whatever the other rows hold), so RateRows
 // computes the rows an output takes (`keep`; FESD's velocity level takes the rates of active
 // constraints, a few in a hundred of a crowd's working pairs): those rows bit for bit, the
-// others empty.
-// (`keep` null: x_y and x_z hold those rows only already.)
+// others empty. (`keep` null: x_y and x_z hold only those rows already.)
 void RateRows(const ColumnsView& all_x_y, const ColumnsView& all_x_z, const std::vector<char>* keep,
               const PointEvaluation& e, const Vector& mask, const Vector& rates,
               VelocityValuesWorkspace* w, Vector* value, Columns* d_v,
