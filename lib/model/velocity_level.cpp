@@ -527,20 +527,13 @@ void KeepRows(const ColumnsView& a, const std::vector<char>& keep, Columns* out)
 // `rate` without derivatives in u, p: the same bits.
 //
 // Every row of a product, sum or diagonal scaling below depends on the same row of X_y and
-// X_z only (and a row's sums run in the same order whatever the other rows hold), so RateRows
-// computes the rows an output takes (`keep`; FESD's velocity level takes the rates of active
-// constraints, a few in a hundred of a crowd's working pairs): those rows bit for bit, the
-// others empty. (`keep` null: x_y and x_z hold only those rows already.)
-void RateRows(const ColumnsView& all_x_y, const ColumnsView& all_x_z, const std::vector<char>* keep,
-              const PointEvaluation& e, const Vector& mask, const Vector& rates,
-              VelocityValuesWorkspace* w, Vector* value, Columns* d_v,
-              const DerivativeMatrix* c_y = nullptr, Columns* d_y = nullptr) {
-  if (keep != nullptr) {
-    KeepRows(all_x_y, *keep, &w->kept_y);
-    KeepRows(all_x_z, *keep, &w->kept_z);
-  }
-  const ColumnsView x_y = keep != nullptr ? ColumnsView(w->kept_y) : all_x_y;
-  const ColumnsView x_z = keep != nullptr ? ColumnsView(w->kept_z) : all_x_z;
+// X_z only (and a row's sums run in the same order whatever the other rows hold), so callers
+// pass X_y and X_z restricted to the rows an output takes (KeepRows; FESD's velocity level takes
+// the rates of active constraints, a few in a hundred of a crowd's working pairs): those rows
+// come out bit for bit, the others empty.
+void RateRows(const ColumnsView& x_y, const ColumnsView& x_z, const PointEvaluation& e,
+              const Vector& mask, const Vector& rates, VelocityValuesWorkspace* w, Vector* value,
+              Columns* d_v, const DerivativeMatrix* c_y = nullptr, Columns* d_y = nullptr) {
   // value = x_y F, then += x_z rates (Eigen assigns the first product and adds the second).
   value->setZero(x_y.rows);
   for (int k = 0; k < x_y.cols; ++k) {
@@ -634,18 +627,26 @@ static void AssembleVelocityValues(const LoweredSystem& system, const PointEvalu
   // takes (RateRows).
   // (d_y of source s, or null without derivatives in y)
   auto d_y = [&](int source) { return with_y ? &w.d_y[source] : nullptr; };
+  // Source s's rate rows from X_y, X_z over all its rows (curvature rows c_y, may be null).
+  auto rate_rows = [&](int source, const SparseMatrix& x_y, const SparseMatrix& x_z,
+                       const DerivativeMatrix* c_y) {
+    KeepRows(ColumnsView(x_y), w.needed[source], &w.kept_y);
+    KeepRows(ColumnsView(x_z), w.needed[source], &w.kept_z);
+    RateRows(ColumnsView(w.kept_y), ColumnsView(w.kept_z), e, mask, rates, &w, &w.value[source],
+             &w.d_v[source], c_y, d_y(source));
+  };
   if (ng > 0) {
     w.value[0] = e.G;
     CopyColumns(e.G_z.sparse(), &w.d_v[0]);
     if (with_y) CopyColumns(e.G_y.sparse(), &w.d_y[0]);
-    RateRows(ColumnsView(e.G_y.sparse()), ColumnsView(e.G_z.sparse()), &w.needed[1], e, mask, rates,
-             &w, &w.value[1], &w.d_v[1], with_y ? &curvature->equation_y : nullptr, d_y(1));
+    rate_rows(1, e.G_y.sparse(), e.G_z.sparse(), with_y ? &curvature->equation_y : nullptr);
   }
   if (np > 0) {
     DiagonalSum(w.cont_a, e.A_y.sparse(), w.cont_b, e.B_y.sparse(), w.needed[2], &w, &w.x_y);
     DiagonalSum(w.cont_a, e.A_z.sparse(), w.cont_b, e.B_z.sparse(), w.needed[2], &w, &w.x_z);
-    RateRows(ColumnsView(w.x_y), ColumnsView(w.x_z), nullptr, e, mask, rates, &w, &w.value[2],
-             &w.d_v[2], with_y ? &curvature->pair_y : nullptr, d_y(2));
+    // (x_y, x_z hold the rows taken already)
+    RateRows(ColumnsView(w.x_y), ColumnsView(w.x_z), e, mask, rates, &w, &w.value[2], &w.d_v[2],
+             with_y ? &curvature->pair_y : nullptr, d_y(2));
     Vector& j_value = w.value[3];
     j_value.resize(np);
     for (int k = 0; k < np; ++k) j_value[k] = w.cont_b[k] * e.A[k] + w.cont_a[k] * e.B[k];
@@ -654,8 +655,7 @@ static void AssembleVelocityValues(const LoweredSystem& system, const PointEvalu
       DiagonalSum(w.cont_b, e.A_y.sparse(), w.cont_a, e.B_y.sparse(), w.needed[3], &w, &w.d_y[3]);
     }
     if (any_both) {
-      RateRows(ColumnsView(e.B_y.sparse()), ColumnsView(e.B_z.sparse()), &w.needed[4], e, mask,
-               rates, &w, &w.value[4], &w.d_v[4], nullptr, d_y(4));
+      rate_rows(4, e.B_y.sparse(), e.B_z.sparse(), nullptr);
     }
   }
   // One output: its rows (source, source row) in order; values 0 + the source's value (Eigen's
