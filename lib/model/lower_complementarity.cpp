@@ -89,24 +89,40 @@ class ComplementarityBlock final : public LoweredBlock {
       lambda_ = z.segment(z0, m_);
     }
     const auto b = RowMajor(b_values_, nx_, m_);
+    // Each product is evaluated into storage of its own (kept, never resized between uses) and
+    // then added: the order Eigen follows for `+=` of a product through a temporary.
     // x' += B lambda.
-    out->F.head(nx_) += b * lambda_;
+    state_product_.noalias() = b * lambda_;
+    out->F.head(nx_) += state_product_;
     // pair k: a = w_k = g_k + (D lambda)_k, b = lambda_k (the stage unknown, or its rate).
     out->A.segment(k0, m_) = g_;
-    if (index_one_) out->A.segment(k0, m_) += RowMajor(d_values_, m_, m_) * lambda_;
+    if (index_one_) {
+      pair_product_.noalias() = RowMajor(d_values_, m_, m_) * lambda_;
+      out->A.segment(k0, m_) += pair_product_;
+    }
     out->B.segment(k0, m_) = z.segment(z0, m_);
     if (!with_states) return;
 
     // d(B lambda) with lambda held, plus B dlambda_bar through the consistent values.
-    Matrix f_jacobian = ContractRows(jac_b_, lambda_);  // n_x x columns
-    if (consistent) f_jacobian += b * d_lambda_bar_;
-    if (!consistent) out->F_z.AddBlock(0, z0, b);
+    Matrix& f_jacobian = f_jacobian_;  // n_x x columns
+    ContractRows(jac_b_, lambda_, &f_jacobian);
+    if (consistent) {
+      state_rows_product_.noalias() = b * d_lambda_bar_;
+      f_jacobian += state_rows_product_;
+    }
+    if (!consistent) {
+      b_column_major_ = b;  // AddBlock reads a column-major matrix
+      out->F_z.AddBlock(0, z0, b_column_major_);
+    }
     Scatter(context, f_jacobian, 0, all, &out->F_y, &out->F_u, &out->F_p);
     // dw with lambda held (the partial derivative; the velocity level adds the rest).
-    Matrix a_jacobian = jac_g_;
+    Matrix& a_jacobian = a_jacobian_;
+    a_jacobian = jac_g_;
     if (index_one_) {
-      a_jacobian += ContractRows(jac_d_, lambda_);
-      out->A_z.AddBlock(k0, z0, RowMajor(d_values_, m_, m_));
+      ContractRows(jac_d_, lambda_, &contracted_);
+      a_jacobian += contracted_;
+      d_column_major_ = RowMajor(d_values_, m_, m_);
+      out->A_z.AddBlock(k0, z0, d_column_major_);
     }
     Scatter(context, a_jacobian, k0, all, &out->A_y, &out->A_u, &out->A_p);
     for (int k = 0; k < m_; ++k) out->B_z.Add(k0 + k, z0 + k, 1.0);
@@ -140,7 +156,7 @@ class ComplementarityBlock final : public LoweredBlock {
     } else if (active.size() != static_cast<std::size_t>(m_)) {
       active.assign(static_cast<std::size_t>(m_), false);
     }
-    Vector lambda;
+    Vector& lambda = guess_lambda_;
     if (!SolveOnActiveSet(d, active, &lambda)) {
       const LcpResult lcp = SolveLcp(d, g_, LcpOptions());
       lambda = lcp.z;
@@ -173,7 +189,8 @@ class ComplementarityBlock final : public LoweredBlock {
     EvaluateFunctions(context, y, derivatives);
     ConsistentValues(Roles(*context.velocity_roles), derivatives);
     // (a) second derivatives of (D(y) l)_k along d, l = lambda_bar held.
-    Vector weights = Vector::Zero(m_ * m_);
+    Vector& weights = weights_;
+    weights.setZero(m_ * m_);
     for (int k = 0; k < m_; ++k) {
       weights.setZero();
       weights.segment(k * m_, m_) = lambda_bar_;
@@ -182,15 +199,19 @@ class ComplementarityBlock final : public LoweredBlock {
     }
     // (b) d/dl [grad_y (D l)_k . d] dlambda_bar = M dlambda_bar, M_kj = grad D_kj . d.
     const int t_col = TimeColumn(context, all);
-    Vector d_cols = Vector::Zero(jac_d_.cols());
+    Vector& d_cols = argument_direction_;
+    d_cols.setZero(jac_d_.cols());
     d_cols.head(nx_) = direction.head(nx_);
     d_cols[t_col] = direction[context.clock_index];
-    const Matrix m_matrix = RowMajor(jac_d_ * d_cols, m_, m_);
-    Scatter(context, m_matrix * d_lambda_bar_, k0, all, &out->pair_y, &out->pair_u, &out->pair_p);
+    feedthrough_direction_.noalias() = jac_d_ * d_cols;
+    Matrix& m_matrix = d_column_major_;
+    m_matrix = RowMajor(feedthrough_direction_, m_, m_);
+    pair_rows_product_.noalias() = m_matrix * d_lambda_bar_;
+    Scatter(context, pair_rows_product_, k0, all, &out->pair_y, &out->pair_u, &out->pair_p);
     // (c) d/d(y, u, p) of D(y) v_lambda.
-    const Vector rates = context.velocity->segment(layout.z_offset, m_);
-    Scatter(context, ContractRows(jac_d_, rates), k0, all, &out->pair_y, &out->pair_u,
-            &out->pair_p);
+    rates_ = context.velocity->segment(layout.z_offset, m_);
+    ContractRows(jac_d_, rates_, &contracted_);
+    Scatter(context, contracted_, k0, all, &out->pair_y, &out->pair_u, &out->pair_p);
   }
 
   // Free side of each pair. Index 2: the multiplier of an active pair (velocity level), g of
@@ -246,15 +267,19 @@ class ComplementarityBlock final : public LoweredBlock {
     Vector& w = w_;
     w.noalias() = d * lambda_bar_;
     w += g_;
-    Matrix w_jacobian;
-    if (with_states) w_jacobian = jac_g_ + ContractRows(jac_d_, lambda_bar_) + d * d_lambda_bar_;
+    Matrix& w_jacobian = w_jacobian_;
+    if (with_states) {
+      // jac_g + contraction + product, summed in that order (as Eigen's expression did).
+      ContractRows(jac_d_, lambda_bar_, &contracted_);
+      pair_rows_product_.noalias() = d * d_lambda_bar_;
+      w_jacobian = jac_g_ + contracted_ + pair_rows_product_;
+    }
     for (int k = 0; k < m_; ++k) {
       const bool conducting = a_zero[static_cast<std::size_t>(k0 + k)];
       out->values[k0 + k] = conducting ? lambda_bar_[k] : w[k];
       if (!with_states) continue;
-      const Matrix row =
-          conducting ? Matrix(d_lambda_bar_.middleRows(k, 1)) : Matrix(w_jacobian.middleRows(k, 1));
-      Scatter(context, row, k0 + k, all, &out->d_y, &out->d_u, &out->d_p);
+      const Matrix& source = conducting ? d_lambda_bar_ : w_jacobian;
+      Scatter(context, source.middleRows(k, 1), k0 + k, all, &out->d_y, &out->d_u, &out->d_p);
     }
   }
 
@@ -313,21 +338,20 @@ class ComplementarityBlock final : public LoweredBlock {
   }
 
   // Rows r of the contraction sum_j l_j J.row(r * m + j): the Jacobian of M(.) l for a
-  // row-major matrix function M with m columns and l held fixed.
-  Matrix ContractRows(const Matrix& jacobian, const Vector& l) const {
+  // row-major matrix function M with m columns and l held fixed, into *out (its storage kept).
+  void ContractRows(const Matrix& jacobian, const Vector& l, Matrix* out) const {
     const auto rows = static_cast<int>(jacobian.rows()) / m_;
-    Matrix out = Matrix::Zero(rows, jacobian.cols());
+    out->setZero(rows, jacobian.cols());
     for (int r = 0; r < rows; ++r) {
       for (int j = 0; j < m_; ++j) {
-        if (l[j] != 0.0) out.row(r) += l[j] * jacobian.row(r * m_ + j);
+        if (l[j] != 0.0) out->row(r) += l[j] * jacobian.row(r * m_ + j);
       }
     }
-    return out;
   }
 
   // Adds J (columns x, [u], t, [p]) into rows [row, row + J.rows()) of (dy, du, dp): x
   // columns and the clock column of dy. (Each row of the block's pairs is written once.)
-  void Scatter(const BlockContext& context, const Matrix& j, int row, bool all,
+  void Scatter(const BlockContext& context, const ConstMatrixRef& j, int row, bool all,
                DerivativeMatrix* dy, DerivativeMatrix* du, DerivativeMatrix* dp) const {
     const int nu = static_cast<int>(context.inputs->size());
     const int np = static_cast<int>(context.parameters->size());
@@ -349,11 +373,13 @@ class ComplementarityBlock final : public LoweredBlock {
     function.WeightedHessian(y.head(nx_), *context.inputs, y[context.clock_index],
                              *context.parameters, all ? Wrt::All() : Wrt::XT(), weights, &hessian_);
     const int t_col = TimeColumn(context, all);
-    Vector d = Vector::Zero(hessian_.cols());
+    Vector& d = argument_direction_;
+    d.setZero(hessian_.cols());
     d.head(nx_) = direction.head(nx_);
     d[t_col] = direction[context.clock_index];
-    const Vector hd = hessian_ * d;
-    Scatter(context, hd.transpose(), row, all, dy, du, dp);
+    hessian_direction_.noalias() = hessian_ * d;
+    row_ = hessian_direction_.transpose();
+    Scatter(context, row_, row, all, dy, du, dp);
   }
 
   // lambda on the active set S: D_SS lambda_S = -g_S, lambda = 0 elsewhere; true if the result
@@ -429,11 +455,17 @@ class ComplementarityBlock final : public LoweredBlock {
     solved_ = lu.solve(rhs);
     for (int i = 0; i < n; ++i) lambda_bar_[s[static_cast<std::size_t>(i)]] = solved_[i];
     if (!with_states) return;
-    const Matrix partial = jac_g_ + ContractRows(jac_d_, lambda_bar_);
-    Matrix partial_s(n, partial.cols());
+    ContractRows(jac_d_, lambda_bar_, &contracted_);
+    Matrix& partial = partial_;
+    partial = jac_g_ + contracted_;
+    Matrix& partial_s = partial_s_;
+    partial_s.resize(n, partial.cols());
     for (int i = 0; i < n; ++i) partial_s.row(i) = partial.row(s[static_cast<std::size_t>(i)]);
-    const Matrix d_solved = -lu.solve(partial_s);
-    for (int i = 0; i < n; ++i) d_lambda_bar_.row(s[static_cast<std::size_t>(i)]) = d_solved.row(i);
+    Matrix& d_solved = d_solved_;
+    d_solved = lu.solve(partial_s);
+    for (int i = 0; i < n; ++i) {
+      d_lambda_bar_.row(s[static_cast<std::size_t>(i)]) = -d_solved.row(i);
+    }
   }
 
   // Round-off allowance (relative to |g|) when checking a guessed active set.
@@ -446,6 +478,7 @@ class ComplementarityBlock final : public LoweredBlock {
   Vector x_, g_, b_values_, d_values_, lambda_, lambda_bar_;
   Vector bound_lower_, bound_upper_;  // IndicatorBounds' enclosures of g
   std::vector<bool> guess_active_;    // InitialGuess: the active set of the last guess
+  Vector guess_lambda_;               // InitialGuess: its multipliers (storage kept)
   // Scratch kept across evaluations (every element evaluates the block many times): the
   // block's slice of the roles, and the indices of an active set.
   std::vector<PairRole> roles_;
@@ -457,6 +490,15 @@ class ComplementarityBlock final : public LoweredBlock {
   mutable Eigen::FullPivLU<Matrix> lu_;
   Matrix jac_g_, jac_b_, jac_d_, d_lambda_bar_, hessian_;
   ArgumentMatrix directions_;
+  // Kept scratch of the derivative rows (an element evaluates the block at every Newton
+  // iteration; temporaries were most of its cost on small circuits): contractions, products,
+  // column-major copies of row-major values, and the Jacobians assembled from them.
+  Matrix f_jacobian_, a_jacobian_, w_jacobian_, contracted_, state_rows_product_,
+      pair_rows_product_, row_;
+  Matrix b_column_major_, d_column_major_;
+  Matrix partial_, partial_s_, d_solved_;
+  Vector state_product_, pair_product_, feedthrough_direction_, hessian_direction_, weights_,
+      argument_direction_, rates_;
 };
 
 }  // namespace
