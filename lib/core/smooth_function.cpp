@@ -257,7 +257,10 @@ void TypedFunction::Jacobian(const ConstVectorRef& x, const ConstVectorRef& u, d
   // A Jacobian that does not depend on the selected inputs (JacobianConstant) is computed once
   // per set of values of the other inputs; the values come from an evaluation in Dual1
   // constants, whose arithmetic is that of the seeded evaluation's values.
-  const bool constant = columns > 0 && Analysis(x, u, t, p).structure.JacobianConstant(wrt);
+  const FunctionStructure& structure = Analysis(x, u, t, p).structure;
+  const bool constant = columns > 0 && structure.JacobianConstant(wrt);
+  // Values that do not depend on the selected inputs are cached with the Jacobian.
+  const bool zero = constant && structure.JacobianZero(wrt);
   const unsigned bits = WrtBits(wrt);
   JacobianCache& cache = jacobian_cache_;
   if (constant) {
@@ -275,6 +278,11 @@ void TypedFunction::Jacobian(const ConstVectorRef& x, const ConstVectorRef& u, d
     if (same && !wrt.u) compare(u.data(), u.size());
     if (same && !wrt.t) compare(&t, 1);
     if (same && !wrt.p) compare(p.data(), p.size());
+    if (same && zero && cache.values_valid) {
+      *out = cache.values;
+      *jac = cache.jacobian;
+      return;
+    }
     if (same) {
       SeedInputs(&space1_, x, u, t, p, wrt, [](double value, int) { return Dual1(value); });
       Call(space1_.x.data(), nx, space1_.u.data(), nu, space1_.t, space1_.p.data(), np,
@@ -321,6 +329,8 @@ void TypedFunction::Jacobian(const ConstVectorRef& x, const ConstVectorRef& u, d
     if (!wrt.t) append(&t, 1);
     if (!wrt.p) append(p.data(), p.size());
     cache.jacobian = *jac;
+    cache.values_valid = zero;
+    if (zero) cache.values = *out;
   }
 }
 

@@ -236,6 +236,8 @@ FunctionStructure AnalyzeStructure(const SparsityPattern& pattern) {
     const int a = block(pattern.hess_first[e]), b = block(pattern.hess_second[e]);
     structure.couples[a][b] = structure.couples[b][a] = true;
   }
+  bool depends[4] = {};
+  for (const int input : pattern.jac_inputs) depends[block(input)] = true;
   for (unsigned bits = 0; bits < 16 && !structure.point_dependent; ++bits) {
     bool zero = true;
     for (int a = 0; a < 4; ++a) {
@@ -245,6 +247,10 @@ FunctionStructure AnalyzeStructure(const SparsityPattern& pattern) {
       }
     }
     if (zero) structure.hessian_zero |= 1u << bits;
+    bool independent = true;
+    for (int a = 0; a < 4; ++a)
+      independent = independent && !(((bits >> a) & 1u) != 0 && depends[a]);
+    if (independent) structure.jacobian_zero |= 1u << bits;
   }
   return structure;
 }

@@ -46,6 +46,8 @@ struct FunctionStructure {
   bool couples[4][4] = {};
   // Bit WrtBits(wrt) set: HessianZero(wrt) (made by AnalyzeStructure).
   unsigned hessian_zero = 0;
+  // Bit WrtBits(wrt) set: no output depends on an input of the selected blocks.
+  unsigned jacobian_zero = 0;
 
   bool SameSizes(int x, int u, int p) const { return nx == x && nu == u && np == p; }
   // No second derivative among the selected blocks: weighted Hessians and second derivatives
@@ -56,6 +58,11 @@ struct FunctionStructure {
   // Jacobian is one constant matrix, bit for bit (forward mode then multiplies the seeds by
   // the same constants at every point).
   bool JacobianConstant(Wrt wrt) const { return HessianZero(wrt) && !piecewise; }
+  // The outputs do not depend on the selected inputs (a circuit's constant input matrix in x
+  // and t): for fixed values of the other inputs the values are one constant vector too.
+  bool JacobianZero(Wrt wrt) const {
+    return JacobianConstant(wrt) && ((jacobian_zero >> WrtBits(wrt)) & 1u) != 0;
+  }
 };
 FunctionStructure AnalyzeStructure(const SparsityPattern& pattern);
 

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <string>
 
 #include "moreau/core/convergence.hpp"
 
@@ -39,6 +40,58 @@ TEST(SmoothFunctionTest, JacobianColumnsFollowTheSelection) {
   ASSERT_EQ(jac.cols(), 3);
   EXPECT_LE((jac.leftCols(2) - expected.leftCols(2)).lpNorm<Eigen::Infinity>(), kRoundOff);
   EXPECT_LE((jac.col(2) - expected.col(3)).lpNorm<Eigen::Infinity>(), kRoundOff);
+}
+
+// A function affine in the selected inputs keeps its Jacobian between calls, and one that does
+// not depend on them at all (a circuit's constant input matrix, differentiated in x and t) also
+// its values: both are keyed by the other inputs, so new values of those give new results, and
+// the values must stay those of a fresh evaluation whatever the selected inputs do.
+TEST(SmoothFunctionTest, KeptJacobiansAndValuesFollowTheOtherInputs) {
+  // b does not depend on x or t; g is affine in them; h is not.
+  const SmoothFunction b = MakeSmoothFunction(
+      "b", 2, [](const auto&, const auto& u, const auto&, const auto& p, auto& out) {
+        out[0] = 2.0 * p[0];
+        out[1] = u[0] + p[0] * p[1];
+      });
+  const SmoothFunction g = MakeSmoothFunction(
+      "g", 1, [](const auto& x, const auto&, const auto& t, const auto& p, auto& out) {
+        out[0] = p[0] * x[0] - x[1] / 3.0 + t * p[1];
+      });
+  const SmoothFunction h = MakeSmoothFunction(
+      "h", 1, [](const auto& x, const auto&, const auto& t, const auto&, auto& out) {
+        out[0] = x[0] * x[1] + t * t;
+      });
+  Vector u{{0.5}}, p{{3.0, -4.0}};
+  Vector value, evaluated;
+  Matrix jac;
+  for (int call = 0; call < 6; ++call) {
+    if (call == 3) p[0] = -1.25;  // another key: new values and Jacobians
+    if (call == 5) u[0] = 7.0;
+    const Vector x{{0.1 * call - 0.4, 1.0 + call}};
+    const double t = 0.25 * call;
+    const std::string at = "call " + std::to_string(call);
+
+    b.Jacobian(x, u, t, p, Wrt::XT(), &value, &jac);
+    b.Evaluate(x, u, t, p, &evaluated);
+    EXPECT_EQ(value, evaluated) << at;
+    EXPECT_EQ(jac, Matrix::Zero(2, 3)) << at;
+
+    g.Jacobian(x, u, t, p, Wrt::XT(), &value, &jac);
+    g.Evaluate(x, u, t, p, &evaluated);
+    EXPECT_EQ(value, evaluated) << at;
+    EXPECT_EQ(jac, (Matrix(1, 3) << p[0], -1.0 / 3.0, p[1]).finished()) << at;
+
+    h.Jacobian(x, u, t, p, Wrt::XT(), &value, &jac);
+    h.Evaluate(x, u, t, p, &evaluated);
+    EXPECT_EQ(value, evaluated) << at;
+    EXPECT_EQ(jac, (Matrix(1, 3) << x[1], x[0], 2.0 * t).finished()) << at;
+
+    // With u and p selected too, b's values depend on the selection: not kept.
+    b.Jacobian(x, u, t, p, Wrt::All(), &value, &jac);
+    b.Evaluate(x, u, t, p, &evaluated);
+    EXPECT_EQ(value, evaluated) << at;
+    EXPECT_EQ(jac(1, 4), p[1]) << at;  // d(u0 + p0 p1)/dp0: columns x0, x1, u0, t, p0, p1
+  }
 }
 
 TEST(SmoothFunctionTest, ChunkedJacobianForManyInputs) {

@@ -447,13 +447,16 @@ class TypedFunction : public SmoothFunction::Concept {
   std::shared_ptr<const AnalyzedPattern> analyzed_;  // the entry last used
   int detections_ = 0;                               // traces this object made for it
   // The constant dense Jacobian of the last Jacobian call where it is one, keyed by the wrt
-  // blocks and the values of the unselected inputs (compared bit for bit).
+  // blocks and the values of the unselected inputs (compared bit for bit); also the values
+  // where the function does not depend on the selected inputs at all (JacobianZero).
   struct JacobianCache {
     bool valid = false;
     unsigned wrt_bits = 0;
     int nx = -1, nu = -1, np = -1;
     std::vector<double> key;
     Matrix jacobian;
+    bool values_valid = false;
+    Vector values;
   };
   JacobianCache jacobian_cache_;
   // Detected patterns, colourings and workspaces; made at the first sparse call and not copied
