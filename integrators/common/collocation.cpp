@@ -14,7 +14,9 @@ CollocationStages::CollocationStages(LoweredSystem* system, int stages)
       np_(system->num_pairs()),
       stages_(static_cast<std::size_t>(stages)),
       stage_y_(static_cast<std::size_t>(stages)),
-      stage_z_(static_cast<std::size_t>(stages)) {}
+      stage_z_(static_cast<std::size_t>(stages)),
+      extrapolation_(stages, stages),  // sized now: InitialGuess allocates nothing
+      extrapolation_weights_(stages) {}
 
 void CollocationStages::Resize() {
   nz_ = system_->num_algebraic();
@@ -186,7 +188,8 @@ void CollocationStages::InitialGuess(const ConstVectorRef& y0, double h, const V
       extrapolation_.resize(s_, s_);
       for (int i = 0; i < s_; ++i) {
         const double theta = 1.0 + tableau_.c[i] * ratio;
-        extrapolation_.col(i) = tableau_.InterpolationWeights(theta);
+        tableau_.InterpolationWeights(theta, &extrapolation_weights_);
+        extrapolation_.col(i) = extrapolation_weights_;
         extrapolation_.col(i)[s_ - 1] -= 1.0;  // minus Z_s: increments from the new start
       }
     }

@@ -106,6 +106,7 @@ class CollocationStages {
   // Extrapolation weights for the last step-length ratio (column i: stage i of the new step).
   mutable double cached_ratio_ = -1.0;
   mutable Matrix extrapolation_;
+  mutable Vector extrapolation_weights_;
   mutable Vector guess_y_, guess_z_;
 };
 

@@ -32,10 +32,15 @@ bool NearActiveFilter::Update(const Vector& y, const std::vector<bool>& a_zero, 
   ++stats_.updates;
   const int declared = system_->num_declared_pairs();
   // Velocities at the step start (multipliers included when known).
-  const Vector z_point =
-      z.size() == system_->num_algebraic() ? z : Vector(Vector::Zero(system_->num_algebraic()));
-  system_->Evaluate(y, z_point, Derivatives::kNone, &point_);
-  system_->FilterableConstraints(y, point_.F.head(system_->num_scene_states()), &values_, &rates_);
+  // (z itself where it fits: no copy per step.)
+  const Vector* z_point = &z;
+  if (z.size() != system_->num_algebraic()) {
+    zero_z_.setZero(system_->num_algebraic());
+    z_point = &zero_z_;
+  }
+  system_->Evaluate(y, *z_point, Derivatives::kNone, &point_);
+  velocity_ = point_.F.head(system_->num_scene_states());  // (kept: no temporary per step)
+  system_->FilterableConstraints(y, velocity_, &values_, &rates_);
   // (Kept flag vectors: a step allocates nothing.)
   std::vector<bool>& keep = keep_;
   std::vector<bool>& working = working_;

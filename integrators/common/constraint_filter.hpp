@@ -65,6 +65,8 @@ class NearActiveFilter {
   std::vector<bool> keep_, working_, active_;  // Update's flags over the declared pairs
   Vector values_, rates_;
   PointEvaluation point_;
+  Vector zero_z_;    // Update: z = 0 where the given z does not fit
+  Vector velocity_;  // Update: the scene states' velocities
   Stats stats_;
 };
 

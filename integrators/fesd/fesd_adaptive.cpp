@@ -444,7 +444,9 @@ FesdRun::ErrorEstimate FesdRun::EstimateError(double fraction, std::size_t first
   const int m = static_cast<int>(piece_.size());
   const double h = piece_.front().h;
   const Vector& y_start = piece_.front().y0;
-  const Vector y_end = piece_.back().End();
+  Vector& y_end = comparison_.piece_end;  // kept (no allocation per step)
+  const ElementPolynomial& last = piece_.back();
+  y_end = last.y0 + last.increments.col(last.increments.cols() - 1);  // last.End()
   const std::vector<bool>& a_zero = piece_.front().a_zero;
   const double p = 2.0 * s_ - 1.0;
   // How accurately the compared solutions are known (see kNewtonNoise); the smooth kernel
@@ -456,13 +458,13 @@ FesdRun::ErrorEstimate FesdRun::EstimateError(double fraction, std::size_t first
   comparison_residual_ = 0.0;
   const double infinity = std::numeric_limits<double>::infinity();
   const ErrorEstimate failed{infinity, infinity};
-  Vector local;
+  Vector& local = comparison_.local;
   if (m >= 2) {
-    Vector coarse;
+    Vector& coarse = comparison_.coarse;
     if (!SolveComparisonElement(y_start, 0.0, m * h, a_zero, &coarse)) return failed;
     local = (coarse - y_end) / (std::pow(m, p) - 1.0);
   } else {
-    Vector half, fine;
+    Vector &half = comparison_.half, &fine = comparison_.fine;
     if (!SolveComparisonElement(y_start, 0.0, 0.5 * h, a_zero, &half) ||
         !SolveComparisonElement(half, 0.5 * h, 0.5 * h, a_zero, &fine)) {
       return failed;

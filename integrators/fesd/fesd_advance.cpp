@@ -358,7 +358,8 @@ bool FesdRun::FilterCheck(const internal::CollocationStages& stages, const Vecto
   bool positive = true;
   double smallest = std::numeric_limits<double>::infinity();
   for (int i = 0; i < s_; ++i) {
-    const Vector yi = y0 + w_e.segment(stages.state_offset(i), ny_);
+    Vector& yi = filter_state_;
+    yi = y0 + w_e.segment(stages.state_offset(i), ny_);
     double value = 0.0;
     positive &= filter_.Check(yi, &value);
     smallest = std::min(smallest, value);
@@ -577,7 +578,7 @@ Violation FesdRun::EndViolation(const internal::CollocationStages& stages, const
     // nonlinear one is solved by Newton from the stage's algebraic values). That is the solve
     // the element's certificates make at its last stage (ConsistentFreeSides), which
     // therefore take it from end_level_.
-    Vector solved;
+    Vector& solved = end_solved_;
     const PointEvaluation* point = at_stage ? stages.stage_with_derivatives(last) : nullptr;
     const bool ok =
         point != nullptr

@@ -106,7 +106,8 @@ Violation FesdRun::InsideViolation(const CollocationStages& stages, const Vector
     system_.EvaluateEventIndicators(b.y, v, a_zero_, Derivatives::kStates, &b.at);
     for (int p = 0; p < np_; ++p) {
       if (!b.end_grazes[static_cast<std::size_t>(p)]) continue;
-      const double slope = b.at.d_y.Row(p).dot(b.dy);
+      b.at.d_y.Row(p, &b.row);
+      const double slope = b.row.dot(b.dy);
       if (!(slope > 0.0)) continue;
       const double end_value = b.at.values[p];
       const double step = (std::fabs(end_value) + 2.0 * b.thresholds[p]) / slope;
@@ -147,7 +148,10 @@ Violation FesdRun::InsideViolation(const CollocationStages& stages, const Vector
           system_.EvaluateEventIndicators(b.y, v, a_zero_, Derivatives::kStates, &b.at);
           b.node_values[j] = b.at.values;
           b.node_slopes[j].resize(np_);
-          for (int p = 0; p < np_; ++p) b.node_slopes[j][p] = b.at.d_y.Row(p).dot(b.dy);
+          for (int p = 0; p < np_; ++p) {
+            b.at.d_y.Row(p, &b.row);
+            b.node_slopes[j][p] = b.row.dot(b.dy);
+          }
         }
       }
       b.values.resize(nodes.size());

@@ -76,7 +76,7 @@ void FesdRun::Record(const Vector& w, double h, bool ends_at_switch,
       polynomial.algebraic.resize(nz_, s_);
       for (int i = 0; i < s_; ++i) {
         polynomial.increments.col(i) = w_e.segment(stages.state_offset(i), ny_);
-        polynomial.algebraic.col(i) = stages.Algebraic(w_e, i);
+        polynomial.algebraic.col(i) = w_e.segment(stages.algebraic_offset(i), nz_);
       }
       polynomial.h = h;
       polynomial.a_zero = a_zero_;

@@ -625,12 +625,15 @@ class FesdRun {
     // bound_lower/upper: the indicators' bounds over the whole element, apart from the box
     // (box_lower/upper) they are computed from, which BoundEventIndicators reads.
     Vector thresholds, y, dy, box_lower, box_upper, bound_lower, bound_upper, end_values, probe;
+    Eigen::RowVectorXd row;  // a row of at.d_y
     IndicatorEvaluation at;
     std::vector<Vector> node_values, node_slopes;
     std::vector<double> values, slopes;
     CrossingWorkspace search;
   };
   InsideBuffers inside_;
+  mutable Vector end_solved_;    // EndViolation's velocity-level solution (kept across elements)
+  mutable Vector filter_state_;  // FilterCheck's stage state
   // Advance's fallback: the state before the step, and the search switched off while the step
   // is taken again without it.
   Snapshot advance_before_;
@@ -658,6 +661,8 @@ class FesdRun {
     GroupSetup setup;
     Vector guess;
     SemismoothNewtonResult solved;
+    // EstimateError's: the piece's end, the comparison solutions and the local error.
+    Vector piece_end, coarse, half, fine, local;
   };
   ComparisonBuffers comparison_;
   struct ResolutionBuffers {  // IndicatorResolution's workspace, kept across steps

@@ -155,7 +155,8 @@ bool IdaRun::BoundedHiddenRoot(double t_a, double t_b, double* t_negative) {
   // monomial coefficients a_d = sum_{k >= d} E_k binom(k, d) (-1)^(k - d), E_k = D_k H^k / k!.
   const double span = t_b - t_a;
   BoundedRootBuffers& b = bounded_root_;
-  internal::PolynomialPath& path = b.path;
+  MOREAU_ASSERT(order <= kMaxBdfOrder, "IDA's order above the one set");
+  internal::PolynomialPath& path = b.paths[static_cast<std::size_t>(order)];
   Matrix& a = path.coefficients();
   a.setZero(n_, order + 1);
   double scale = 1.0;  // H^k / k!

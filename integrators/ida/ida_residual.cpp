@@ -38,13 +38,13 @@ void IdaRun::Unpack(N_Vector Y, Vector* y, Vector* z, Vector* v) const {
 // R = [y' - F(y, z); z_c' - v_c; V(y, v) + kappa P(y, z)]; for the multiplier of an
 // index-1 pair the z_c row is its kept side at position level instead (P_k = 0).
 int IdaRun::Residual(N_Vector Y, N_Vector Yp, N_Vector R) {
-  Vector y, z, v;
+  Vector &y = unpacked_y_, &z = unpacked_z_, &v = unpacked_v_;
   Unpack(Y, &y, &z, &v);
   const auto yp = View(Yp);
   auto r = View(R);
   system_.Evaluate(y, z, Derivatives::kNone, &point_);
   r.head(ny_) = yp.head(ny_) - point_.F;
-  Vector p;
+  Vector& p = position_;
   if (nz_ > 0) PositionLevel(point_, &p);
   for (int c = 0; c < nc_; ++c) {
     const int k = position_pair_[static_cast<std::size_t>(c)];
@@ -61,7 +61,7 @@ int IdaRun::Residual(N_Vector Y, N_Vector Yp, N_Vector R) {
 // matrix, or KLU's CSC matrix from triplets (no dense n x n intermediate).
 int IdaRun::Jacobian(double c_j, N_Vector Y, SUNMatrix J) {
   ++result_.stats.num_jacobian_evaluations;
-  Vector y, z, v;
+  Vector &y = unpacked_y_, &z = unpacked_z_, &v = unpacked_v_;
   Unpack(Y, &y, &z, &v);
   system_.Evaluate(y, z, Derivatives::kStates, &point_);
   if (nz_ > 0) system_.EvaluateVelocityLevel(y, v, roles_, Derivatives::kStates, &velocity_);

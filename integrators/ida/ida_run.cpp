@@ -157,6 +157,16 @@ void IdaRun::Fail(IdaStatus status, double t, const std::string& reason) {
   result_.message = s.str();
 }
 
+void IdaRun::SizeBoundedRootPaths() {
+  BoundedRootBuffers& b = bounded_root_;
+  for (int order = 1; order <= kMaxBdfOrder; ++order) {
+    internal::PolynomialPath& path = b.paths[static_cast<std::size_t>(order)];
+    if (path.coefficients().rows() == n_) continue;
+    path.coefficients().setZero(n_, order + 1);
+    path.Box(0.0, 1.0, &b.box_lower, &b.box_upper);  // sizes its Taylor scratch
+  }
+}
+
 void IdaRun::CreateSolver(double t0) {
   memory_ = IDACreate(context_.context);
   MOREAU_ASSERT(memory_ != nullptr, "IDACreate failed");
@@ -168,6 +178,8 @@ void IdaRun::CreateSolver(double t0) {
   // Error weights (WeightCallback): rtol and atol as the local error test of the scene states.
   Check(IDAWFtolerances(memory_, &IdaRun::WeightCallback), "IDAWFtolerances");
   Check(IDASetMaxNumSteps(memory_, options_.max_steps), "IDASetMaxNumSteps");
+  Check(IDASetMaxOrd(memory_, kMaxBdfOrder), "IDASetMaxOrd");
+  SizeBoundedRootPaths();
   Check(IDASetNonlinConvCoef(memory_, options_.newton_convergence_factor), "IDASetNonlinConvCoef");
   if (options_.max_step > 0.0) Check(IDASetMaxStep(memory_, options_.max_step), "IDASetMaxStep");
   if (sparse_) {

@@ -14,6 +14,7 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <array>
 #include <limits>
 #include <memory>
 #include <stdexcept>
@@ -340,19 +341,27 @@ class IdaRun {
   Vector hidden_work_;
   std::vector<int> hidden_roots_;
   // BoundedHiddenRoot's work storage, kept across steps (a step allocates nothing in it).
+  // IDA's largest BDF order (its default, set explicitly in CreateSolver).
+  static constexpr int kMaxBdfOrder = 5;
   struct BoundedRootBuffers {
-    internal::PolynomialPath path;
+    // The interpolant of the last step, one per BDF order (its coefficients and Taylor
+    // scratch keep their size while the order changes: no allocation per step).
+    std::array<internal::PolynomialPath, kMaxBdfOrder + 1> paths;
     std::vector<char> watched;
     Vector e, thresholds, box_lower, box_upper, pair_lower, pair_upper, relay_lower, relay_upper;
     internal::CrossingWorkspace search;
   };
   BoundedRootBuffers bounded_root_;
+  // Sizes every order's path once (BoundedHiddenRoot then only writes into them).
+  void SizeBoundedRootPaths();
   double first_unresolved_time_ = 0.0;
   // The root functions without offsets at the end of the last scanned step, and its time
   // (NaN after a restart): the next step's first sample.
   double last_sample_time_ = std::numeric_limits<double>::quiet_NaN();
   Vector last_sample_;
   Vector root_y_, root_z_, root_v_;  // Roots' unpacked arguments (no allocation per call)
+  // Residual's and Jacobian's (never nested in each other), and the residual's position level.
+  Vector unpacked_y_, unpacked_z_, unpacked_v_, position_;
   // Per algebraic unknown i: its IDA column (ny + c for the c-th continuous one, carried as
   // z_c; ny + nc + i for a jump one). Per position-level row: the IDA row of the index-1
   // multiplier it determines, or -1.

@@ -300,8 +300,9 @@ class RadauRun {
         z->setZero();
         return;
       }
-      const Vector w = tableau_.InterpolationWeights(theta);
-      z->col(j) = previous_z_ * w - previous_z_.col(s_ - 1);
+      tableau_.InterpolationWeights(theta, &guess_weights_);
+      guess_column_.noalias() = previous_z_ * guess_weights_;
+      z->col(j) = guess_column_ - previous_z_.col(s_ - 1);
     }
   }
 
@@ -327,7 +328,9 @@ class RadauRun {
   double ErrorNorm(double h, const Vector& y0, const Matrix& z, bool refine) {
     const int nx = system_.num_scene_states();
     Evaluate(y0, Derivatives::kStates);
-    const Vector f0 = eval_.F;
+    // Kept vectors (no allocation per step); the arithmetic of the expressions they replace.
+    Vector& f0 = error_f0_;
+    f0 = eval_.F;
     filter_matrix_.Reset(n_, filter_solver_->wants_sparse());
     filter_matrix_.AddDiagonal(0, 0, n_, 1.0);
     filter_matrix_.AddDerivative(0, 0, eval_.F_y, -h * tableau_.gamma0);
@@ -335,10 +338,13 @@ class RadauRun {
     if (filter_solver_->Factorize(filter_matrix_) != FactorizationStatus::kSuccess) {
       return std::numeric_limits<double>::infinity();
     }
-    const Vector ez = z * tableau_.error_weights;
-    Vector err = tableau_.gamma0 * h * f0 + ez;
+    Vector& ez = error_ez_;
+    ez.noalias() = z * tableau_.error_weights;
+    Vector& err = error_;
+    err = tableau_.gamma0 * h * f0 + ez;
     filter_solver_->Solve(err);
-    const Vector y1 = y0 + z.col(s_ - 1);
+    Vector& y1 = error_y1_;
+    y1 = y0 + z.col(s_ - 1);
     auto norm = [&](const Vector& e) {
       double sum = 0.0;
       for (int i = 0; i < nx; ++i) {
@@ -357,7 +363,8 @@ class RadauRun {
     if (refine && error > 1.0) {
       // Hairer's refinement on first and rejected steps (avoids needless rejections for
       // stiff problems): use F(y0 + err) in place of F(y0).
-      Evaluate(y0 + err, Derivatives::kNone);
+      error_point_ = y0 + err;
+      Evaluate(error_point_, Derivatives::kNone);
       err = tableau_.gamma0 * h * eval_.F + ez;
       filter_solver_->Solve(err);
       error = norm(err);
@@ -438,6 +445,8 @@ class RadauRun {
   SystemMatrix filter_matrix_;
   PointEvaluation eval_;
   Matrix previous_z_;
+  // Scratch of InitialGuess and ErrorNorm, kept across steps.
+  Vector guess_weights_, guess_column_, error_f0_, error_ez_, error_, error_y1_, error_point_;
   double previous_h_ = 0.0;
   bool have_previous_ = false;
   double last_step_ = 0.0;

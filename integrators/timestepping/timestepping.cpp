@@ -329,6 +329,7 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
   std::vector<bool> statuses = PairStatuses(initial);
 
   Vector previous_w;
+  Vector guess, stage_state;  // kept across steps (no allocation per step)
   double previous_h = 0.0;
   std::vector<int> control;  // the control segment of every stretch
   // Sample times are stretch ends (stop times) so that a step ends at each.
@@ -422,8 +423,7 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
       // First attempt: state-informed guess (stages predicted across a switching surface
       // start in their new mode). Second attempt: the previous step's algebraic values at
       // every stage, if the first did not converge.
-      const Vector guess =
-          stages.InitialGuess(y, h, previous_h > 0.0 ? &previous_w : nullptr, previous_h, z);
+      stages.InitialGuess(y, h, previous_h > 0.0 ? &previous_w : nullptr, previous_h, z, &guess);
       newton.Solve(step_system, guess, &solved);
       AddNewtonStats(solved, &stats);
       if (!solved.converged()) {
@@ -455,7 +455,8 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
       bool positive = true;
       for (int i = 0; i < s; ++i) {
         double value = 0.0;
-        positive &= filter.Check(y + w.segment(stages.state_offset(i), ny), &value);
+        stage_state = y + w.segment(stages.state_offset(i), ny);
+        positive &= filter.Check(stage_state, &value);
         left_out = std::min(left_out, value);
       }
       if (!positive) {
@@ -499,11 +500,11 @@ TimeSteppingResult SimulateTimeStepping(const Scene& scene, const TimeSteppingOp
         if (stats.num_inside_crossings == 0) first_inside_crossing = grid[k];
         ++stats.num_inside_crossings;
       }
-      y = stages.EndState(y, w);
+      y += w.segment(stages.state_offset(s - 1), ny);  // EndState: y0 + Z_s, in place
       // The clock on the exact grid (shifted with a given initial clock, which the
       // sensitivities differentiate).
       y[system.clock_index()] = grid[k + 1] + clock_offset;
-      z = stages.Algebraic(w, s - 1);
+      z = w.segment(stages.algebraic_offset(s - 1), system.num_algebraic());  // Algebraic(w, s - 1)
       previous_w = w;
       previous_h = h;
       ++stats.num_steps;

@@ -171,16 +171,24 @@ void DerivativeMatrix::TransposedMultiplyAdd(const ConstVectorRef& x, VectorRef 
 }
 
 Eigen::RowVectorXd DerivativeMatrix::Row(int row) const {
+  Eigen::RowVectorXd out;
+  Row(row, &out);
+  return out;
+}
+
+void DerivativeMatrix::Row(int row, Eigen::RowVectorXd* out) const {
   MOREAU_ASSERT(row >= 0 && row < rows_, "Row: index outside the matrix");
-  if (!sparse_) return dense_.row(row);
-  Eigen::RowVectorXd out = Eigen::RowVectorXd::Zero(cols_);
+  if (!sparse_) {
+    *out = dense_.row(row);
+    return;
+  }
+  out->setZero(cols_);
   const SparseMatrix& m = sparse();
   for (int j = 0; j < m.outerSize(); ++j) {
     for (SparseMatrix::InnerIterator it(m, j); it; ++it) {
-      if (it.row() == row) out[j] += it.value();
+      if (it.row() == row) (*out)[j] += it.value();
     }
   }
-  return out;
 }
 
 double DerivativeMatrix::NonZeros() const {

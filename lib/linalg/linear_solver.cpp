@@ -213,7 +213,7 @@ Vector SystemMatrix::MultiplyTransposed(const Vector& x) const {
 
 void SystemMatrix::MultiplyTransposed(const Vector& x, Vector* y) const {
   if (sparse_) {
-    *y = sparse_matrix_.transpose() * x;
+    y->noalias() = sparse_matrix_.transpose() * x;  // (y is never x: no temporary)
   } else {
     y->noalias() = dense_.transpose() * x;
   }
@@ -314,7 +314,13 @@ class DenseLuSolver final : public LinearSolver {
     if (small_) {
       SolveSmall(rhs);
     } else {
-      rhs = lu_.solve(rhs);
+      // Eigen's PartialPivLU::_solve_impl (c = P rhs, unit-lower then upper solves in place)
+      // in kept scratch: `rhs = lu_.solve(rhs)` formed P rhs in a temporary per solve.
+      Vector& c = solve_scratch_;
+      c.noalias() = lu_.permutationP() * rhs;
+      lu_.matrixLU().triangularView<Eigen::UnitLower>().solveInPlace(c);
+      lu_.matrixLU().triangularView<Eigen::Upper>().solveInPlace(c);
+      rhs = c;
     }
   }
   void SolveMatrix(MatrixRef rhs) const override {
@@ -433,6 +439,7 @@ class DenseLuSolver final : public LinearSolver {
   Vector column_max_;  // scratch of the singularity test
   std::vector<int> pivot_, rows_;
   Eigen::PartialPivLU<Matrix> lu_;
+  mutable Vector solve_scratch_;  // Solve's P rhs (kept: no allocation per solve)
   double rcond_ = 0.0;
 };
 

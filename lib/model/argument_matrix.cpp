@@ -286,13 +286,23 @@ void ArgumentMatrix::AddStateGradient(int k, int col, const Matrix* projection,
         if (it.col() < nx_) target->Add(static_cast<int>(it.col()), col, it.value());
       }
     } else {
-      target->AddBlock(0, col, dense_.row(k).head(nx_).transpose());
+      // Entry by entry: a row of the column-major Jacobian is strided, which a block reference
+      // would copy (an allocation per call).
+      for (int i = 0; i < nx_; ++i) target->Add(i, col, dense_(k, i));
     }
     return;
   }
-  const Vector row = is_sparse_ ? Vector(Vector(rows_sparse_.row(k).transpose()).head(nx_))
-                                : Vector(dense_.row(k).head(nx_).transpose());
-  target->AddBlock(0, col, *projection * row);
+  Vector& row = gradient_row_;
+  if (is_sparse_) {
+    row.setZero(nx_);
+    for (decltype(rows_sparse_)::InnerIterator it(rows_sparse_, k); it; ++it) {
+      if (it.col() < nx_) row[it.col()] = it.value();
+    }
+  } else {
+    row = dense_.row(k).head(nx_).transpose();
+  }
+  projected_row_.noalias() = *projection * row;
+  target->AddBlock(0, col, projected_row_);
 }
 
 void ArgumentMatrix::AddStateGradients(int col0, const Matrix* projection, double weight,

@@ -34,6 +34,23 @@ Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::Ro
       values.data(), rows, cols);
 }
 
+// dst = A^{-1} rhs for an invertible square A from its FullPivLU: the steps of Eigen 3.4's
+// FullPivLU::_solve_impl (c = P rhs, unit-lower then upper triangular solves in place, rows
+// placed by Q), in the caller's kept scratch c (of rhs's plain type, as Eigen's, so that the
+// same triangular solver runs), where Eigen allocates c and a temporary for P rhs at each
+// solve. The same arithmetic in the same order: the same bits.
+template <class Rhs, class Dst>
+void SolveInvertible(const Eigen::FullPivLU<Matrix>& lu, const Rhs& rhs,
+                     typename Rhs::PlainObject* c, Dst* dst) {
+  const Eigen::Index n = lu.rows();
+  MOREAU_ASSERT(lu.cols() == n && lu.rank() == n, "SolveInvertible: a singular factorization");
+  c->noalias() = lu.permutationP() * rhs;
+  lu.matrixLU().template triangularView<Eigen::UnitLower>().solveInPlace(*c);
+  lu.matrixLU().template triangularView<Eigen::Upper>().solveInPlace(*c);
+  dst->resize(n, rhs.cols());
+  for (Eigen::Index i = 0; i < n; ++i) dst->row(lu.permutationQ().indices().coeff(i)) = c->row(i);
+}
+
 class ComplementarityBlock final : public LoweredBlock {
  public:
   ComplementarityBlock(const Scene& scene, const Complementarity& effect)
@@ -405,7 +422,7 @@ class ComplementarityBlock final : public LoweredBlock {
       Eigen::FullPivLU<Matrix>& lu = lu_;
       lu.compute(d_ss);
       if (!lu.isInvertible()) return false;
-      solved_ = lu.solve(rhs);
+      SolveInvertible(lu, rhs, &solve_scratch_, &solved_);
       for (int i = 0; i < n; ++i) (*lambda)[s[static_cast<std::size_t>(i)]] = solved_[i];
     }
     Vector& w = w_;
@@ -452,7 +469,7 @@ class ComplementarityBlock final : public LoweredBlock {
       if (with_states) d_lambda_bar_.setConstant(std::numeric_limits<double>::quiet_NaN());
       return;
     }
-    solved_ = lu.solve(rhs);
+    SolveInvertible(lu, rhs, &solve_scratch_, &solved_);
     for (int i = 0; i < n; ++i) lambda_bar_[s[static_cast<std::size_t>(i)]] = solved_[i];
     if (!with_states) return;
     ContractRows(jac_d_, lambda_bar_, &contracted_);
@@ -462,7 +479,7 @@ class ComplementarityBlock final : public LoweredBlock {
     partial_s.resize(n, partial.cols());
     for (int i = 0; i < n; ++i) partial_s.row(i) = partial.row(s[static_cast<std::size_t>(i)]);
     Matrix& d_solved = d_solved_;
-    d_solved = lu.solve(partial_s);
+    SolveInvertible(lu, partial_s, &solve_scratch_columns_, &d_solved);
     for (int i = 0; i < n; ++i) {
       d_lambda_bar_.row(s[static_cast<std::size_t>(i)]) = -d_solved.row(i);
     }
@@ -486,7 +503,8 @@ class ComplementarityBlock final : public LoweredBlock {
   // The active-set solves' matrices and LU (FullPivLU::compute reuses its storage).
   Matrix d_matrix_;
   mutable Matrix d_ss_;
-  mutable Vector rhs_, solved_, w_;
+  mutable Vector rhs_, solved_, w_, solve_scratch_;
+  mutable Matrix solve_scratch_columns_;
   mutable Eigen::FullPivLU<Matrix> lu_;
   Matrix jac_g_, jac_b_, jac_d_, d_lambda_bar_, hessian_;
   ArgumentMatrix directions_;

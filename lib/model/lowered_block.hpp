@@ -117,6 +117,7 @@ class ArgumentMatrix {
   std::vector<int> copied_outer_, copied_inner_, row_entry_source_;
   Vector x_, direction_, weights_;
   mutable Vector gradient_;
+  mutable Vector gradient_row_, projected_row_;  // AddStateGradient's scratch
 };
 
 class LoweredBlock {

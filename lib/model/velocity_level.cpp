@@ -914,8 +914,8 @@ class VelocitySystem final : public MixedComplementaritySystem {
       guess_r_ = values_.equations;
       guess_a_ = values_.a;
       guess_b_ = values_.b;
-      system_.EvaluateVelocityLevel(y_, Vector::Zero(num_unknowns()), roles_, Derivatives::kNone,
-                                    &values_);
+      zeros_.setZero(num_unknowns());  // kept (no allocation per solve)
+      system_.EvaluateVelocityLevel(y_, zeros_, roles_, Derivatives::kNone, &values_);
     }
     const Vector& r0 = linear_ ? zero_r_ : values_.equations;
     const Vector& a0 = linear_ ? zero_a_ : values_.a;
@@ -1025,6 +1025,7 @@ class VelocitySystem final : public MixedComplementaritySystem {
   // evaluation at v0.
   VelocityLevelEvaluation evaluation_, values_;
   Vector v0_, zero_r_, zero_a_, zero_b_;
+  Vector zeros_;                        // nonlinear Scale: the point v = 0
   Vector guess_r_, guess_a_, guess_b_;  // Scale's values at the guess
   mutable Vector step_;
   Vector scale_;

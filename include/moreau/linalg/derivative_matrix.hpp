@@ -111,6 +111,8 @@ class DerivativeMatrix {
   void TransposedMultiplyAdd(const ConstVectorRef& x, VectorRef y, double scale = 1.0) const;
   /// Row `row` as a dense row vector (O(cols) dense, O(nonzeros) sparse).
   Eigen::RowVectorXd Row(int row) const;
+  /// The same into *out (its storage reused: no allocation once sized).
+  void Row(int row, Eigen::RowVectorXd* out) const;
   /// Structurally stored entries (dense: rows x cols).
   double NonZeros() const;
 
