@@ -52,6 +52,11 @@ void PolynomialPath::Derivative(double theta, Vector* dy) const {
   }
 }
 
+void PolynomialPath::SetShape(Eigen::Index n, int degree) {
+  coefficients_.setZero(n, degree + 1);
+  taylor_.resize(n, degree + 1);
+}
+
 void PolynomialPath::Box(double a, double b, Vector* lower, Vector* upper) const {
   const Eigen::Index n = coefficients_.rows(), q = coefficients_.cols() - 1;
   const double m = 0.5 * (a + b), r = 0.5 * (b - a);

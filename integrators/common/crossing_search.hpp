@@ -33,6 +33,9 @@ class PolynomialPath {
                       const Matrix& increments);
   // Direct access (IDA: Taylor coefficients of its interpolant in the step's parameter).
   Matrix& coefficients() { return coefficients_; }
+  // Sizes the coefficients (zero) and Box's scratch for n components of degree `degree`, so
+  // that a path written through coefficients() at that shape allocates nothing.
+  void SetShape(Eigen::Index n, int degree);
   const Matrix& coefficients() const { return coefficients_; }
   // y(theta).
   void Point(double theta, Vector* y) const;

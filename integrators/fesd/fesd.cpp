@@ -210,9 +210,9 @@ FesdResult FesdRun::Run() {
   inside_.watched.reserve(static_cast<std::size_t>(system_.num_declared_pairs()));
   comparison_.setup.a_zero.reserve(static_cast<std::size_t>(np_));
   comparison_.setup.y_start.resize(ny_);
-  // A comparison element's unknowns (GroupSystem::num_unknowns of one element, no event).
-  comparison_.guess.resize(s_ * (ny_ + nz_));
-  comparison_.solved.solution.resize(s_ * (ny_ + nz_));
+  // A comparison element's unknowns (one element, no event).
+  comparison_.guess.resize(group_.element_size());
+  comparison_.solved.solution.resize(group_.element_size());
   // The kept Newton results: a failed solve (routine for trial elements and comparisons)
   // writes its message in place, and a solve's history has at most max_iterations + 1 entries.
   for (SemismoothNewtonResult* kept : {&advance_.solved, &comparison_.solved}) {

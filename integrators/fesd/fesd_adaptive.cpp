@@ -445,8 +445,7 @@ FesdRun::ErrorEstimate FesdRun::EstimateError(double fraction, std::size_t first
   const double h = piece_.front().h;
   const Vector& y_start = piece_.front().y0;
   Vector& y_end = comparison_.piece_end;  // kept (no allocation per step)
-  const ElementPolynomial& last = piece_.back();
-  y_end = last.y0 + last.increments.col(last.increments.cols() - 1);  // last.End()
+  piece_.back().End(&y_end);
   const std::vector<bool>& a_zero = piece_.front().a_zero;
   const double p = 2.0 * s_ - 1.0;
   // How accurately the compared solutions are known (see kNewtonNoise); the smooth kernel

@@ -60,7 +60,8 @@ struct ElementPolynomial {
   double h = 0.0;
   std::vector<bool> a_zero;
   bool frozen = false;
-  Vector End() const { return y0 + increments.col(increments.cols() - 1); }
+  // The end state y0 + Z_s, into *y (its storage reused).
+  void End(Vector* y) const { *y = y0 + increments.col(increments.cols() - 1); }
 };
 
 // Everything a solved element or group contributes to the result, captured while its stage

@@ -161,9 +161,7 @@ void IdaRun::SizeBoundedRootPaths() {
   BoundedRootBuffers& b = bounded_root_;
   for (int order = 1; order <= kMaxBdfOrder; ++order) {
     internal::PolynomialPath& path = b.paths[static_cast<std::size_t>(order)];
-    if (path.coefficients().rows() == n_) continue;
-    path.coefficients().setZero(n_, order + 1);
-    path.Box(0.0, 1.0, &b.box_lower, &b.box_upper);  // sizes its Taylor scratch
+    if (path.coefficients().rows() != n_) path.SetShape(n_, order);
   }
 }
 

@@ -121,46 +121,35 @@ void free(void* p) { __libc_free(p); }
 
 // SuiteSparse's allocator: counted apart, then glibc's (or the sanitizer's) directly.
 namespace {
-void* RawMalloc(std::size_t size) {
 #if defined(__SANITIZE_ADDRESS__)
-  return std::malloc(size);
+void* RawMalloc(std::size_t size) { return std::malloc(size); }
+void* RawCalloc(std::size_t count, std::size_t size) { return std::calloc(count, size); }
+void* RawRealloc(void* p, std::size_t size) { return std::realloc(p, size); }
+void RawFree(void* p) { std::free(p); }
 #else
-  return __libc_malloc(size);
+void* RawMalloc(std::size_t size) { return __libc_malloc(size); }
+void* RawCalloc(std::size_t count, std::size_t size) { return __libc_calloc(count, size); }
+void* RawRealloc(void* p, std::size_t size) { return __libc_realloc(p, size); }
+void RawFree(void* p) { __libc_free(p); }
 #endif
-}
 void* SparseLuMalloc(std::size_t size) {
   if (counting) ++sparse_lu_allocations;
   return RawMalloc(size);
 }
 void* SparseLuCalloc(std::size_t count, std::size_t size) {
   if (counting) ++sparse_lu_allocations;
-#if defined(__SANITIZE_ADDRESS__)
-  return std::calloc(count, size);
-#else
-  return __libc_calloc(count, size);
-#endif
+  return RawCalloc(count, size);
 }
 void* SparseLuRealloc(void* p, std::size_t size) {
   if (counting && size > 0) ++sparse_lu_allocations;
-#if defined(__SANITIZE_ADDRESS__)
-  return std::realloc(p, size);
-#else
-  return __libc_realloc(p, size);
-#endif
-}
-void SparseLuFree(void* p) {
-#if defined(__SANITIZE_ADDRESS__)
-  std::free(p);
-#else
-  __libc_free(p);
-#endif
+  return RawRealloc(p, size);
 }
 // Installed before main (no SuiteSparse call can have happened yet).
 [[maybe_unused]] const bool sparse_lu_allocator_installed = [] {
   SuiteSparse_config.malloc_func = &SparseLuMalloc;
   SuiteSparse_config.calloc_func = &SparseLuCalloc;
   SuiteSparse_config.realloc_func = &SparseLuRealloc;
-  SuiteSparse_config.free_func = &SparseLuFree;
+  SuiteSparse_config.free_func = &RawFree;
   return true;
 }();
 }  // namespace
