@@ -317,6 +317,10 @@ class FesdRun {
   // trial elements' collocation polynomials (a guess accurate to their local error).
   Vector GroupGuess(const std::vector<Vector>& trial_w, const Vector& y_start, double h_trial,
                     int m, double h_guess, const Vector& v_end, bool on_trajectory);
+  // Raises the event weights of a switch group (fesd_advance.cpp) so that every scaled
+  // indicator is at least 1 where the group starts; used after a try did not converge.
+  void NormalizeIndicatorWeights(const std::vector<Vector>& trial_w, const Vector& y_start,
+                                 const Vector& v_end, Vector* weights);
 
   // True if pair k's free side (the side its status does not keep at zero) is a jump variable
   // (an active constraint's multiplier, a sliding mode's theta or alpha). Stage values of those
@@ -722,6 +726,9 @@ class FesdRun {
   // again (AdvanceOnce is not reentrant: Decide and the checks it calls do not advance).
   struct AdvanceBuffers {
     Vector y_start, y, y_next, scales;
+    // NormalizeIndicatorWeights's evaluations: the indicators at y_start and at the first stage.
+    IndicatorEvaluation start_indicators, first_stage_indicators;
+    Vector first_stage_state;
     std::vector<int> powers;
     std::vector<SolveRecord> records;  // the trial pass's elements (the first num_records)
     std::size_t num_records = 0;

@@ -45,7 +45,7 @@ constexpr double kScaleFloor = 1e-6;
 const std::set<std::string> kScenesWithStatus = {"D2"};
 
 // Scenes not checked here, with the reason; docs/accuracy.md names them. The crowd's default
-// run (100 discs, about 22 s of CPU in the release build) takes several minutes under ASan and
+// run (100 discs, about 2.5 s of CPU in the release build) takes minutes under ASan and
 // UBSan, beyond the sanitizer build's share of the test budget: it is checked in the release
 // build only.
 const std::map<std::string, std::string> kScenesUnchecked =

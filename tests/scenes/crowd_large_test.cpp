@@ -213,5 +213,55 @@ TEST(CrowdLargeTest, ConstraintsMissedByTheMarginJoinAndTheStepIsSolvedAgain) {
   ExpectSameStates(stepped.trajectory, stepped_full.trajectory);
 }
 
+// A switch where the groups' Newton slid towards zero length (docs/fesd-formulation.md,
+// section 3): 400 discs, seed 1, s = 3, after t = 2.5325 a contact forms while another pair has
+// just left zero with a small curvature, whose scaled indicator kept (E)'s residual at 6e-7 as
+// h -> 0. The trajectory try ends there (40 iterations, h = 2e-5); its repetition with
+// normalized event weights converges. Without the repetition one retry did not suffice
+// (event_location_failure at t = 2.53; the default six found the switch at the third), and a
+// crowd of 6000 agents failed every attempt at one switch.
+TEST(CrowdLargeTest, ASwitchWhoseGroupsSlideTowardsZeroLengthIsLocated) {
+  // The same run with half the step: measured 2.5e-11 apart in x(T) and 2.6e-11 in every
+  // event time (order 2s - 1 = 5); 1e-9 is 40 times that.
+  constexpr double kHalfStepAgreement = 1e-9;
+  CrowdOptions crowd;
+  crowd.agents = 400;
+  crowd.seed = 1;
+  crowd.final_time = 2.6;
+  const CrowdLayout layout = MakeCrowdLayout(crowd);
+  const Scene scene = MakeCrowdScene(layout);
+  FesdOptions options;
+  options.stages = 3;
+  options.step_size = 0.05;
+  options.max_event_retries = 1;
+  const FesdResult located = SimulateFesd(scene, options);
+  ASSERT_EQ(located.status, FesdStatus::kSuccess) << located.message;
+  EXPECT_EQ(located.stats.num_event_retries, 0) << "the repetition should have converged";
+  // The switch: pair 18-19 comes into contact 2.67e-3 after the group's start at 2.5325.
+  bool located_switch = false;
+  for (const Event& event : located.events) {
+    located_switch = located_switch ||
+                     (event.what == "contacts.pair_18_19" && event.t > 2.5325 && event.t < 2.5375);
+  }
+  EXPECT_TRUE(located_switch);
+  for (std::size_t k = 0; k < located.trajectory.size(); ++k) {
+    const CrowdCertificate c = CertifyCrowdState(layout, located.trajectory.x[k]);
+    ASSERT_TRUE(c.Feasible(kOverlapTolerance))
+        << "t " << located.trajectory.t[k] << ": " << c.Summary();
+  }
+
+  options.step_size = 0.025;
+  options.max_event_retries = 6;
+  const FesdResult halved = SimulateFesd(scene, options);
+  ASSERT_EQ(halved.status, FesdStatus::kSuccess) << halved.message;
+  ASSERT_EQ(halved.events.size(), located.events.size());
+  for (std::size_t k = 0; k < located.events.size(); ++k) {
+    EXPECT_EQ(halved.events[k].what, located.events[k].what) << "event " << k;
+    EXPECT_NEAR(halved.events[k].t, located.events[k].t, kHalfStepAgreement) << "event " << k;
+  }
+  EXPECT_LE((halved.final_state - located.final_state).lpNorm<Eigen::Infinity>(),
+            kHalfStepAgreement);
+}
+
 }  // namespace
 }  // namespace moreau
