@@ -550,7 +550,8 @@ class UmfpackSolver final : public LinearSolver {
 // 3.6e6 entries in L + U against UMFPACK's 9.7e4; docs/decisions.md).
 // When a fresh factorization holds more than kMaxFillGrowth times the estimated entries, the
 // solver hands this and every later factorization to UMFPACK, whose frontal pivoting weighs
-// the fill.
+// the fill. So it does, before factorizing, when the estimate itself exceeds kMaxEstimatedFill
+// times the matrix's entries: KLU's kernel has no dense blocks to spend such fill in.
 class KluSolver final : public LinearSolver {
  public:
   explicit KluSolver(bool automatic) : automatic_(automatic) { klu_defaults(&common_); }
@@ -587,6 +588,11 @@ class KluSolver final : public LinearSolver {
       row_pattern_.assign(row, row + col[n]);
       symbolic_ = klu_analyze(n, col, row, &common_);
       if (symbolic_ == nullptr) return FactorizationStatus::kSingular;
+      if (automatic_ && EstimatedEntries() > kMaxEstimatedFill * col[n]) {
+        Release();
+        umfpack_ = std::make_unique<UmfpackSolver>();
+        return umfpack_->Factorize(a);
+      }
     }
     // Numeric factorization. On request (LinearSolverKind::kKlu) the previous pivot order is
     // tried first (klu_refactor), kept while the condition estimate holds. kAutomatic pivots
@@ -610,9 +616,7 @@ class KluSolver final : public LinearSolver {
       // The fill guard: entries held in L, U and the off-diagonal blocks against the
       // ordering's estimate for diagonal pivots.
       const double held = static_cast<double>(numeric_->lnz) + numeric_->unz + numeric_->nzoff;
-      const double estimated =
-          symbolic_->lnz + symbolic_->unz + static_cast<double>(symbolic_->nzoff);
-      if (automatic_ && held > kMaxFillGrowth * estimated) {
+      if (automatic_ && held > kMaxFillGrowth * EstimatedEntries()) {
         Release();
         umfpack_ = std::make_unique<UmfpackSolver>();
         return umfpack_->Factorize(a);
@@ -653,6 +657,18 @@ class KluSolver final : public LinearSolver {
   // all 1043 factorizations of its run (0.78 to 1.0 of it); a 40 x 40 grid whose diagonal
   // entries are too small to pivot on holds 6.4 times it (the test), a 100 x 100 one 13 times.
   static constexpr double kMaxFillGrowth = 4.0;
+  // kAutomatic's estimate rule: the ordering's estimate of L + U over the matrix's entries
+  // beyond which UMFPACK factorizes instead. The crowds' element systems stay at about 1.1
+  // (docs/benchmarks.md); a switch group of the crowd of 6000 agents with FESD s = 3 (n = 81384,
+  // 1.16e6 entries) was estimated at 16 times its entries, and KLU spent about 98 s on each of
+  // its factorizations: with UMFPACK the segment of that run around it (t in [4.15, 4.2]) took
+  // 16 s of CPU instead of 167 s.
+  static constexpr double kMaxEstimatedFill = 10.0;
+
+  // Entries of L, U and the off-diagonal blocks that the ordering estimates (diagonal pivots).
+  double EstimatedEntries() const {
+    return symbolic_->lnz + symbolic_->unz + static_cast<double>(symbolic_->nzoff);
+  }
 
   void Release() {
     if (numeric_ != nullptr) klu_free_numeric(&numeric_, &common_);

@@ -93,11 +93,11 @@ TEST(LinearSolverTest, SaddlePointSystems) {
   }
 }
 
-// The k x k grid's five-point pattern with O(1) neighbour couplings of random sign and
-// diagonal entries of 1e-6: KLU's threshold pivoting (0.001 of the column) refuses every
-// diagonal pivot the AMD ordering counted on, and fills in (k = 40: 6.4 times the entries
-// the ordering estimated).
-SystemMatrix GridWithSmallDiagonal(int k) {
+// The k x k grid's five-point pattern with O(1) neighbour couplings of random sign and the
+// given diagonal entries. With 1e-6 there, KLU's threshold pivoting (0.001 of the column)
+// refuses every diagonal pivot the AMD ordering counted on, and fills in (k = 40: 6.4 times
+// the entries the ordering estimated); with 5 (diagonally dominant) it keeps to the ordering.
+SystemMatrix Grid(int k, double diagonal) {
   std::mt19937 rng(5);
   std::uniform_real_distribution<double> magnitude(0.5, 1.0);
   SystemMatrix a;
@@ -105,7 +105,7 @@ SystemMatrix GridWithSmallDiagonal(int k) {
   for (int i = 0; i < k; ++i) {
     for (int j = 0; j < k; ++j) {
       const int row = i * k + j;
-      a.AddEntry(row, row, 1e-6);
+      a.AddEntry(row, row, diagonal);
       for (const int column : {j > 0 ? row - 1 : -1, j + 1 < k ? row + 1 : -1, i > 0 ? row - k : -1,
                                i + 1 < k ? row + k : -1}) {
         if (column >= 0) a.AddEntry(row, column, (rng() % 2 == 0 ? 1.0 : -1.0) * magnitude(rng));
@@ -127,8 +127,8 @@ Vector SolveWith(LinearSolver* lu, const SystemMatrix& a, const Vector& b) {
 // same bits as KLU on request, first factorization), UMFPACK from the first that fills in
 // (the same bits as UMFPACK), and UMFPACK thereafter.
 TEST(LinearSolverTest, AutomaticSparseLuHandsOverToUmfpackWhenKluFillsIn) {
-  const SystemMatrix sound = RandomSparse(3000, true, 11);
-  const SystemMatrix filling = GridWithSmallDiagonal(40);
+  const SystemMatrix sound = Grid(40, 5.0);
+  const SystemMatrix filling = Grid(40, 1e-6);
   const int n_sound = sound.size(), n_filling = filling.size();
   ASSERT_GT(n_filling, kDenseSizeLimit);
   auto solve = [](LinearSolverKind kind, const SystemMatrix& a) {
@@ -168,6 +168,25 @@ TEST(LinearSolverTest, AutomaticSparseLuHandsOverToUmfpackWhenKluFillsIn) {
   EXPECT_TRUE(SolveWith(automatic.get(), sound, b_sound) ==
               solve(LinearSolverKind::kSparseLu, sound));
   EXPECT_EQ(automatic->num_factorizations(), 3);
+}
+
+// kAutomatic above kDenseSizeLimit gives a matrix whose ordering already predicts more than
+// ten times its entries in L + U to UMFPACK before KLU factorizes it: a random sparse matrix
+// of 3000 rows with five entries each is estimated at 135 times its entries (a grid's
+// five-point pattern, as above, stays below ten).
+TEST(LinearSolverTest, AutomaticSparseLuGivesUmfpackWhatTheOrderingPredictsToFill) {
+  const SystemMatrix a = RandomSparse(3000, true, 11);
+  const Vector b = Vector::LinSpaced(a.size(), -1.0, 2.0);
+  auto solve = [&](LinearSolverKind kind) {
+    auto lu = MakeLinearSolver(kind, a.size(), 5.0 * a.size());
+    return SolveWith(lu.get(), a, b);
+  };
+  const Vector x_umfpack = solve(LinearSolverKind::kSparseLu);
+  ASSERT_FALSE(solve(LinearSolverKind::kKlu) == x_umfpack);  // else the test tells nothing
+  auto automatic = MakeLinearSolver(LinearSolverKind::kAutomatic, a.size(), 5.0 * a.size());
+  EXPECT_EQ(automatic->kind(), LinearSolverKind::kKlu);
+  EXPECT_TRUE(SolveWith(automatic.get(), a, b) == x_umfpack);
+  EXPECT_EQ(automatic->num_factorizations(), 1);
 }
 
 TEST(LinearSolverTest, RefactorizationWithSamePattern) {
