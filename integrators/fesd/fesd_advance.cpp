@@ -199,7 +199,7 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
     setup.h_max = rest / m;
     setup.h_reference = h_trial;
     setup.indicator_weights = scales.cwiseInverse();
-    if (normalized) NormalizeIndicatorWeights(trial_w, y_start, v_end.v, &setup.indicator_weights);
+    if (normalized) NormalizeIndicatorWeights(trial_w, y_start, &setup.indicator_weights);
     setup.indicator_power = powers;
     group_.Configure(setup);
     // First attempt: the reduced switch group where the statuses leave a smooth field, checked
@@ -340,8 +340,10 @@ bool FesdRun::AdvanceOnce(double step_end, int* remaining, bool* retry) {
 // Jump free sides that start at zero keep their weights (their stage values are not the
 // velocity level's).
 void FesdRun::NormalizeIndicatorWeights(const std::vector<Vector>& trial_w, const Vector& y_start,
-                                        const Vector& v_end, Vector* weights) {
-  // The indicators at y_start again (the step's evaluation there has been overwritten).
+                                        Vector* weights) {
+  // The indicators at y_start again (the step's evaluation there has been overwritten). Both
+  // evaluations take the step start's velocity level: the first stage's values are read for
+  // continuous free sides only, which do not depend on it.
   IndicatorEvaluation& start = advance_.start_indicators;
   IndicatorsAt(y_start, velocity_, &start);
   const std::vector<int>& powers = advance_.powers;
@@ -354,8 +356,7 @@ void FesdRun::NormalizeIndicatorWeights(const std::vector<Vector>& trial_w, cons
       if (!first_stage) {
         Vector& y_first = advance_.first_stage_state;
         y_first = y_start + trial_w.front().segment(group_.element(0).state_offset(0), ny_);
-        system_.EvaluateEventIndicators(y_first, v_end, a_zero_, Derivatives::kNone,
-                                        &advance_.first_stage_indicators);
+        IndicatorsAt(y_first, velocity_, &advance_.first_stage_indicators);
         first_stage = true;
       }
       size = advance_.first_stage_indicators.values[k] / (tableau_.c[0] * tableau_.c[0]);

@@ -320,7 +320,7 @@ class FesdRun {
   // Raises the event weights of a switch group (fesd_advance.cpp) so that every scaled
   // indicator is at least 1 where the group starts; used after a try did not converge.
   void NormalizeIndicatorWeights(const std::vector<Vector>& trial_w, const Vector& y_start,
-                                 const Vector& v_end, Vector* weights);
+                                 Vector* weights);
 
   // True if pair k's free side (the side its status does not keep at zero) is a jump variable
   // (an active constraint's multiplier, a sliding mode's theta or alpha). Stage values of those
