@@ -88,6 +88,11 @@ class ComplementarityBlock final : public LoweredBlock {
   // Index 1: lambda is a function of the state, part of the physical dynamics (time-freezing
   // and the speed of time scale it). Index 2: a multiplier that adapts, as a moving set's.
   bool ScaledByClockRate() const override { return index_one_; }
+  // F += B(y) lambda and w = g(y) + D(y) lambda are affine in z = lambda. At velocity level,
+  // index 2 reads z itself; index 1 evaluates F at the consistent multipliers lambda_bar(y) of
+  // the roles (fixed for decided roles) and its rows are then affine in the rates v through
+  // D(y) v. The roles enter index 1's coefficients, so AffineInAlgebraic stays false.
+  bool AffineInAlgebraicForDecidedRoles() const override { return true; }
 
   void Evaluate(const BlockContext& context, const ConstVectorRef& y, const ConstVectorRef& z,
                 Derivatives derivatives, PointEvaluation* out) override {

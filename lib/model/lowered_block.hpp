@@ -271,6 +271,13 @@ class LoweredBlock {
   // a velocity-level problem of fixed statuses is solved by one linear solve
   // (SolveVelocityLevel). False is always safe.
   virtual bool AffineInAlgebraic() const { return false; }
+  // True if, at velocity level with roles that decide every pair (BlockContext::velocity_roles
+  // without a complementary pair), the block's contributions to F, G, A and B are affine in z
+  // with coefficients that depend on y and those roles only: the rows of a velocity-level
+  // problem of fixed statuses are then affine in v, although they may change with the roles
+  // (index-1 complementarity evaluates F at the roles' consistent multipliers). Implied by
+  // AffineInAlgebraic. False is always safe.
+  virtual bool AffineInAlgebraicForDecidedRoles() const { return AffineInAlgebraic(); }
 
   // Events implied by a change of the block's pair statuses between two times:
   // a_zero[k] is true when pair k has a_k = 0 (its first side vanishes), false when b_k = 0.

@@ -811,7 +811,11 @@ namespace {
 // without a solution no longer evaluates the system at each of its ~20 failing iterations.
 class VelocitySystem final : public MixedComplementaritySystem {
  public:
-  VelocitySystem(const LoweredSystem& system, bool linear) : system_(system), linear_(linear) {}
+  // affine_decided: the rows are affine in v for roles that decide every pair
+  // (LoweredSystem::VelocityLevelIsAffineForDecidedRoles): with such roles the problem is the
+  // same linear model, expanded at v0 for those roles (Reset without `point`).
+  VelocitySystem(const LoweredSystem& system, bool linear, bool affine_decided)
+      : system_(system), linear_(linear), affine_decided_(linear || affine_decided) {}
   // Fixed statuses (every pair decided).
   void SetStatuses(const std::vector<bool>& a_zero) {
     roles_.resize(a_zero.size());
@@ -828,6 +832,8 @@ class VelocitySystem final : public MixedComplementaritySystem {
     y_ = y;
     complementary_ = 0;
     for (PairRole role : roles_) complementary_ += role == PairRole::kComplementary ? 1 : 0;
+    model_ = linear_ || (affine_decided_ && complementary_ == 0);
+    MOREAU_ASSERT(point == nullptr || linear_, "Reset: a point expansion needs a linear level");
     // Row scales from the data: the rows are affine in v, and their values at v = 0 (the
     // free velocities grad c . f + c_t) set the size of their terms. Stiff dynamics (|f| ~
     // 1e5) make an absolute tolerance of 1e-12 unreachable in double precision; relative to
@@ -835,7 +841,7 @@ class VelocitySystem final : public MixedComplementaritySystem {
     if (linear_ && point != nullptr) {
       AssembleVelocityRows(system_, *point, no_curvature_, v0, roles_, Derivatives::kNone,
                            &evaluation_);
-    } else if (linear_) {
+    } else if (model_) {
       system_.EvaluateVelocityLevel(y_, v0, roles_, Derivatives::kNone, &evaluation_);
     }
     Scale(v0);
@@ -852,6 +858,7 @@ class VelocitySystem final : public MixedComplementaritySystem {
     MOREAU_ASSERT(linear_ && !system_.sparse(), "ResetFromRows: linear dense levels only");
     y_ = y;
     complementary_ = 0;
+    model_ = true;
     const int nz = system_.num_algebraic(), ng = system_.num_equations();
     const int rows_count = ng + static_cast<int>(roles_.size());
     const auto& pairs = system_.pairs();
@@ -902,7 +909,7 @@ class VelocitySystem final : public MixedComplementaritySystem {
   // 1e5 for a scene in microseconds, where an absolute 1e-12 is below their round-off and the
   // decision fails ("no consistent continuation").
   void Scale(const Vector& v0) {
-    if (linear_) {
+    if (model_) {
       v0_ = v0;
       step_ = -v0;  // the values at v = 0
       Model(step_, &zero_r_, &zero_a_, &zero_b_);
@@ -917,9 +924,9 @@ class VelocitySystem final : public MixedComplementaritySystem {
       zeros_.setZero(num_unknowns());  // kept (no allocation per solve)
       system_.EvaluateVelocityLevel(y_, zeros_, roles_, Derivatives::kNone, &values_);
     }
-    const Vector& r0 = linear_ ? zero_r_ : values_.equations;
-    const Vector& a0 = linear_ ? zero_a_ : values_.a;
-    const Vector& b0 = linear_ ? zero_b_ : values_.b;
+    const Vector& r0 = model_ ? zero_r_ : values_.equations;
+    const Vector& a0 = model_ ? zero_a_ : values_.a;
+    const Vector& b0 = model_ ? zero_b_ : values_.b;
     scale_.resize(num_unknowns());
     for (int i = 0; i < num_equations(); ++i) {
       scale_[i] = 1.0 / (1.0 + std::fabs(r0[i]) + std::fabs(guess_r_[i] - r0[i]));
@@ -944,7 +951,7 @@ class VelocitySystem final : public MixedComplementaritySystem {
   // tolerance, relative to the sizes the solution's rows are computed from.
   bool HoldsRelativeToTermSizes(const Vector& v, double tolerance) {
     Vector r, a, b;
-    if (!Evaluate(v, true, &r, &a, &b)) return false;  // (linear: the Jacobian is Reset's)
+    if (!Evaluate(v, true, &r, &a, &b)) return false;  // (model: the Jacobian is Reset's)
     const Vector magnitude = v.cwiseAbs();
     auto sizes = [&](const DerivativeMatrix& jacobian, const Vector& values) {
       Vector size = values.cwiseAbs();
@@ -979,7 +986,7 @@ class VelocitySystem final : public MixedComplementaritySystem {
   int num_equations() const override { return system_.num_algebraic() - complementary_; }
   int num_pairs() const override { return complementary_; }
   bool Evaluate(const Vector& v, bool with_jacobian, Vector* r, Vector* a, Vector* b) override {
-    if (linear_) {
+    if (model_) {
       step_ = v - v0_;
       Model(step_, r, a, b);
     } else {
@@ -999,9 +1006,12 @@ class VelocitySystem final : public MixedComplementaritySystem {
     }
   }
   double EstimatedJacobianNonzeros() const override {
-    const VelocityLevelEvaluation& e = linear_ ? evaluation_ : values_;
+    const VelocityLevelEvaluation& e = model_ ? evaluation_ : values_;
     return e.equations_v.NonZeros() + e.a_v.NonZeros() + e.b_v.NonZeros();
   }
+  // The linear model of the current roles is used (set by Reset): a linear level, or one
+  // affine for decided roles with every pair decided.
+  bool model() const { return model_; }
 
  private:
   // The linear model's values at v0 + d.
@@ -1018,6 +1028,8 @@ class VelocitySystem final : public MixedComplementaritySystem {
 
   const LoweredSystem& system_;
   const bool linear_;
+  const bool affine_decided_;
+  bool model_ = false;
   Vector y_;
   std::vector<PairRole> roles_;
   int complementary_ = 0;
@@ -1113,22 +1125,25 @@ namespace internal {
 // round-off within the Newton tolerance.
 class VelocitySolver {
  public:
-  VelocitySolver(const LoweredSystem& system, bool linear)
-      : problem_(system, linear),
+  // linear, affine_decided: LoweredSystem::VelocityLevelIsLinear and
+  // VelocityLevelIsAffineForDecidedRoles.
+  VelocitySolver(const LoweredSystem& system, bool linear, bool affine_decided)
+      : problem_(system, linear, affine_decided),
         newton_(VelocityNewtonOptions(system.sparse())),
-        linear_(linear) {}
+        linear_(linear),
+        affine_decided_(affine_decided) {}
 
   // LoweredSystem::DecideStatuses' workspace, kept across decisions (FESD decides at t0 and at
   // every switch): the trials' problem, their Newton solvers (with their linear solvers) and
   // the evaluations, so that a decision allocates only for its result.
   struct Decision {
-    Decision(const LoweredSystem& system, bool linear)
-        : problem(system, linear),
+    Decision(const LoweredSystem& system, bool linear, bool affine_decided)
+        : problem(system, linear, affine_decided),
           newton(VelocityNewtonOptions(system.sparse())),
           linear_trial_newton(LinearTrialNewtonOptions(system.sparse())) {}
     VelocitySystem problem;
     SemismoothNewton newton;               // every candidate complementary, and general trials
-    SemismoothNewton linear_trial_newton;  // trials of a linear level without monotone ones
+    SemismoothNewton linear_trial_newton;  // trials of an affine level without monotone ones
     LinearStep linear_step;                // the same trials' first step (LinearStep)
     Vector guess, solution, step, free_a, free_b, field;
     std::vector<PairRole> trial, block_roles;
@@ -1149,7 +1164,9 @@ class VelocitySolver {
     std::vector<int> candidates, enumerated, monotone, check_row;
   };
   Decision& decision(const LoweredSystem& system) {
-    if (decision_ == nullptr) decision_ = std::make_unique<Decision>(system, linear_);
+    if (decision_ == nullptr) {
+      decision_ = std::make_unique<Decision>(system, linear_, affine_decided_);
+    }
     return *decision_;
   }
 
@@ -1165,7 +1182,8 @@ class VelocitySolver {
     problem_.SetStatuses(a_zero);
     problem_.Reset(y, v0, point);
     bool converged = false;
-    if (!linear_ || !linear_step_.Solve(&problem_, newton_.options(), v0, v)) {
+    // Every pair is decided: a level affine for decided roles is a linear system here.
+    if (!problem_.model() || !linear_step_.Solve(&problem_, newton_.options(), v0, v)) {
       SemismoothNewtonResult& result = result_;
       newton_.Solve(problem_, v0, &result);
       *v = result.solution;
@@ -1209,6 +1227,7 @@ class VelocitySolver {
   SemismoothNewton newton_;
   SemismoothNewtonResult result_;  // kept: its storage serves every solve
   const bool linear_;
+  const bool affine_decided_;
   Entry entries_[kEntries];
   int next_ = 0;
   LinearStep linear_step_;
@@ -1229,6 +1248,17 @@ bool LoweredSystem::VelocityLevelIsLinear() const {
   return true;
 }
 
+bool LoweredSystem::VelocityLevelIsAffineForDecidedRoles() const {
+  for (const auto& block : blocks_) {
+    if (!block->AffineInAlgebraicForDecidedRoles()) return false;
+    // The clock rate P(z) multiplies those blocks' F (as in VelocityLevelIsLinear).
+    if (clock_rate_block_ >= 0 && block->ScaledByClockRate() && block->num_algebraic() > 0) {
+      return false;
+    }
+  }
+  return true;
+}
+
 bool LoweredSystem::SolveVelocityLevel(const Vector& y, const std::vector<bool>& a_zero,
                                        const Vector& v0, Vector* v) const {
   if (num_algebraic_ == 0) {
@@ -1236,7 +1266,8 @@ bool LoweredSystem::SolveVelocityLevel(const Vector& y, const std::vector<bool>&
     return true;
   }
   if (!velocity_solver_) {
-    velocity_solver_ = std::make_shared<internal::VelocitySolver>(*this, VelocityLevelIsLinear());
+    velocity_solver_ = std::make_shared<internal::VelocitySolver>(
+        *this, VelocityLevelIsLinear(), VelocityLevelIsAffineForDecidedRoles());
   }
   return velocity_solver_->Solve(*this, y, a_zero, v0, nullptr, v);
 }
@@ -1251,7 +1282,8 @@ bool LoweredSystem::SolveVelocityLevel(const Vector& y, const std::vector<bool>&
   MOREAU_ASSERT(point.F_z.rows() == num_states_ && point.F_z.cols() == num_algebraic_,
                 "SolveVelocityLevel: the point evaluation has no derivatives");
   if (!velocity_solver_) {
-    velocity_solver_ = std::make_shared<internal::VelocitySolver>(*this, VelocityLevelIsLinear());
+    velocity_solver_ = std::make_shared<internal::VelocitySolver>(
+        *this, VelocityLevelIsLinear(), VelocityLevelIsAffineForDecidedRoles());
   }
   if (!VelocityLevelIsLinear()) return velocity_solver_->Solve(*this, y, a_zero, v0, nullptr, v);
   return velocity_solver_->Solve(*this, y, a_zero, z, &point, v);
@@ -1266,7 +1298,8 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
     return decision;
   }
   if (!velocity_solver_) {
-    velocity_solver_ = std::make_shared<internal::VelocitySolver>(*this, VelocityLevelIsLinear());
+    velocity_solver_ = std::make_shared<internal::VelocitySolver>(
+        *this, VelocityLevelIsLinear(), VelocityLevelIsAffineForDecidedRoles());
   }
   internal::VelocitySolver::Decision& workspace = velocity_solver_->decision(*this);
   // Continuous sides at y from the index-1 consistent values (e.g. lambda = g - min g).
@@ -1392,9 +1425,11 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
     return decision;
   }
   for (int k : monotone) roles[static_cast<std::size_t>(k)] = PairRole::kComplementary;
-  // Without monotone candidates every trial decides every pair (kLinearTrialIterations).
-  SemismoothNewton& trial_newton =
-      linear && monotone.empty() ? workspace.linear_trial_newton : workspace.newton;
+  // Without monotone candidates every trial decides every pair, so that a level affine for
+  // decided roles (a linear one, or index-1 complementarity) makes every trial a linear system
+  // (kLinearTrialIterations), solved on its model expanded at the guess (Reset).
+  const bool linear_trials = monotone.empty() && (linear || VelocityLevelIsAffineForDecidedRoles());
+  SemismoothNewton& trial_newton = linear_trials ? workspace.linear_trial_newton : workspace.newton;
 
   // Enumerate: every candidate keeps either its jump side at zero (the continuous side may
   // leave zero) or its continuous side's rate at zero (it stays at zero).
@@ -1453,7 +1488,7 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
     }
     // Without monotone candidates a linear trial is a linear system: its first Newton step,
     // where it meets the tolerance, is the solution Newton returns (LinearStep).
-    if (!(linear && monotone.empty() &&
+    if (!(linear_trials &&
           workspace.linear_step.Solve(&system, trial_newton.options(), guess, &solution))) {
       SemismoothNewtonResult result = trial_newton.Solve(system, guess);
       if (!result.converged()) continue;

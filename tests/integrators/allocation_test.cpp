@@ -356,7 +356,7 @@ INSTANTIATE_TEST_SUITE_P(
         Case{"fesd_S3", "S3", "fesd", With(kNoTrajectory, "h", 0.1), 3.86, true},
         Case{"fesd_H1", "H1", "fesd", With(kNoTrajectory, "h", 0.1), 2.00, true},
         Case{"fesd_rectifier", "rectifier", "fesd",
-             With(With(kNoTrajectory, "h", 1e-4), "output_dt", 0.0), 25.60, true},
+             With(With(kNoTrajectory, "h", 1e-4), "output_dt", 0.0), 25.07, true},
         Case{"fesd_crowd", "crowd:N=16", "fesd", With(kNoTrajectory, "h", 0.1), 517.98, false, 12,
              35},
         Case{"fesd_adaptive_F1", "F1", "fesd", kNoTrajectory, 23.58, true},

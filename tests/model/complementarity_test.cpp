@@ -379,6 +379,46 @@ TEST(ComplementarityLoweringTest, InitialGuessSolvesTheLcp) {
   }
 }
 
+// The velocity level of decided roles is affine in the rates v (the block's
+// AffineInAlgebraicForDecidedRoles: a status decision's trials and the solves of fixed
+// statuses are then solved on a linear model expanded at one evaluation): for every decided
+// assignment of the roles, the rows at the midpoint of two rates are the mean of their rows,
+// and d/dv is the same at both. The affine claim is exact; kAffineRoundOff allows the
+// round-off of rows of size |v| ~ 1e3 (the rectifier's rates in A/s).
+TEST(ComplementarityLoweringTest, VelocityLevelOfDecidedRolesIsAffineInTheRates) {
+  constexpr double kAffineRoundOff = 1e-12;
+  for (const Scene& scene :
+       {MakeScene("rectifier"), MakeScene("diode_bridge"), testing::ComplementarityScene(false)}) {
+    LoweredSystem system(scene);
+    Vector y = system.InitialState();
+    y.head(system.num_scene_states()) += Vector::LinSpaced(system.num_scene_states(), 0.3, -0.2);
+    const int nz = system.num_algebraic(), np = system.num_pairs();
+    ASSERT_EQ(nz, np) << scene.name;  // (the rates of the multipliers)
+    const Vector v0 = 1e3 * Vector::LinSpaced(nz, -0.7, 0.9);
+    const Vector v1 = 1e3 * Vector::LinSpaced(nz, 1.1, -0.4);
+    const Vector mid = 0.5 * (v0 + v1);
+    for (unsigned mask = 0; mask < (1u << np); ++mask) {
+      std::vector<PairRole> roles;
+      for (int k = 0; k < np; ++k)
+        roles.push_back((mask >> k) & 1u ? PairRole::kAZero : PairRole::kBZero);
+      VelocityLevelEvaluation e0, e1, em;
+      system.EvaluateVelocityLevel(y, v0, roles, Derivatives::kNone, &e0);
+      system.EvaluateVelocityLevel(y, v1, roles, Derivatives::kNone, &e1);
+      system.EvaluateVelocityLevel(y, mid, roles, Derivatives::kNone, &em);
+      ASSERT_EQ(em.a.size(), 0);  // decided roles: equations only
+      const Vector mean = 0.5 * (e0.equations + e1.equations);
+      const double size =
+          1.0 + e0.equations.cwiseAbs().maxCoeff() + e1.equations.cwiseAbs().maxCoeff();
+      EXPECT_LE((em.equations - mean).cwiseAbs().maxCoeff(), kAffineRoundOff * size)
+          << scene.name << " roles " << mask;
+      const Matrix jacobian0 = e0.equations_v.ToDense(), jacobian1 = e1.equations_v.ToDense();
+      EXPECT_LE((jacobian0 - jacobian1).cwiseAbs().maxCoeff(),
+                kAffineRoundOff * (1.0 + jacobian0.cwiseAbs().maxCoeff()))
+          << scene.name << " roles " << mask;
+    }
+  }
+}
+
 // ---- status decisions ----------------------------------------------------------------------
 
 StatusDecision DecideRectifier(double v_c, double i_l) {

@@ -510,6 +510,11 @@ class LoweredSystem {
   // rate included) and the clock rate multiplies no block with algebraic unknowns: the
   // velocity-level rows are then affine in v (velocity_level.cpp).
   bool VelocityLevelIsLinear() const;
+  // Weaker: for roles that decide every pair (no complementary pair) the velocity-level rows
+  // are affine in v, with coefficients that may depend on the roles (every block
+  // AffineInAlgebraicForDecidedRoles, the same clock-rate condition). A solve for fixed
+  // statuses, and a status decision's trial, is then a linear system (velocity_level.cpp).
+  bool VelocityLevelIsAffineForDecidedRoles() const;
   // Evaluate; with `velocity_roles` (EvaluateVelocityLevel, z = v) blocks see the roles and v
   // in their context (BlockContext::velocity_roles).
   // field_only, switching_mode: EvaluateField (BlockContext::field_only, switching_mode).
