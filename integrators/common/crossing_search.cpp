@@ -213,23 +213,18 @@ Crossing SearchCrossing(const std::vector<char>& watched, const Vector& threshol
   return crossing;
 }
 
-double HermiteMinimum(const std::vector<double>& nodes, const std::vector<double>& values,
-                      const std::vector<double>& slopes, int samples, double* theta) {
+namespace {
+
+// The Hermite interpolant through (nodes[i], values[i], slopes[i]) in Newton form on the doubled
+// nodes z = (x_0, x_0, x_1, x_1, ...): p(x) = sum_l coefficients[l] prod_{i < l} (x - z_i), its
+// divided differences with f[z_2i, z_2i+1] = f'(x_i). z, the table and the coefficients live in
+// `storage` (3 m entries, m = 2 n).
+void HermiteNewtonForm(const std::vector<double>& nodes, const std::vector<double>& values,
+                       const std::vector<double>& slopes, double* storage) {
   const std::size_t n = nodes.size();
   MOREAU_ASSERT(n > 0 && values.size() == n && slopes.size() == n,
-                "HermiteMinimum: one value and slope per node");
-  // Divided differences on z = (x_0, x_0, x_1, x_1, ...): f[z_2i, z_2i+1] = f'(x_i).
+                "Hermite interpolant: one value and slope per node");
   const std::size_t m = 2 * n;
-  // z, the divided-difference table and the coefficients: on the stack for the sizes an
-  // element has (its start and stages, s <= 7), as this runs per element.
-  constexpr std::size_t kStackNodes = 16;
-  std::array<double, 3 * 2 * kStackNodes> stack_storage;
-  std::vector<double> heap_storage;
-  double* storage = stack_storage.data();
-  if (n > kStackNodes) {
-    heap_storage.resize(3 * m);
-    storage = heap_storage.data();
-  }
   double* const z = storage;
   double* const table = storage + m;
   double* const coefficients = storage + 2 * m;
@@ -245,6 +240,32 @@ double HermiteMinimum(const std::vector<double>& nodes, const std::vector<double
     }
     coefficients[level] = table[level];
   }
+}
+
+// The Newton form (3 m entries) and HermiteLowerBound's polynomials (2 m more): on the stack for
+// the sizes an element has (its start and stages, s <= 7), as this runs per element.
+constexpr std::size_t kStackNodes = 16;
+struct HermiteStorage {
+  std::array<double, 10 * kStackNodes> stack;
+  std::vector<double> heap;
+  // Room for `per_node` entries per node.
+  double* Get(std::size_t n, std::size_t per_node) {
+    if (n <= kStackNodes && per_node <= 10) return stack.data();
+    heap.resize(per_node * n);
+    return heap.data();
+  }
+};
+
+}  // namespace
+
+double HermiteMinimum(const std::vector<double>& nodes, const std::vector<double>& values,
+                      const std::vector<double>& slopes, int samples, double* theta) {
+  const std::size_t m = 2 * nodes.size();
+  HermiteStorage storage;
+  double* const data = storage.Get(nodes.size(), 6);
+  HermiteNewtonForm(nodes, values, slopes, data);
+  const double* const z = data;
+  const double* const coefficients = data + 2 * m;
   double best = std::numeric_limits<double>::infinity();
   *theta = 0.5;
   for (int k = 0; k < samples; ++k) {
@@ -257,6 +278,56 @@ double HermiteMinimum(const std::vector<double>& nodes, const std::vector<double
     }
   }
   return best;
+}
+
+double HermiteLowerBound(const std::vector<double>& nodes, const std::vector<double>& values,
+                         const std::vector<double>& slopes) {
+  const std::size_t m = 2 * nodes.size();  // coefficients; degree m - 1
+  HermiteStorage storage;
+  double* const data = storage.Get(nodes.size(), 10);
+  HermiteNewtonForm(nodes, values, slopes, data);
+  const double* const z = data;
+  const double* const coefficients = data + 2 * m;
+  // Powers: nested multiplication p <- p (x - z_l) + c_l from the highest coefficient down,
+  // with the same recursion on absolute values (|p| <- |p| (x + |z_l|) + |c_l|) bounding the
+  // size of every term that enters a coefficient.
+  double* const power = data + 3 * m;
+  double* const size = data + 4 * m;
+  std::fill(power, power + m, 0.0);
+  std::fill(size, size + m, 0.0);
+  power[0] = coefficients[m - 1];
+  size[0] = std::fabs(coefficients[m - 1]);
+  for (std::size_t l = m - 1; l-- > 0;) {
+    // Multiply by (x - z_l) (the degree rises by one), then add c_l.
+    for (std::size_t j = m - 1; j > 0; --j) {
+      power[j] = power[j - 1] - z[l] * power[j];
+      size[j] = size[j - 1] + std::fabs(z[l]) * size[j];
+    }
+    power[0] = coefficients[l] - z[l] * power[0];
+    size[0] = std::fabs(coefficients[l]) + std::fabs(z[l]) * size[0];
+  }
+  // Bernstein coefficients of degree d = m - 1: b_j = sum_{i <= j} C(j, i) / C(d, i) a_i, a
+  // combination of the a_i with weights in [0, 1] (Farouki and Rajan, "On the numerical
+  // condition of polynomials in Bernstein form", 1987).
+  const std::size_t d = m - 1;
+  double least = std::numeric_limits<double>::infinity();
+  double total_size = 0.0;
+  for (std::size_t j = 0; j <= d; ++j) {
+    double b = 0.0;
+    double weight = 1.0;  // C(j, i) / C(d, i), from i = 0
+    for (std::size_t i = 0; i <= j; ++i) {
+      b += weight * power[i];
+      if (i < j) weight *= static_cast<double>(j - i) / static_cast<double>(d - i);
+    }
+    least = std::min(least, b);
+    total_size += size[j];
+  }
+  // Each conversion step rounds relative to the sizes it combines: at most about m^2 roundings
+  // of terms bounded by the sum of the sizes, which also bounds the rounding of HermiteMinimum's
+  // Horner evaluations (about m roundings each). A tenfold allowance.
+  const double rounding =
+      10.0 * static_cast<double>(m * m) * std::numeric_limits<double>::epsilon() * total_size;
+  return least - rounding;
 }
 
 }  // namespace moreau::internal

@@ -148,4 +148,13 @@ Crossing SearchCrossing(const std::vector<char>& watched, const Vector& threshol
 double HermiteMinimum(const std::vector<double>& nodes, const std::vector<double>& values,
                       const std::vector<double>& slopes, int samples, double* theta);
 
+// A lower bound of the same interpolant over [0, 1] (nodes in [0, 1]): the least coefficient
+// of its Bernstein form, of which the interpolant is a convex combination at every point of
+// [0, 1], less a bound on the rounding of the conversions (Newton form to powers to Bernstein)
+// and of HermiteMinimum's evaluations. O(n^2) operations against HermiteMinimum's
+// O(samples n): where it is at least a level, no sample of HermiteMinimum is below that level,
+// and the samples need not be taken.
+double HermiteLowerBound(const std::vector<double>& nodes, const std::vector<double>& values,
+                         const std::vector<double>& slopes);
+
 }  // namespace moreau::internal
