@@ -179,7 +179,7 @@ class ComplementarityBlock final : public LoweredBlock {
       active.assign(static_cast<std::size_t>(m_), false);
     }
     Vector& lambda = guess_lambda_;
-    if (!SolveOnActiveSet(d, active, &lambda)) {
+    if (!SolveOnActiveSet(d, active, &lambda) && !PivotToSolution(d, &active, &lambda)) {
       const LcpResult lcp = SolveLcp(d, g_, LcpOptions());
       lambda = lcp.z;
       // Polish on the active set the LCP identified (exact to round-off when it is right).
@@ -439,6 +439,31 @@ class ComplementarityBlock final : public LoweredBlock {
       if (!(free >= -kRoundOff * scale)) return false;
     }
     return true;
+  }
+
+  // After SolveOnActiveSet failed on *active (its lambda and w_ left for that set): Murty's
+  // least-index principal pivoting (K. G. Murty, "Note on a Bard-type scheme for solving the
+  // complementarity problem", 1974): the first pair whose free side is negative changes sides,
+  // and the set is solved again. For a P-matrix D this reaches the LCP's unique solution in
+  // finitely many pivots; a guess off by a pair or two (an element's stages across a diode's
+  // switch) needs one or two, each an m x m solve, where the LCP solver iterates on the whole
+  // problem. True with *active the solution's set and *lambda its multipliers; false after
+  // kMaxPivots (the caller then solves the LCP).
+  bool PivotToSolution(const Matrix& d, std::vector<bool>* active, Vector* lambda) const {
+    const int max_pivots = 2 * m_;
+    for (int pivot = 0; pivot < max_pivots; ++pivot) {
+      // SolveOnActiveSet's test, for the first pair that fails it.
+      const double scale = 1.0 + g_.lpNorm<Eigen::Infinity>();
+      int first = -1;
+      for (int k = 0; k < m_ && first < 0; ++k) {
+        const double free = (*active)[static_cast<std::size_t>(k)] ? (*lambda)[k] : w_[k];
+        if (!(free >= -kRoundOff * scale)) first = k;
+      }
+      if (first < 0) return false;  // (a singular D_SS: SolveOnActiveSet gave up before w)
+      (*active)[static_cast<std::size_t>(first)] = !(*active)[static_cast<std::size_t>(first)];
+      if (SolveOnActiveSet(d, *active, lambda)) return true;
+    }
+    return false;
   }
 
   // Index 1: lambda_bar for the block's roles (S = pairs kept at w = 0: lambda_S =

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <numbers>
 #include <random>
 
 #include "../problems/test_scenes.hpp"
@@ -375,6 +376,37 @@ TEST(ComplementarityLoweringTest, InitialGuessSolvesTheLcp) {
       EXPECT_GE(e.A[k], -1e-14) << shift;
       EXPECT_GE(e.B[k], -1e-14) << shift;
       EXPECT_LE(std::min(e.A[k], e.B[k]), 1e-14) << shift;
+    }
+  }
+}
+
+// The guess from every wrong active set (the previous values' signs) still solves the LCP:
+// a guessed set that is not complementary is corrected by principal pivots or by the LCP
+// solver, never returned. The diode bridge (four diodes, D a P-matrix) at states across its
+// conduction modes, every one of the 16 guessed sets. kComplementarity: round-off of
+// multipliers of size 1e-2 (amperes) from voltages of size 10.
+TEST(ComplementarityLoweringTest, InitialGuessFromAnyActiveSetSolvesTheLcp) {
+  constexpr double kComplementarity = 1e-12;
+  LoweredSystem system(MakeScene("diode_bridge"));
+  const int m = system.num_pairs();
+  ASSERT_EQ(m, 4);
+  for (double phase : {0.3, 1.4, 2.9, 4.0, 5.5}) {
+    // The load at 4 V, the 10 V, 50 Hz source at this phase: one pair of diodes conducts near
+    // the source's peaks, none near its zeros.
+    Vector y = system.InitialState();
+    y[0] = 4.0;
+    y[system.clock_index()] = phase / (2.0 * std::numbers::pi * 50.0);
+    for (unsigned set = 0; set < (1u << m); ++set) {
+      Vector previous = Vector::Zero(system.num_algebraic());
+      for (int k = 0; k < m; ++k) previous[k] = (set >> k) & 1u ? 1.0 : 0.0;
+      const Vector z = system.InitialAlgebraicGuess(y, &previous);
+      PointEvaluation e;
+      system.Evaluate(y, z, Derivatives::kNone, &e);
+      for (int k = 0; k < m; ++k) {
+        EXPECT_GE(e.A[k], -kComplementarity) << phase << " " << set;
+        EXPECT_GE(e.B[k], -kComplementarity) << phase << " " << set;
+        EXPECT_LE(std::min(e.A[k], e.B[k]), kComplementarity) << phase << " " << set;
+      }
     }
   }
 }
