@@ -447,13 +447,14 @@ class ComplementarityBlock final : public LoweredBlock {
   // and the set is solved again. For a P-matrix D this reaches the LCP's unique solution in
   // finitely many pivots; a guess off by a pair or two (an element's stages across a diode's
   // switch) needs one or two, each an m x m solve, where the LCP solver iterates on the whole
-  // problem. True with *active the solution's set and *lambda its multipliers; false after
-  // kMaxPivots (the caller then solves the LCP).
+  // problem. True with *active the solution's set and *lambda its multipliers (every set it
+  // returns passed SolveOnActiveSet's test); false after 2 m pivots (the caller then solves
+  // the LCP).
   bool PivotToSolution(const Matrix& d, std::vector<bool>* active, Vector* lambda) const {
     const int max_pivots = 2 * m_;
+    const double scale = 1.0 + g_.lpNorm<Eigen::Infinity>();  // SolveOnActiveSet's
     for (int pivot = 0; pivot < max_pivots; ++pivot) {
       // SolveOnActiveSet's test, for the first pair that fails it.
-      const double scale = 1.0 + g_.lpNorm<Eigen::Infinity>();
       int first = -1;
       for (int k = 0; k < m_ && first < 0; ++k) {
         const double free = (*active)[static_cast<std::size_t>(k)] ? (*lambda)[k] : w_[k];
