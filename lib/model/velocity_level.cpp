@@ -1236,9 +1236,12 @@ class VelocitySolver {
 
 }  // namespace internal
 
-bool LoweredSystem::VelocityLevelIsLinear() const {
+bool LoweredSystem::VelocityLevelIsAffine(bool for_decided_roles) const {
   for (const auto& block : blocks_) {
-    if (!block->AffineInAlgebraic()) return false;
+    if (!(for_decided_roles ? block->AffineInAlgebraicForDecidedRoles()
+                            : block->AffineInAlgebraic())) {
+      return false;
+    }
     // Time-freezing multiplies the physical-time blocks' F by the clock rate P(z), affine in z
     // if its block says so: the product is affine only where those blocks do not depend on z.
     if (clock_rate_block_ >= 0 && block->ScaledByClockRate() && block->num_algebraic() > 0) {
@@ -1248,15 +1251,10 @@ bool LoweredSystem::VelocityLevelIsLinear() const {
   return true;
 }
 
+bool LoweredSystem::VelocityLevelIsLinear() const { return VelocityLevelIsAffine(false); }
+
 bool LoweredSystem::VelocityLevelIsAffineForDecidedRoles() const {
-  for (const auto& block : blocks_) {
-    if (!block->AffineInAlgebraicForDecidedRoles()) return false;
-    // The clock rate P(z) multiplies those blocks' F (as in VelocityLevelIsLinear).
-    if (clock_rate_block_ >= 0 && block->ScaledByClockRate() && block->num_algebraic() > 0) {
-      return false;
-    }
-  }
-  return true;
+  return VelocityLevelIsAffine(true);
 }
 
 bool LoweredSystem::SolveVelocityLevel(const Vector& y, const std::vector<bool>& a_zero,

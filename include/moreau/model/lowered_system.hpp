@@ -515,6 +515,9 @@ class LoweredSystem {
   // AffineInAlgebraicForDecidedRoles, the same clock-rate condition). A solve for fixed
   // statuses, and a status decision's trial, is then a linear system (velocity_level.cpp).
   bool VelocityLevelIsAffineForDecidedRoles() const;
+  // The test of both: every block affine (for decided roles, or for all), the clock-rate
+  // condition.
+  bool VelocityLevelIsAffine(bool for_decided_roles) const;
   // Evaluate; with `velocity_roles` (EvaluateVelocityLevel, z = v) blocks see the roles and v
   // in their context (BlockContext::velocity_roles).
   // field_only, switching_mode: EvaluateField (BlockContext::field_only, switching_mode).
