@@ -205,7 +205,7 @@ void CollocationStages::InitialGuess(const ConstVectorRef& y0, double h, const V
     // No previous step: the clock's increments are still known (its rate does not depend on
     // the state), and switching functions of time alone (sin(omega t) with omega h >> 1)
     // make Newton from a frozen clock guess stagnate.
-    PointEvaluation start;
+    PointEvaluation& start = start_.evaluation;  // kept: no allocation per guess
     system_->Evaluate(y0, z_previous, Derivatives::kNone, &start);
     const int clock = system_->clock_index();
     if (std::isfinite(start.F[clock])) {

@@ -108,6 +108,18 @@ class CollocationStages {
   mutable Matrix extrapolation_;
   mutable Vector extrapolation_weights_;
   mutable Vector guess_y_, guess_z_;
+  // InitialGuess without a previous step: the start's evaluation, kept across guesses. Scratch:
+  // a copy or move of the stages starts without it (copying its storage would allocate where
+  // the guess itself no longer does).
+  struct StartScratch {
+    StartScratch() = default;
+    StartScratch(const StartScratch&) {}
+    StartScratch(StartScratch&&) noexcept {}
+    StartScratch& operator=(const StartScratch&) { return *this; }
+    StartScratch& operator=(StartScratch&&) noexcept { return *this; }
+    PointEvaluation evaluation;
+  };
+  mutable StartScratch start_;
 };
 
 }  // namespace moreau::internal
