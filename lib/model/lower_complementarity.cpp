@@ -179,7 +179,9 @@ class ComplementarityBlock final : public LoweredBlock {
       active.assign(static_cast<std::size_t>(m_), false);
     }
     Vector& lambda = guess_lambda_;
-    if (!SolveOnActiveSet(d, active, &lambda) && !PivotToSolution(d, &active, &lambda)) {
+    int failing = -1;
+    if (!SolveOnActiveSet(d, active, &lambda, &failing) &&
+        !PivotToSolution(d, failing, &active, &lambda)) {
       const LcpResult lcp = SolveLcp(d, g_, LcpOptions());
       lambda = lcp.z;
       // Polish on the active set the LCP identified (exact to round-off when it is right).
@@ -406,7 +408,11 @@ class ComplementarityBlock final : public LoweredBlock {
 
   // lambda on the active set S: D_SS lambda_S = -g_S, lambda = 0 elsewhere; true if the result
   // is complementary (lambda_S >= 0, w >= 0 off S) up to round-off.
-  bool SolveOnActiveSet(const Matrix& d, const std::vector<bool>& active, Vector* lambda) const {
+  // *failing (if given): the first pair whose free side is negative where the set's solution
+  // is not complementary, -1 otherwise (also for a singular D_SS).
+  bool SolveOnActiveSet(const Matrix& d, const std::vector<bool>& active, Vector* lambda,
+                        int* failing = nullptr) const {
+    if (failing != nullptr) *failing = -1;
     std::vector<int>& s = active_indices_;
     s.clear();
     for (int k = 0; k < m_; ++k) {
@@ -436,33 +442,28 @@ class ComplementarityBlock final : public LoweredBlock {
     const double scale = 1.0 + g_.lpNorm<Eigen::Infinity>();
     for (int k = 0; k < m_; ++k) {
       const double free = active[static_cast<std::size_t>(k)] ? (*lambda)[k] : w[k];
-      if (!(free >= -kRoundOff * scale)) return false;
+      if (!(free >= -kRoundOff * scale)) {
+        if (failing != nullptr) *failing = k;
+        return false;
+      }
     }
     return true;
   }
 
-  // After SolveOnActiveSet failed on *active (its lambda and w_ left for that set): Murty's
-  // least-index principal pivoting (K. G. Murty, "Note on a Bard-type scheme for solving the
-  // complementarity problem", 1974): the first pair whose free side is negative changes sides,
+  // From a set whose solution is not complementary, its first failing pair `failing`
+  // (SolveOnActiveSet): Murty's least-index principal pivoting (K. G. Murty, "Note on a
+  // Bard-type scheme for solving the complementarity problem", 1974): that pair changes sides
   // and the set is solved again. For a P-matrix D this reaches the LCP's unique solution in
   // finitely many pivots; a guess off by a pair or two (an element's stages across a diode's
   // switch) needs one or two, each an m x m solve, where the LCP solver iterates on the whole
   // problem. True with *active the solution's set and *lambda its multipliers (every set it
-  // returns passed SolveOnActiveSet's test); false after 2 m pivots (the caller then solves
-  // the LCP).
-  bool PivotToSolution(const Matrix& d, std::vector<bool>* active, Vector* lambda) const {
-    const int max_pivots = 2 * m_;
-    const double scale = 1.0 + g_.lpNorm<Eigen::Infinity>();  // SolveOnActiveSet's
-    for (int pivot = 0; pivot < max_pivots; ++pivot) {
-      // SolveOnActiveSet's test, for the first pair that fails it.
-      int first = -1;
-      for (int k = 0; k < m_ && first < 0; ++k) {
-        const double free = (*active)[static_cast<std::size_t>(k)] ? (*lambda)[k] : w_[k];
-        if (!(free >= -kRoundOff * scale)) first = k;
-      }
-      if (first < 0) return false;  // (a singular D_SS: SolveOnActiveSet gave up before w)
-      (*active)[static_cast<std::size_t>(first)] = !(*active)[static_cast<std::size_t>(first)];
-      if (SolveOnActiveSet(d, *active, lambda)) return true;
+  // returns passed SolveOnActiveSet's test); false after 2 m pivots or at a singular D_SS (the
+  // caller then solves the LCP).
+  bool PivotToSolution(const Matrix& d, int failing, std::vector<bool>* active,
+                       Vector* lambda) const {
+    for (int pivot = 0; pivot < 2 * m_ && failing >= 0; ++pivot) {
+      (*active)[static_cast<std::size_t>(failing)] = !(*active)[static_cast<std::size_t>(failing)];
+      if (SolveOnActiveSet(d, *active, lambda, &failing)) return true;
     }
     return false;
   }
