@@ -55,12 +55,12 @@ class SwitchingBlockBase : public LoweredBlock {
       f_jacobian_[i].Jacobian(context, effect_.modes[i], y, derivatives, &f_[i]);
     }
   }
-  // EvaluateSurfaces and EvaluateModes together; with dense derivatives by one pass over the
-  // stacked function (the same values and derivatives, entry for entry). Read the
-  // derivatives with AddSurfaceRow and AddModeRows.
+  // EvaluateSurfaces and EvaluateModes together; with dense derivatives or values alone by one pass
+  // over the stacked function (the same values and derivatives, entry for entry: its parts'
+  // own code in turn). Read the derivatives with AddSurfaceRow and AddModeRows.
   void EvaluateSurfacesAndModes(const BlockContext& context, const ConstVectorRef& y,
                                 Derivatives derivatives) {
-    use_stacked_ = has_stacked_ && !context.sparse && derivatives != Derivatives::kNone;
+    use_stacked_ = has_stacked_ && (!context.sparse || derivatives == Derivatives::kNone);
     if (!use_stacked_) {
       EvaluateSurfaces(context, y, derivatives);
       EvaluateModes(context, y, derivatives);
