@@ -2,8 +2,10 @@
 // estimate, rejection and failure retries, and the replay of a step sequence.
 #include <Eigen/Dense>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
+#include <mutex>
 #include <sstream>
 #include <utility>
 
@@ -489,13 +491,24 @@ FesdRun::ErrorEstimate FesdRun::EstimateError(double fraction, std::size_t first
 }
 
 const FesdRun::ResolutionGrid& FesdRun::Resolution() const {
-  ResolutionGrid& grid = resolution_grid_;
-  if (!grid.nodes.empty()) return grid;
+  // The grid depends on the stage count alone: made once per process for each (a run of a
+  // small scene spent 5% of its instructions making it anew).
+  static std::array<std::once_flag, kMaxRadauStages + 1> made;
+  static std::array<ResolutionGrid, kMaxRadauStages + 1> grids;
+  MOREAU_ASSERT(s_ >= 1 && s_ <= kMaxRadauStages, "Resolution: stages out of range");
+  const auto s = static_cast<std::size_t>(s_);
+  std::call_once(made[s], [&] { MakeResolutionGrid(tableau_, &grids[s]); });
+  return grids[s];
+}
+
+void FesdRun::MakeResolutionGrid(const RadauTableau& tableau, ResolutionGrid* made) {
+  ResolutionGrid& grid = *made;
+  const int stages = tableau.stages;
   // Nodes: the element start and the stages; test points: the midpoints of the two widest gaps
   // between nodes, where the interpolation error of a function the element does not resolve
   // is largest.
   grid.nodes = {0.0};
-  for (int i = 0; i < s_; ++i) grid.nodes.push_back(tableau_.c[i]);
+  for (int i = 0; i < stages; ++i) grid.nodes.push_back(tableau.c[i]);
   const std::vector<double>& nodes = grid.nodes;
   std::vector<std::pair<double, double>> gaps;  // (width, midpoint)
   for (std::size_t j = 0; j + 1 < nodes.size(); ++j) {
@@ -521,16 +534,15 @@ const FesdRun::ResolutionGrid& FesdRun::Resolution() const {
     lagrange(grid.tests[t], &grid.test_weights, static_cast<Eigen::Index>(t));
   }
   for (double theta : grid.nodes)
-    grid.node_state_weights.push_back(tableau_.InterpolationWeights(theta));
+    grid.node_state_weights.push_back(tableau.InterpolationWeights(theta));
   for (double theta : grid.tests)
-    grid.test_state_weights.push_back(tableau_.InterpolationWeights(theta));
+    grid.test_state_weights.push_back(tableau.InterpolationWeights(theta));
   grid.differences.resize(n, n);
   for (Eigen::Index j = 0; j < n; ++j) {
     for (Eigen::Index l = 0; l < n; ++l) grid.differences(l, j) = nodes[j] - nodes[l];
   }
   grid.dip_weights.resize(kDipSamples, n);
   for (int m = 0; m < kDipSamples; ++m) lagrange(DipSample(m), &grid.dip_weights, m);
-  return grid;
 }
 
 double FesdRun::IndicatorResolution() const {

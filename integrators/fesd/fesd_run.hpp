@@ -516,7 +516,8 @@ class FesdRun {
   // if a free side is negative at a test point (a switch between the checked points).
   double IndicatorResolution() const;
   struct ResolutionGrid;
-  const ResolutionGrid& Resolution() const;
+  const ResolutionGrid& Resolution() const;  // the grid of s_ stages (made once per process)
+  static void MakeResolutionGrid(const RadauTableau& tableau, ResolutionGrid* grid);
 
   // Solves one fixed-length element from y0 with the given statuses (comparison solutions of
   // EstimateError), initial guess from the piece's collocation polynomials. Returns false if
@@ -709,7 +710,6 @@ class FesdRun {
     std::vector<Vector> node_state_weights, test_state_weights;
     Matrix differences;  // (l, j): nodes[j] - nodes[l] (CrossingGuess's denominators)
   };
-  mutable ResolutionGrid resolution_grid_;
   Vector boundary_scaled_;  // DecideAtBoundary's scaled indicators
   // The consistent velocity level and indicators that EndViolation solved at an element's end
   // state, which is its last stage (c_s = 1), from that stage's evaluation and algebraic
