@@ -3,6 +3,10 @@
 #include <algorithm>
 #include <bit>
 #include <cstdint>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <vector>
 
 #include "sparse_derivatives.hpp"
 #include "thread_pool.hpp"
@@ -420,16 +424,66 @@ class ZeroFunction final : public TypedFunctionFor<ZeroFunction> {
 
 }  // namespace internal
 
+namespace internal {
+namespace {
+
+// The analyses of stacked functions by their parts' analyses, in order. Parts that share
+// analyses are clones of the same functions (TypedFunction::ShareAnalysis), so two stacks of
+// such parts compute the same outputs: the later shares the earlier's analysis instead of
+// tracing its pattern again (a switching effect's surfaces and mode fields are stacked anew
+// at every lowering, so once per run of a scene). An entry is kept while its parts' analyses
+// live (the scene's functions and their clones hold them) and dropped at a later call once
+// one of them has died (an address in a key is then no longer trusted).
+class StackedAnalyses {
+ public:
+  std::shared_ptr<FunctionAnalysis> For(const std::vector<std::shared_ptr<FunctionAnalysis>>& parts,
+                                        const std::shared_ptr<FunctionAnalysis>& fresh) {
+    std::vector<const FunctionAnalysis*> key;
+    for (const auto& part : parts) key.push_back(part.get());
+    const std::lock_guard<std::mutex> lock(mutex_);
+    std::erase_if(entries_, [](const auto& entry) {
+      return std::any_of(entry.second.parts.begin(), entry.second.parts.end(),
+                         [](const auto& part) { return part.expired(); });
+    });
+    auto found = entries_.find(key);
+    if (found != entries_.end()) return found->second.stacked;
+    Entry& entry = entries_[key];
+    entry.parts.assign(parts.begin(), parts.end());
+    entry.stacked = fresh;
+    return fresh;
+  }
+
+ private:
+  struct Entry {
+    std::vector<std::weak_ptr<FunctionAnalysis>> parts;
+    std::shared_ptr<FunctionAnalysis> stacked;
+  };
+  std::mutex mutex_;
+  std::map<std::vector<const FunctionAnalysis*>, Entry> entries_;
+};
+
+StackedAnalyses& TheStackedAnalyses() {
+  static StackedAnalyses analyses;
+  return analyses;
+}
+
+}  // namespace
+}  // namespace internal
+
 SmoothFunction MakeStackedFunction(std::string name, const std::vector<SmoothFunction>& parts) {
   int outputs = 0;
+  std::vector<std::shared_ptr<internal::FunctionAnalysis>> part_analyses;
   for (const SmoothFunction& part : parts) {
     RequireArgument(part.typed() != nullptr, "stacked function '", name, "': part '", part.name(),
                     "' is empty or has a hand-written Jacobian; only automatically "
                     "differentiated functions can be stacked");
     outputs += part.num_outputs();
+    part_analyses.push_back(part.typed()->shared_analysis());
   }
-  return SmoothFunction(
-      std::make_unique<internal::StackedFunction>(std::move(name), parts, outputs));
+  auto stacked = std::make_unique<internal::StackedFunction>(std::move(name), parts, outputs);
+  stacked->AdoptAnalysis(
+      internal::TheStackedAnalyses().For(part_analyses, stacked->shared_analysis()));
+  return SmoothFunction(std::move(stacked));
 }
 
 SmoothFunction MakeZeroFunction(std::string name, int num_outputs) {

@@ -558,6 +558,36 @@ TEST(SparseCostTest, CopiesShareTheDetectedPatternAndPlansAreCachedPerRowSubset)
   EXPECT_EQ(jac.nonZeros(), 12);  // three pairs, four coordinates each
 }
 
+// A switching effect's surfaces and mode fields are stacked anew at every lowering (once per
+// run): a stack of the same parts (or of their copies, which share their analyses) takes the
+// pattern the first stack detected; a stack of other parts, or of the same parts in another
+// order, detects its own.
+TEST(SparseCostTest, StacksOfTheSamePartsShareTheDetectedPattern) {
+  Vector q;
+  const SmoothFunction pairs = NeighbourPairs(9, &q);
+  const SmoothFunction other = NeighbourPairs(9, &q);
+  const Vector none;
+  Vector value;
+  SparseMatrix jac;
+  auto detections = [&](const SmoothFunction& stacked) {
+    stacked.SparseJacobian(q, none, 0.0, none, Wrt::X(), &value, &jac);
+    return stacked.sparse_derivative_stats().num_detections;
+  };
+  const SmoothFunction first = MakeStackedFunction("first", {pairs, other});
+  EXPECT_EQ(detections(first), 1);
+  const SmoothFunction pairs_copy = pairs;
+  const SmoothFunction again = MakeStackedFunction("again", {pairs_copy, other});
+  EXPECT_EQ(detections(again), 0);
+  Matrix dense_first, dense_again;
+  first.SparseJacobian(q, none, 0.0, none, Wrt::X(), &value, &jac);
+  dense_first = Matrix(jac);
+  again.SparseJacobian(q, none, 0.0, none, Wrt::X(), &value, &jac);
+  dense_again = Matrix(jac);
+  EXPECT_EQ(dense_first, dense_again);
+  EXPECT_EQ(detections(MakeStackedFunction("swapped", {other, pairs})), 1);
+  EXPECT_EQ(detections(MakeStackedFunction("alone", {pairs})), 1);
+}
+
 TEST(SparseCostTest, StackedAndZeroFunctionsKeepTheirPartsPatterns) {
   Vector q;
   const SmoothFunction pairs = NeighbourPairs(9, &q);

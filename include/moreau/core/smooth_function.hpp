@@ -380,6 +380,13 @@ class TypedFunction : public SmoothFunction::Concept {
   // Makes `copy` (a clone of this function: same code, same outputs) share this function's
   // analysis (its detected patterns). Every Clone() passes its result through it.
   std::unique_ptr<SmoothFunction::Concept> ShareAnalysis(std::unique_ptr<TypedFunction> copy) const;
+  // The analysis this function shares with its clones, and its replacement by another
+  // function's of the same code and outputs (MakeStackedFunction: stacks of the same parts).
+  const std::shared_ptr<FunctionAnalysis>& shared_analysis() const { return analysis_; }
+  void AdoptAnalysis(std::shared_ptr<FunctionAnalysis> analysis) {
+    analysis_ = std::move(analysis);
+    analyzed_.reset();
+  }
   // Dense counterpart of SparseHessianDirection for at most Dual1::kCapacity selected columns:
   // rows(k, j) = (d^2 g_k / d(selected)^2 . direction)_j for every output, from one Dual2
   // evaluation (outer directions: the selected columns; inner: the direction). No sparsity
