@@ -1163,6 +1163,10 @@ class VelocitySolver {
     std::vector<PairRole> roles;
     std::vector<int> candidates, enumerated, monotone, check_row;
   };
+  // LoweredSystem::VelocityLevelIsLinear and VelocityLevelIsAffineForDecidedRoles of the
+  // system it was made for.
+  bool linear() const { return linear_; }
+  bool affine_decided() const { return affine_decided_; }
   Decision& decision(const LoweredSystem& system) {
     if (decision_ == nullptr) {
       decision_ = std::make_unique<Decision>(system, linear_, affine_decided_);
@@ -1257,17 +1261,21 @@ bool LoweredSystem::VelocityLevelIsAffineForDecidedRoles() const {
   return VelocityLevelIsAffine(true);
 }
 
+internal::VelocitySolver& LoweredSystem::VelocitySolverOf() const {
+  if (!velocity_solver_) {
+    velocity_solver_ = std::make_shared<internal::VelocitySolver>(
+        *this, VelocityLevelIsLinear(), VelocityLevelIsAffineForDecidedRoles());
+  }
+  return *velocity_solver_;
+}
+
 bool LoweredSystem::SolveVelocityLevel(const Vector& y, const std::vector<bool>& a_zero,
                                        const Vector& v0, Vector* v) const {
   if (num_algebraic_ == 0) {
     v->resize(0);
     return true;
   }
-  if (!velocity_solver_) {
-    velocity_solver_ = std::make_shared<internal::VelocitySolver>(
-        *this, VelocityLevelIsLinear(), VelocityLevelIsAffineForDecidedRoles());
-  }
-  return velocity_solver_->Solve(*this, y, a_zero, v0, nullptr, v);
+  return VelocitySolverOf().Solve(*this, y, a_zero, v0, nullptr, v);
 }
 
 bool LoweredSystem::SolveVelocityLevel(const Vector& y, const std::vector<bool>& a_zero,
@@ -1279,12 +1287,9 @@ bool LoweredSystem::SolveVelocityLevel(const Vector& y, const std::vector<bool>&
   }
   MOREAU_ASSERT(point.F_z.rows() == num_states_ && point.F_z.cols() == num_algebraic_,
                 "SolveVelocityLevel: the point evaluation has no derivatives");
-  if (!velocity_solver_) {
-    velocity_solver_ = std::make_shared<internal::VelocitySolver>(
-        *this, VelocityLevelIsLinear(), VelocityLevelIsAffineForDecidedRoles());
-  }
-  if (!VelocityLevelIsLinear()) return velocity_solver_->Solve(*this, y, a_zero, v0, nullptr, v);
-  return velocity_solver_->Solve(*this, y, a_zero, z, &point, v);
+  internal::VelocitySolver& solver = VelocitySolverOf();
+  if (!solver.linear()) return solver.Solve(*this, y, a_zero, v0, nullptr, v);
+  return solver.Solve(*this, y, a_zero, z, &point, v);
 }
 
 StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_tolerance) const {
@@ -1295,11 +1300,8 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
     decision.v.resize(0);
     return decision;
   }
-  if (!velocity_solver_) {
-    velocity_solver_ = std::make_shared<internal::VelocitySolver>(
-        *this, VelocityLevelIsLinear(), VelocityLevelIsAffineForDecidedRoles());
-  }
-  internal::VelocitySolver::Decision& workspace = velocity_solver_->decision(*this);
+  internal::VelocitySolver& solver = VelocitySolverOf();
+  internal::VelocitySolver::Decision& workspace = solver.decision(*this);
   // Continuous sides at y from the index-1 consistent values (e.g. lambda = g - min g).
   Vector& guess = workspace.guess;
   InitialAlgebraicGuess(y, nullptr, &guess);
@@ -1398,7 +1400,7 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
     decision.a_zero[static_cast<std::size_t>(k)] = jump_zero != continuous_a;
   };
 
-  const bool linear = VelocityLevelIsLinear();
+  const bool linear = solver.linear();
   // One problem and evaluation workspace for all trials (SetRoles and Reset set every part
   // of the problem; the evaluations size and fill their outputs).
   VelocitySystem& system = workspace.problem;
@@ -1426,7 +1428,7 @@ StatusDecision LoweredSystem::DecideStatuses(const Vector& y, double candidate_t
   // Without monotone candidates every trial decides every pair, so that a level affine for
   // decided roles (a linear one, or index-1 complementarity) makes every trial a linear system
   // (kLinearTrialIterations), solved on its model expanded at the guess (Reset).
-  const bool linear_trials = monotone.empty() && (linear || VelocityLevelIsAffineForDecidedRoles());
+  const bool linear_trials = monotone.empty() && (linear || solver.affine_decided());
   SemismoothNewton& trial_newton = linear_trials ? workspace.linear_trial_newton : workspace.newton;
 
   // Enumerate: every candidate keeps either its jump side at zero (the continuous side may

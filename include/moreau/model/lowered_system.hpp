@@ -570,7 +570,9 @@ class LoweredSystem {
   mutable CurvatureTerms curvature_;
   mutable std::unique_ptr<internal::ArgumentMatrix> dynamics_jacobian_holder_;
   // SolveVelocityLevel's solver and its last solutions (velocity_level.cpp); not copied.
+  // Made at its first use (VelocitySolverOf).
   mutable std::shared_ptr<internal::VelocitySolver> velocity_solver_;
+  internal::VelocitySolver& VelocitySolverOf() const;
   std::unique_ptr<internal::ThreadPool> pool_;  // SetThreads; not copied
 };
 
