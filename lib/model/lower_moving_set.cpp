@@ -119,15 +119,30 @@ class MovingSetBlock final : public LoweredBlock {
     const Matrix* projection = has_projection_ ? &projection_ : nullptr;
     // Multipliers of every constraint (zero for those left out).
     ScatterMultipliers(z.segment(z0, nw));
+    // complementarity pair k: a = c_k(x, t), b = lambda_k.
+    auto set_pairs = [&] {
+      for (int j = 0; j < nw; ++j) out->A[k0 + j] = c_[working_[static_cast<std::size_t>(j)]];
+      out->B.segment(k0, nw) = z.segment(z0, nw);
+    };
+    if (derivatives == Derivatives::kNone && !context.sparse && all_working_ &&
+        z.segment(z0, nw).isZero(0.0)) {
+      // Values without a pushing constraint (every smooth element's certificate): P grad c
+      // lambda is zero, so c's values suffice, without its gradient (a Jacobian pass of dual
+      // numbers). Dense storage without a filter only: with a filter the gradient path below
+      // evaluates the working rows alone, where values would be evaluated for every declared
+      // constraint; and sparse Jacobians keep their storage sized by the calls they serve
+      // (skipping some made later ones reallocate: the crowd's steps in allocation_tests).
+      jacobian_.Jacobian(context, set_.constraints, y, Derivatives::kNone, &c_, nullptr);
+      set_pairs();
+      return;
+    }
     // grad c is needed for the values too (x' += P grad c lambda); only the working rows.
     jacobian_.Jacobian(context, set_.constraints, y,
                        derivatives == Derivatives::kNone ? Derivatives::kStates : derivatives, &c_,
                        rows());
     // (gradient form) x' += P grad c lambda.
     jacobian_.AddStateGradientProduct(lambda_, projection, out->F.head(nx), rows());
-    // complementarity pair k: a = c_k(x, t), b = lambda_k.
-    for (int j = 0; j < nw; ++j) out->A[k0 + j] = c_[working_[static_cast<std::size_t>(j)]];
-    out->B.segment(k0, nw) = z.segment(z0, nw);
+    set_pairs();
     if (derivatives == Derivatives::kNone) return;
 
     // d/dy of P grad c lambda = P sum_k lambda_k Hess c_k (x rows; x, clock, u, p columns),

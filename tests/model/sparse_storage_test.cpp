@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <random>
 #include <tuple>
 #include <utility>
@@ -336,6 +337,51 @@ TEST(SparseStorage, EvaluationsEqualDenseOnEveryCatalogScene) {
     }
   }
   EXPECT_GT(compared, 100);  // the catalog's effect scenes, both forms, two points each
+}
+
+// Values alone (Derivatives::kNone) are the values of an evaluation with derivatives, in both
+// storages, with the multipliers zero (a moving set then evaluates its constraints' values
+// without their gradient: no constraint pushes) and nonzero. G, A and B are equal as numbers
+// (a skipped zero product may turn a -0 into +0, nothing more). F only to round-off: a model
+// function's values alone run in doubles, with derivatives in dual numbers, whose value parts
+// some operations round differently (the crowd's, the circuits' fields: a few ulps of their
+// terms, which in the rectifier's field are three times the sum).
+TEST(SparseStorage, ValuesAloneEqualTheValuesOfAnEvaluationWithDerivatives) {
+  constexpr double kDualRoundOff = 32.0 * std::numeric_limits<double>::epsilon();
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> uniform(-0.5, 0.5);
+  auto expect_equal = [](const Vector& a, const Vector& b, double tolerance,
+                         const std::string& what) {
+    ASSERT_EQ(a.size(), b.size()) << what;
+    const double scale = std::max(1.0, b.lpNorm<Eigen::Infinity>());
+    const bool equal = tolerance == 0.0 ? (a.array() == b.array()).all()
+                                        : (a - b).lpNorm<Eigen::Infinity>() <= tolerance * scale;
+    EXPECT_TRUE(equal) << what << "\nvalues alone: " << a.transpose()
+                       << "\nwith derivatives: " << b.transpose();
+  };
+  int with_zero_multipliers = 0;
+  for (const Scene& scene : Scenes()) {
+    Pair pair = Lower(scene, SwitchingForm::kStewart, RelayForm::kTimeFreezing);
+    for (LoweredSystem* system : {&pair.dense, &pair.sparse}) {
+      const std::string label = scene.name + (system->sparse() ? " sparse" : " dense");
+      for (bool zero : {true, false}) {
+        Vector y = system->InitialState();
+        for (int i = 0; i < system->num_scene_states(); ++i) y[i] += uniform(rng);
+        Vector z(system->num_algebraic());
+        for (Eigen::Index i = 0; i < z.size(); ++i) z[i] = zero ? 0.0 : 0.5 + uniform(rng);
+        PointEvaluation alone, with;
+        system->Evaluate(y, z, Derivatives::kNone, &alone);
+        system->Evaluate(y, z, Derivatives::kStates, &with);
+        const std::string what = label + (zero ? " (z = 0)" : "");
+        expect_equal(alone.F, with.F, kDualRoundOff, what + " F");
+        expect_equal(alone.G, with.G, 0.0, what + " G");
+        expect_equal(alone.A, with.A, 0.0, what + " A");
+        expect_equal(alone.B, with.B, 0.0, what + " B");
+        with_zero_multipliers += zero && system->num_pairs() > 0 ? 1 : 0;
+      }
+    }
+  }
+  EXPECT_GT(with_zero_multipliers, 20);  // the catalog's effect scenes, both storages
 }
 
 // The pattern of a sparse evaluation depends on the structure and on which moving-set
