@@ -343,9 +343,12 @@ TEST(SparseStorage, EvaluationsEqualDenseOnEveryCatalogScene) {
 // storages, with the multipliers zero (a moving set then evaluates its constraints' values
 // without their gradient: no constraint pushes) and nonzero. G, A and B are equal as numbers
 // (a skipped zero product may turn a -0 into +0, nothing more). F only to round-off: a model
-// function's values alone run in doubles, with derivatives in dual numbers, whose value parts
-// some operations round differently (the crowd's, the circuits' fields: a few ulps of their
-// terms, which in the rectifier's field are three times the sum).
+// function's values alone run in doubles, with derivatives in dual numbers, and a dual
+// quotient's value is a * (1 / b), not a / b (dual.hpp), an ulp apart: the crowd's, D3's and
+// the circuits' fields differ by a few ulps of their terms (the rectifier's terms are three
+// times their sum). With that quotient computed as a / b every scene's F is equal exactly
+// (checked), but results move by round-off and two of the random scenes' fragile outcomes
+// change, so the quotient is left as it is.
 TEST(SparseStorage, ValuesAloneEqualTheValuesOfAnEvaluationWithDerivatives) {
   constexpr double kDualRoundOff = 32.0 * std::numeric_limits<double>::epsilon();
   std::mt19937 rng(11);

@@ -172,8 +172,10 @@ Dual<T> Chain(const T& value, const Dual<T>& a, const T& da) {
 
 // ---- arithmetic -------------------------------------------------------------------------
 /// @name Arithmetic on dual numbers
-/// The value of the result is the double (or inner dual) arithmetic of the values; its
-/// derivatives follow by the chain rule. The mixed forms with a double operand treat the
+/// The value of the result is the double (or inner dual) arithmetic of the values, except
+/// for the quotient of two dual numbers, whose value is a * (1 / b) (the inverse serves the
+/// derivatives too), which may differ from a / b in the last bit; its derivatives follow by
+/// the chain rule. The mixed forms with a double operand treat the
 /// double as a constant (no derivative directions), so `2.0 * x` and `x - 1.0` need no
 /// conversion.
 /// @{
