@@ -124,6 +124,9 @@ struct CrossingWorkspace {
     int depth;
   };
   Vector lower, upper, values, levels;
+  // After a search: bounded[k] is true where watched function k has a finite lower bound over
+  // the whole step, [0, 1] (the search's first evaluation); the others were checked by samples
+  // only, and a caller with another test for them reads this instead of bounding again.
   std::vector<char> bounded;
   std::vector<Node> stack;
   // Sizes the storage for `functions` watched functions and the depth of `limits` (an

@@ -132,11 +132,12 @@ Violation FesdRun::InsideViolation(const CollocationStages& stages, const Vector
     // Free sides without a bound (index-1 complementarity, functions without interval
     // evaluation): the extremum of their Hermite interpolant from the values and exact
     // derivatives at the element start and the stages, evaluated on the polynomial.
-    functions.bounds(0.0, 1.0, &b.bound_lower, &b.bound_upper);  // (-inf: no bound)
+    // (The search's bound over the whole element told which sides have one: search.bounded.)
     const std::vector<double>& nodes = Resolution().nodes;
     bool have_node_values = false;  // the buffers keep their vectors across calls
     for (int k = 0; k < np_; ++k) {
-      if (!b.watched[static_cast<std::size_t>(k)] || std::isfinite(b.bound_lower[k])) continue;
+      const auto i = static_cast<std::size_t>(k);
+      if (!b.watched[i] || b.search.bounded[i]) continue;
       if (!have_node_values) {
         // Values and d/dtheta = d_y . y'(theta) at every node, for all pairs at once.
         have_node_values = true;

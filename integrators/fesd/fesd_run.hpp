@@ -628,9 +628,8 @@ class FesdRun {
     PolynomialPath path;
     Matrix increments;
     std::vector<char> watched, end_grazes;
-    // bound_lower/upper: the indicators' bounds over the whole element, apart from the box
-    // (box_lower/upper) they are computed from, which BoundEventIndicators reads.
-    Vector thresholds, y, dy, box_lower, box_upper, bound_lower, bound_upper, end_values, probe;
+    // box_lower/upper: the box of the path that BoundEventIndicators reads.
+    Vector thresholds, y, dy, box_lower, box_upper, end_values, probe;
     Eigen::RowVectorXd row;  // a row of at.d_y
     IndicatorEvaluation at;
     std::vector<Vector> node_values, node_slopes;
