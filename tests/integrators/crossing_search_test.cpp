@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -84,6 +85,48 @@ TEST(HermiteTest, TheLowerBoundClearsAFreeSideFarFromZero) {
   EXPECT_GT(bound, 0.0);
   EXPECT_LE(bound, minimum);
   EXPECT_GT(bound, minimum - 0.1);
+}
+
+// After a search, CrossingWorkspace::bounded says which watched functions have a finite lower
+// bound over the whole step (FESD reads it to pick the functions its Hermite path checks,
+// instead of bounding the element again). Functions on theta in [0, 1]: f0 = (theta - 0.5)^2
+// + level (bounded: its enclosure over [a, b] from the endpoint values and the vertex), f1
+// without an enclosure (-inf, +inf), f2 bounded but not watched. With level 0.1 the first bound
+// clears f0 (no subdivision); with level -0.01 f0 dips below zero near 0.5, so the search
+// subdivides and finds it, and the flags still describe the whole step.
+TEST(SearchTest, TheWorkspaceSaysWhichWatchedFunctionsTheWholeStepBounds) {
+  for (double level : {0.1, -0.01}) {
+    auto f0 = [level](double theta) { return (theta - 0.5) * (theta - 0.5) + level; };
+    auto values = [&](double theta, Vector* out) {
+      *out = Vector::Constant(3, 1.0);
+      (*out)[0] = f0(theta);
+      return true;
+    };
+    auto bounds = [&](double a, double b, Vector* lower, Vector* upper) {
+      const double inf = std::numeric_limits<double>::infinity();
+      const double low = (a <= 0.5 && 0.5 <= b) ? level : std::min(f0(a), f0(b));
+      *lower = Vector::Constant(3, -inf);
+      *upper = Vector::Constant(3, inf);
+      (*lower)[0] = low;
+      (*upper)[0] = std::max(f0(a), f0(b));
+      (*lower)[2] = 0.5;
+      (*upper)[2] = 2.0;
+    };
+    const CrossingFunctionRefs functions{values, bounds};
+    const std::vector<char> watched = {1, 1, 0};
+    const Vector thresholds = Vector::Constant(3, 1e-9);
+    CrossingWorkspace workspace;
+    const Crossing crossing = SearchCrossing(watched, thresholds, functions, {}, &workspace);
+    EXPECT_EQ(crossing.outcome, level > 0.0 ? CrossingOutcome::kNone : CrossingOutcome::kFound)
+        << "level " << level;
+    if (level > 0.0) {
+      EXPECT_EQ(crossing.bound_evaluations, 1);
+    }
+    ASSERT_EQ(workspace.bounded.size(), 3u);
+    EXPECT_EQ(workspace.bounded[0], 1) << "level " << level;
+    EXPECT_EQ(workspace.bounded[1], 0) << "level " << level;
+    EXPECT_EQ(workspace.bounded[2], 0) << "level " << level;  // bounded, but not watched
+  }
 }
 
 }  // namespace
