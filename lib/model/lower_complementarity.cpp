@@ -164,7 +164,7 @@ class ComplementarityBlock final : public LoweredBlock {
       }
       return;
     }
-    EvaluateFunctions(context, y, Derivatives::kNone);
+    EvaluateFunctions(context, y, Derivatives::kNone, /*input_matrix=*/false);
     Matrix& d = d_matrix_;  // kept (a guess per element and output point)
     d = RowMajor(d_values_, m_, m_);
     // The active set to try first: the previous values' when given, else the set of this
@@ -210,7 +210,7 @@ class ComplementarityBlock final : public LoweredBlock {
     if (!index_one_) return;
     MOREAU_ASSERT(context.velocity_roles != nullptr && context.velocity != nullptr,
                   "complementarity curvature terms need the velocity-level roles and values");
-    EvaluateFunctions(context, y, derivatives);
+    EvaluateFunctions(context, y, derivatives, /*input_matrix=*/false);
     ConsistentValues(Roles(*context.velocity_roles), derivatives);
     // (a) second derivatives of (D(y) l)_k along d, l = lambda_bar held.
     Vector& weights = weights_;
@@ -265,7 +265,7 @@ class ComplementarityBlock final : public LoweredBlock {
     const int z0 = layout.z_offset;
     const bool with_states = derivatives != Derivatives::kNone;
     const bool all = derivatives == Derivatives::kAll;
-    EvaluateFunctions(context, y, derivatives);
+    EvaluateFunctions(context, y, derivatives, /*input_matrix=*/false);
     if (!index_one_) {
       for (int k = 0; k < m_; ++k) {
         if (a_zero[static_cast<std::size_t>(k0 + k)]) {
@@ -342,22 +342,25 @@ class ComplementarityBlock final : public LoweredBlock {
     return roles_;
   }
 
-  // g, B, D at (x, u, t, p), with Jacobians (columns x, [u], t, [p]) unless kNone.
+  // g, B, D at (x, u, t, p), with Jacobians (columns x, [u], t, [p]) unless kNone. Without
+  // input_matrix, B is not evaluated (b_values_, jac_b_ keep older values): the pair sides and
+  // consistent multipliers need g and D only (EventIndicators, InitialGuess), and every reader
+  // of B evaluates it first (Evaluate, AddCurvature).
   void EvaluateFunctions(const BlockContext& context, const ConstVectorRef& y,
-                         Derivatives derivatives) {
+                         Derivatives derivatives, bool input_matrix = true) {
     x_ = y.head(nx_);
     const double t = y[context.clock_index];
     const Vector& u = *context.inputs;
     const Vector& p = *context.parameters;
     if (derivatives == Derivatives::kNone) {
       effect_.output.Evaluate(x_, u, t, p, &g_);
-      effect_.input_matrix.Evaluate(x_, u, t, p, &b_values_);
+      if (input_matrix) effect_.input_matrix.Evaluate(x_, u, t, p, &b_values_);
       if (index_one_) effect_.feedthrough.Evaluate(x_, u, t, p, &d_values_);
       return;
     }
     const Wrt wrt = derivatives == Derivatives::kAll ? Wrt::All() : Wrt::XT();
     effect_.output.Jacobian(x_, u, t, p, wrt, &g_, &jac_g_);
-    effect_.input_matrix.Jacobian(x_, u, t, p, wrt, &b_values_, &jac_b_);
+    if (input_matrix) effect_.input_matrix.Jacobian(x_, u, t, p, wrt, &b_values_, &jac_b_);
     if (index_one_) effect_.feedthrough.Jacobian(x_, u, t, p, wrt, &d_values_, &jac_d_);
   }
 
