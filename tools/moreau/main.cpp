@@ -154,8 +154,9 @@ int Run(Scene scene, const moreau::SimulationSettings& settings,
     std::snprintf(text, sizeof text, "t = %.6g of %.6g", t, tf);
     return std::string(text);
   };
-  const moreau::SimulationResult report = moreau::Simulate(
-      scene, settings, [&](double t) { progress.Update((t - t0) / (tf - t0), time_text(t)); });
+  const moreau::SimulationResult report = moreau::Simulate(scene, settings, [&](double t) {
+    progress.Update((t - t0) / (tf - t0), [&] { return time_text(t); });
+  });
   progress.Finish((report.final_time - t0) / (tf - t0), time_text(report.final_time));
   // What the user should know although the run may have succeeded (also in summary.json;
   // --quiet leaves errors only).

@@ -15,15 +15,13 @@ ProgressBar::ProgressBar(std::string label, bool enabled)
       start_(Clock::now()),
       last_(start_) {}
 
-void ProgressBar::Update(double fraction, const std::string& detail) {
-  if (!enabled_) return;
-  std::lock_guard<std::mutex> lock(mutex_);
+bool ProgressBar::Due(double* elapsed) {
   const auto now = Clock::now();
-  const double elapsed = std::chrono::duration<double>(now - start_).count();
+  *elapsed = std::chrono::duration<double>(now - start_).count();
   const double since_last = std::chrono::duration<double>(now - last_).count();
-  if (elapsed < kProgressDelaySeconds || since_last < (tty_ ? 0.2 : 5.0)) return;
+  if (*elapsed < kProgressDelaySeconds || since_last < (tty_ ? 0.2 : 5.0)) return false;
   last_ = now;
-  Draw(fraction, elapsed, detail);
+  return true;
 }
 
 void ProgressBar::Draw(double fraction, double elapsed, const std::string& detail) {

@@ -17,13 +17,25 @@ inline constexpr double kProgressDelaySeconds = 2.0;
 class ProgressBar {
  public:
   ProgressBar(std::string label, bool enabled);
-  // `fraction` of the work is done (clamped to [0, 1]); `detail` follows the percentage.
-  void Update(double fraction, const std::string& detail);
+  // `fraction` of the work is done (clamped to [0, 1]); detail() returns the text after the
+  // percentage. It is called only when the bar is drawn: runs update the bar at every step,
+  // and formatting a text each time cost a small run a few percent of its time.
+  template <class Detail>
+  void Update(double fraction, Detail&& detail) {
+    if (!enabled_) return;
+    std::lock_guard<std::mutex> lock(mutex_);
+    double elapsed = 0.0;
+    if (Due(&elapsed)) Draw(fraction, elapsed, detail());
+  }
   // If the bar was shown: draws it at `fraction` with `detail` (the final state) and ends its
   // line.
   void Finish(double fraction, const std::string& detail);
 
  private:
+  // (With mutex_ held.) Whether the bar is to be drawn now (kProgressDelaySeconds after the
+  // start, then every 0.2 s on a terminal, 5 s otherwise); if so, notes the time and sets
+  // *elapsed.
+  bool Due(double* elapsed);
   void Draw(double fraction, double elapsed, const std::string& detail);
   using Clock = std::chrono::steady_clock;
   std::string label_;

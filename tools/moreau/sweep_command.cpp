@@ -41,7 +41,8 @@ int RunSweepCommand(const Scene& scene, const SweepCommandSettings& settings) {
   };
   const SweepResult result =
       RunSweep(scene, spec, settings.simulation, settings.jobs, {}, [&](long done, long total) {
-        bar.Update(static_cast<double>(done) / std::max(total, 1L), runs_text(done, total));
+        bar.Update(static_cast<double>(done) / std::max(total, 1L),
+                   [&] { return runs_text(done, total); });
       });
   const long runs = static_cast<long>(result.rows.size());
   bar.Finish(1.0, runs_text(runs, runs));
