@@ -146,6 +146,12 @@ Violation FesdRun::InsideViolation(const CollocationStages& stages, const Vector
         for (std::size_t j = 0; j < nodes.size(); ++j) {
           b.path.Point(nodes[j], &b.y);
           b.path.Derivative(nodes[j], &b.dy);
+          // The slopes along the path directly where every block provides them (index-1
+          // complementarity: no Jacobian d_y formed), else from d_y.
+          if (system_.EvaluateEventIndicatorSlopes(b.y, v, a_zero_, b.dy, &b.node_values[j],
+                                                   &b.node_slopes[j])) {
+            continue;
+          }
           system_.EvaluateEventIndicators(b.y, v, a_zero_, Derivatives::kStates, &b.at);
           b.node_values[j] = b.at.values;
           b.node_slopes[j].resize(np_);

@@ -307,6 +307,79 @@ class ComplementarityBlock final : public LoweredBlock {
     }
   }
 
+  // Values as EventIndicators with kStates (the same evaluations and operations: the same
+  // bits) and slopes along dy from the same Jacobians applied to the direction d = (dy_x, dy_t):
+  // dg = J_g d, dD = J_D d, and for index 1 the consistent multipliers' rates from their
+  // equations on the active set s, D_ss dlambda_s = -(dg + dD lambda)_s (the same LU), so that
+  // dw = dg + dD lambda + D dlambda. The matrix d_lambda_bar and the rows scattered into d_y
+  // are not formed (on the circuits, most of the cost of an evaluation with derivatives).
+  bool EventIndicatorSlopes(const BlockContext& context, const ConstVectorRef& y,
+                            const ConstVectorRef& v, const std::vector<bool>& a_zero,
+                            const ConstVectorRef& dy, VectorRef values, VectorRef slopes) override {
+    if (context.sparse) return false;  // (the dense Jacobians below)
+    const int k0 = layout.pair_offset;
+    const int z0 = layout.z_offset;
+    EvaluateFunctions(context, y, Derivatives::kStates, /*input_matrix=*/false);
+    // d in the Jacobians' columns: x, then t (Wrt::XT).
+    Vector& d = argument_direction_;
+    d.setZero(jac_g_.cols());
+    d.head(nx_) = dy.head(nx_);
+    d[TimeColumn(context, false)] = dy[context.clock_index];
+    Vector& dg = slope_g_;
+    dg.noalias() = jac_g_ * d;
+    if (!index_one_) {
+      for (int k = 0; k < m_; ++k) {
+        const bool active = a_zero[static_cast<std::size_t>(k0 + k)];
+        values[k0 + k] = active ? v[z0 + k] : g_[k];
+        slopes[k0 + k] = active ? 0.0 : dg[k];  // a jump side: held with v
+      }
+      return true;
+    }
+    std::vector<PairRole>& roles = roles_;
+    roles.resize(static_cast<std::size_t>(m_));
+    for (int k = 0; k < m_; ++k) {
+      roles[static_cast<std::size_t>(k)] =
+          a_zero[static_cast<std::size_t>(k0 + k)] ? PairRole::kAZero : PairRole::kBZero;
+    }
+    ConsistentValues(roles, Derivatives::kNone);
+    const auto dmat = RowMajor(d_values_, m_, m_);
+    Vector& w = w_;
+    w.noalias() = dmat * lambda_bar_;
+    w += g_;
+    // dD lambda: (J_D d) reshaped row-major, times lambda.
+    Vector& dd = slope_d_;
+    dd.noalias() = jac_d_ * d;
+    Vector& partial = slope_partial_;  // dg + dD lambda
+    partial = dg;
+    for (int k = 0; k < m_; ++k) {
+      for (int j = 0; j < m_; ++j) partial[k] += dd[k * m_ + j] * lambda_bar_[j];
+    }
+    Vector& dlambda = slope_lambda_;
+    dlambda.setZero(m_);
+    const std::vector<int>& s = active_indices_;  // (ConsistentValues' active set)
+    const int n = static_cast<int>(s.size());
+    if (n > 0) {
+      if (!lu_.isInvertible()) return false;  // (the values are NaN then as well)
+      Vector& rhs = rhs_;
+      rhs.resize(n);
+      for (int i = 0; i < n; ++i) rhs[i] = -partial[s[static_cast<std::size_t>(i)]];
+      SolveInvertible(lu_, rhs, &solve_scratch_, &solved_);
+      for (int i = 0; i < n; ++i) dlambda[s[static_cast<std::size_t>(i)]] = solved_[i];
+    }
+    for (int k = 0; k < m_; ++k) {
+      const bool conducting = a_zero[static_cast<std::size_t>(k0 + k)];
+      values[k0 + k] = conducting ? lambda_bar_[k] : w[k];
+      if (conducting) {
+        slopes[k0 + k] = dlambda[k];
+      } else {
+        double dw = partial[k];
+        for (int j = 0; j < m_; ++j) dw += dmat(k, j) * dlambda[j];
+        slopes[k0 + k] = dw;
+      }
+    }
+    return true;
+  }
+
   // a = w = 0 kept: the pair is active (a diode conducts); b = lambda = 0: inactive (blocks).
   std::vector<Event> StatusEvents(double t, const std::vector<bool>& before,
                                   const std::vector<bool>& after) const override {
@@ -542,6 +615,8 @@ class ComplementarityBlock final : public LoweredBlock {
   mutable Matrix solve_scratch_columns_;
   mutable Eigen::FullPivLU<Matrix> lu_;
   Matrix jac_g_, jac_b_, jac_d_, d_lambda_bar_, hessian_;
+  // EventIndicatorSlopes' rates along the direction (kept: one evaluation per search node).
+  Vector slope_g_, slope_d_, slope_partial_, slope_lambda_;
   ArgumentMatrix directions_;
   // Kept scratch of the derivative rows (an element evaluates the block at every Newton
   // iteration; temporaries were most of its cost on small circuits): contractions, products,

@@ -168,6 +168,16 @@ class LoweredBlock {
   virtual void EventIndicators(const BlockContext& context, const ConstVectorRef& y,
                                const ConstVectorRef& v, const std::vector<bool>& a_zero,
                                Derivatives derivatives, IndicatorEvaluation* out) = 0;
+  // The block's event indicators with Derivatives::kStates (the same values, bit for bit) and
+  // their slopes along dy, d_y.row(k) . dy up to round-off, into values and slopes at the
+  // block's pair offset (LoweredSystem::EvaluateEventIndicatorSlopes). False if the block does
+  // not provide them; a block without pairs has nothing to provide.
+  virtual bool EventIndicatorSlopes(const BlockContext& context, const ConstVectorRef& y,
+                                    const ConstVectorRef& v, const std::vector<bool>& a_zero,
+                                    const ConstVectorRef& dy, VectorRef values, VectorRef slopes) {
+    (void)context, (void)y, (void)v, (void)a_zero, (void)dy, (void)values, (void)slopes;
+    return num_pairs() == 0;
+  }
 
   // Enclosures of the continuous free sides over a box of states (LoweredSystem::
   // BoundEventIndicators): for every pair of the block whose free side under a_zero is a

@@ -797,6 +797,23 @@ void LoweredSystem::EvaluateEventIndicators(const ConstVectorRef& y, const Const
   }
 }
 
+bool LoweredSystem::EvaluateEventIndicatorSlopes(const ConstVectorRef& y, const ConstVectorRef& v,
+                                                 const std::vector<bool>& a_zero,
+                                                 const ConstVectorRef& dy, Vector* values,
+                                                 Vector* slopes) const {
+  MOREAU_ASSERT(static_cast<int>(a_zero.size()) == num_pairs_, "wrong number of statuses");
+  MOREAU_ASSERT(dy.size() == num_states_, "slope direction of the wrong size");
+  values->setZero(num_pairs_);
+  slopes->setZero(num_pairs_);
+  internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
+  context.sparse = sparse_;
+  context.pool = pool_.get();
+  for (const auto& block : blocks_) {
+    if (!block->EventIndicatorSlopes(context, y, v, a_zero, dy, *values, *slopes)) return false;
+  }
+  return true;
+}
+
 namespace {
 
 // Velocity-level problem as a mixed complementarity system in v (roles fixed).

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <random>
 
@@ -361,6 +362,76 @@ TEST(ComplementarityLoweringTest, VelocityLevelAndIndicatorDerivativesMatchCentr
                  "indicators d/dp");
     }
   }
+}
+
+// The slopes of the indicators along a direction (what the search between an element's nodes
+// needs): the values bit for bit those of the evaluation with derivatives, the slopes d_y . dy
+// to round-off, for every status pattern of the index-1 and index-2 pairs, at several states
+// and directions with a time component. The two differ in the order of their operations
+// (the direction applied before or after the solve with the active block D_ss), so they agree
+// to round-off of the terms they add: a free side w = g + D lambda has the slope
+// A_y dy + D (dlambda/dy) dy (A_y: w's derivative with the multipliers held), whose terms can
+// be much larger than their sum (the bridge's blocking diodes: volts that cancel to millivolts).
+// Allowed: kSlopeRoundOff times the sum of the magnitudes of those terms (observed: at most
+// 0.014 of it). A relay (no slopes of its own) makes the system decline, so that the caller falls
+// back to d_y.
+TEST(ComplementarityLoweringTest, IndicatorSlopesAreTheDerivativesAlongTheDirection) {
+  constexpr double kSlopeRoundOff = 64 * std::numeric_limits<double>::epsilon();
+  std::mt19937 random(11);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  for (const Scene& scene : {testing::ComplementarityScene(false), MakeScene("rectifier"),
+                             MakeScene("diode_bridge"), MakeScene("buck")}) {
+    LoweredSystem system(scene);
+    const int ny = system.num_states(), np = system.num_pairs(), nz = system.num_algebraic();
+    for (int trial = 0; trial < 4; ++trial) {
+      Vector y = system.InitialState();
+      for (int i = 0; i < system.num_scene_states(); ++i) y[i] += 0.3 * unit(random);
+      y[system.clock_index()] =
+          scene.initial_time + (scene.final_time - scene.initial_time) * 0.25 * (trial + 0.5);
+      Vector dy(ny);
+      for (int i = 0; i < ny; ++i) dy[i] = unit(random);
+      const Vector v = Vector::LinSpaced(nz, 0.3, 0.9);
+      for (unsigned mask = 0; mask < (1u << np); ++mask) {
+        std::vector<bool> a_zero(static_cast<std::size_t>(np));
+        for (int k = 0; k < np; ++k) a_zero[static_cast<std::size_t>(k)] = (mask >> k) & 1u;
+        const std::string label =
+            scene.name + " trial " + std::to_string(trial) + " statuses " + std::to_string(mask);
+        IndicatorEvaluation reference;
+        system.EvaluateEventIndicators(y, v, a_zero, Derivatives::kStates, &reference);
+        Vector values, slopes;
+        ASSERT_TRUE(system.EvaluateEventIndicatorSlopes(y, v, a_zero, dy, &values, &slopes))
+            << label;
+        const Matrix d_y = reference.d_y.ToDense();
+        // The multipliers (pair k's unknown is z_k here): the conducting pairs' free sides, and
+        // their rates d_y; zero for the others. A_y and A_z (= D) at those multipliers.
+        ASSERT_EQ(nz, np) << label;
+        Vector z = Vector::Zero(nz);
+        Matrix rates = Matrix::Zero(nz, ny);
+        for (int k = 0; k < np; ++k) {
+          if (!a_zero[static_cast<std::size_t>(k)]) continue;
+          z[k] = reference.values[k];
+          rates.row(k) = d_y.row(k);
+        }
+        PointEvaluation point;
+        system.Evaluate(y, z, Derivatives::kStates, &point);
+        const Matrix a_y = point.A_y.ToDense(), a_z = point.A_z.ToDense();
+        for (int k = 0; k < np; ++k) {
+          EXPECT_EQ(values[k], reference.values[k]) << label << " pair " << k;  // the same bits
+          const double slope = d_y.row(k).dot(dy);
+          const double terms = a_y.row(k).cwiseAbs().dot(dy.cwiseAbs()) +
+                               (a_z.row(k).cwiseAbs() * rates.cwiseAbs()).dot(dy.cwiseAbs()) +
+                               d_y.row(k).cwiseAbs().dot(dy.cwiseAbs());
+          EXPECT_NEAR(slopes[k], slope, kSlopeRoundOff * terms) << label << " pair " << k;
+        }
+      }
+    }
+  }
+  LoweredSystem with_relay(testing::ComplementarityScene(true));
+  Vector values, slopes;
+  EXPECT_FALSE(with_relay.EvaluateEventIndicatorSlopes(
+      with_relay.InitialState(), Vector::Zero(with_relay.num_algebraic()),
+      std::vector<bool>(static_cast<std::size_t>(with_relay.num_pairs()), false),
+      Vector::Ones(with_relay.num_states()), &values, &slopes));
 }
 
 // The index-1 guess solves the LCP at the state: complementary to round-off.

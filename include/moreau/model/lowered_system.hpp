@@ -452,6 +452,15 @@ class LoweredSystem {
   void EvaluateEventIndicators(const ConstVectorRef& y, const ConstVectorRef& v,
                                const std::vector<bool>& a_zero, Derivatives derivatives,
                                IndicatorEvaluation* out) const;
+  /// Event indicators at y (the values of EvaluateEventIndicators with derivatives, bit for
+  /// bit) and their slopes along the state direction dy, slopes_k = d_y.row(k) . dy up to
+  /// round-off (v, u, p held): what a search along a path needs at a node, without the full
+  /// Jacobian d_y. Returns false, with *values and *slopes unspecified, if a block with pairs
+  /// does not provide them (today: index-1 complementarity does; the caller then takes d_y
+  /// from EvaluateEventIndicators).
+  bool EvaluateEventIndicatorSlopes(const ConstVectorRef& y, const ConstVectorRef& v,
+                                    const std::vector<bool>& a_zero, const ConstVectorRef& dy,
+                                    Vector* values, Vector* slopes) const;
   /// Enclosures of the event indicators over a box of states: for statuses a_zero, lower_k <=
   /// (free side of pair k at y) <= upper_k for every y with y_lower <= y <= y_upper (the clock's
   /// entries bound the time), by interval arithmetic on the model functions (core/interval.hpp).
