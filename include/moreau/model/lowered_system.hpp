@@ -456,8 +456,9 @@ class LoweredSystem {
   /// bit) and their slopes along the state direction dy, slopes_k = d_y.row(k) . dy up to
   /// round-off (v, u, p held): what a search along a path needs at a node, without the full
   /// Jacobian d_y. Returns false, with *values and *slopes unspecified, if a block with pairs
-  /// does not provide them (today: index-1 complementarity does; the caller then takes d_y
-  /// from EvaluateEventIndicators).
+  /// does not provide them (today only complementarity blocks in dense storage do, whose
+  /// index-1 free sides have no interval bounds; the caller then takes d_y from
+  /// EvaluateEventIndicators).
   bool EvaluateEventIndicatorSlopes(const ConstVectorRef& y, const ConstVectorRef& v,
                                     const std::vector<bool>& a_zero, const ConstVectorRef& dy,
                                     Vector* values, Vector* slopes) const;
