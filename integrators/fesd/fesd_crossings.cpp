@@ -143,15 +143,18 @@ Violation FesdRun::InsideViolation(const CollocationStages& stages, const Vector
         have_node_values = true;
         b.node_values.resize(nodes.size());
         b.node_slopes.resize(nodes.size());
+        // The slopes along the path directly where every block provides them (index-1
+        // complementarity: no Jacobian d_y formed), else from d_y (a block that declines at
+        // one node declines at all: not asked again).
+        bool direct_slopes = true;
         for (std::size_t j = 0; j < nodes.size(); ++j) {
           b.path.Point(nodes[j], &b.y);
           b.path.Derivative(nodes[j], &b.dy);
-          // The slopes along the path directly where every block provides them (index-1
-          // complementarity: no Jacobian d_y formed), else from d_y.
-          if (system_.EvaluateEventIndicatorSlopes(b.y, v, a_zero_, b.dy, &b.node_values[j],
-                                                   &b.node_slopes[j])) {
+          if (direct_slopes && system_.EvaluateEventIndicatorSlopes(
+                                   b.y, v, a_zero_, b.dy, &b.node_values[j], &b.node_slopes[j])) {
             continue;
           }
+          direct_slopes = false;
           system_.EvaluateEventIndicators(b.y, v, a_zero_, Derivatives::kStates, &b.at);
           b.node_values[j] = b.at.values;
           b.node_slopes[j].resize(np_);

@@ -280,17 +280,8 @@ class ComplementarityBlock final : public LoweredBlock {
       }
       return;
     }
-    std::vector<PairRole>& roles = roles_;
-    roles.resize(static_cast<std::size_t>(m_));
-    for (int k = 0; k < m_; ++k) {
-      roles[static_cast<std::size_t>(k)] =
-          a_zero[static_cast<std::size_t>(k0 + k)] ? PairRole::kAZero : PairRole::kBZero;
-    }
-    ConsistentValues(roles, derivatives);
+    const Vector& w = IndexOneFreeSides(a_zero, derivatives);
     const auto d = RowMajor(d_values_, m_, m_);
-    Vector& w = w_;
-    w.noalias() = d * lambda_bar_;
-    w += g_;
     Matrix& w_jacobian = w_jacobian_;
     if (with_states) {
       // jac_g + contraction + product, summed in that order (as Eigen's expression did).
@@ -335,17 +326,8 @@ class ComplementarityBlock final : public LoweredBlock {
       }
       return true;
     }
-    std::vector<PairRole>& roles = roles_;
-    roles.resize(static_cast<std::size_t>(m_));
-    for (int k = 0; k < m_; ++k) {
-      roles[static_cast<std::size_t>(k)] =
-          a_zero[static_cast<std::size_t>(k0 + k)] ? PairRole::kAZero : PairRole::kBZero;
-    }
-    ConsistentValues(roles, Derivatives::kNone);
+    const Vector& w = IndexOneFreeSides(a_zero, Derivatives::kNone);
     const auto dmat = RowMajor(d_values_, m_, m_);
-    Vector& w = w_;
-    w.noalias() = dmat * lambda_bar_;
-    w += g_;
     // dD lambda: (J_D d) reshaped row-major, times lambda.
     Vector& dd = slope_d_;
     dd.noalias() = jac_d_ * d;
@@ -378,6 +360,24 @@ class ComplementarityBlock final : public LoweredBlock {
       }
     }
     return true;
+  }
+
+  // Index 1, after EvaluateFunctions: the consistent multipliers lambda_bar_ for the statuses
+  // a_zero (of the whole system; conducting pairs keep w = 0) with derivatives as asked, and w =
+  // g + D lambda_bar, returned (w_). The free side of a conducting pair is lambda_bar_k, of a
+  // blocking one w_k (EventIndicators, EventIndicatorSlopes).
+  const Vector& IndexOneFreeSides(const std::vector<bool>& a_zero, Derivatives derivatives) {
+    const int k0 = layout.pair_offset;
+    std::vector<PairRole>& roles = roles_;
+    roles.resize(static_cast<std::size_t>(m_));
+    for (int k = 0; k < m_; ++k) {
+      roles[static_cast<std::size_t>(k)] =
+          a_zero[static_cast<std::size_t>(k0 + k)] ? PairRole::kAZero : PairRole::kBZero;
+    }
+    ConsistentValues(roles, derivatives);
+    w_.noalias() = RowMajor(d_values_, m_, m_) * lambda_bar_;
+    w_ += g_;
+    return w_;
   }
 
   // a = w = 0 kept: the pair is active (a diode conducts); b = lambda = 0: inactive (blocks).

@@ -172,10 +172,11 @@ class LoweredBlock {
   // their slopes along dy, d_y.row(k) . dy up to round-off, into values and slopes at the
   // block's pair offset (LoweredSystem::EvaluateEventIndicatorSlopes). False if the block does
   // not provide them; a block without pairs has nothing to provide.
-  virtual bool EventIndicatorSlopes(const BlockContext& context, const ConstVectorRef& y,
-                                    const ConstVectorRef& v, const std::vector<bool>& a_zero,
-                                    const ConstVectorRef& dy, VectorRef values, VectorRef slopes) {
-    (void)context, (void)y, (void)v, (void)a_zero, (void)dy, (void)values, (void)slopes;
+  virtual bool EventIndicatorSlopes(const BlockContext& /*context*/, const ConstVectorRef& /*y*/,
+                                    const ConstVectorRef& /*v*/,
+                                    const std::vector<bool>& /*a_zero*/,
+                                    const ConstVectorRef& /*dy*/, VectorRef /*values*/,
+                                    VectorRef /*slopes*/) {
     return num_pairs() == 0;
   }
 
