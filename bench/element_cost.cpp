@@ -7,6 +7,8 @@
 //   scripts/bench-element-cost   (F1 and S3, s = 2 and 3, under callgrind; prints the ratios)
 //   valgrind --tool=callgrind --toggle-collect='MeasuredFesdRun*'
 //     --toggle-collect='MeasuredRadauRun*' build/release/bench/element_cost F1 2   (one line)
+// An optional third argument replaces the scene's horizon (scripts/bench-element-cost
+// --decompose: runs that end before the first switch, for the cost of an element without one).
 #include <cstdio>
 #include <cstdlib>
 #include <string>
@@ -25,11 +27,21 @@
 }
 
 int main(int argc, char** argv) {
-  if (argc != 3) {
-    std::fprintf(stderr, "usage: element_cost <scene> <stages>\n");
+  if (argc != 3 && argc != 4) {
+    std::fprintf(stderr, "usage: element_cost <scene> <stages> [final time]\n");
     return 2;
   }
-  const moreau::Scene scene = moreau::MakeScene(argv[1]);
+  moreau::Scene scene = moreau::MakeScene(argv[1]);
+  if (argc == 4) {
+    char* end = nullptr;
+    const double final_time = std::strtod(argv[3], &end);
+    if (*end != '\0' || !(final_time > scene.initial_time)) {
+      std::fprintf(stderr, "element_cost: the final time '%s' is not a number after t0 = %g\n",
+                   argv[3], scene.initial_time);
+      return 2;
+    }
+    scene.final_time = final_time;
+  }
   const moreau::Scene smooth = moreau::bench::SmoothPart(scene);
   const moreau::bench::PairedOptions options =
       moreau::bench::ElementRatioOptions(std::atoi(argv[2]));
