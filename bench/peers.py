@@ -38,7 +38,9 @@ Output: the work-precision table (markdown), per target error 1e-3, 1e-6, 1e-9 t
 run of each method that reaches it for good (its error and that of every finer run of the
 sweep at most the target: a cancellation that dips below it at one step does not count), the
 ratio of Siconos' best to moreau's best, and (with --plot PATH) a log-log plot of error
-against CPU time.
+against CPU time. Exits with status 1 (after the output) if a ratio falls below its floor
+(RATIO_FLOORS: about two thirds of the published ratios), so that a run notices a material
+loss on moreau's side; --quick runs are not held to them.
 """
 
 import argparse
@@ -53,6 +55,12 @@ import numpy as np
 import moreau
 
 TARGETS = [1e-3, 1e-6, 1e-9]
+# The ratios Siconos' best / moreau's best below which the script fails (unless --quick), per
+# problem and target: about two thirds of those the README and the benchmarks page publish
+# (rectifier 15.9x, 338x, 4.4e3x; bridge 4.0x, 43x, 513x on 2026-11-30), which leaves room for
+# Siconos' own scatter between runs (up to 15-20% on millisecond runs) and notices a material
+# loss on moreau's side.
+RATIO_FLOORS = {"rectifier": [10.0, 220.0, 2900.0], "diode_bridge": [2.6, 28.0, 340.0]}
 RECTIFIER_T = 1.2e-3
 BRIDGE_T = 0.02
 
@@ -374,6 +382,7 @@ def main():
 
     print(f"Siconos {version} (Debian python3-siconos), moreau; CPU time, best of up to "
           f"{args.repeats} runs (at least 3, more while they fit in {REPEAT_BUDGET:g} s).\n")
+    below = []  # guarded ratios that this run fell below
     for problem in problems:
         print(f"### {problem}\n")
         print("| method | " + " | ".join(f"error {t:.0e}" for t in TARGETS) + " |")
@@ -394,12 +403,16 @@ def main():
             print(f"| {name} | " + " | ".join(cells) + " |")
         print()
         ratios = []
-        for target in TARGETS:
+        for target, floor in zip(TARGETS, RATIO_FLOORS[problem]):
             s, m = best.get(("Siconos", target)), best.get(("moreau", target))
             if s is None and m is not None:
                 ratios.append(f"error {target:.0e}: Siconos did not reach it")
             elif s is not None and m is not None:
                 ratios.append(f"error {target:.0e}: moreau {s / m:.3g}x faster")
+                if s / m < floor:
+                    below.append(f"{problem} at {target:.0e}: {s / m:.3g}x, floor {floor:g}x")
+            else:
+                below.append(f"{problem} at {target:.0e}: moreau did not reach it")
         print("Siconos' best against moreau's best: " + "; ".join(ratios) + ".\n")
 
     if args.plot:
@@ -426,6 +439,10 @@ def main():
         fig.tight_layout()
         fig.savefig(args.plot, dpi=110)
         print(f"plot: {args.plot}", file=sys.stderr)
+    if below and not args.quick:
+        print("bench-peers: below the guarded ratios (RATIO_FLOORS in bench/peers.py): " +
+              "; ".join(below), file=sys.stderr)
+        sys.exit(1)
 
 
 if __name__ == "__main__":
