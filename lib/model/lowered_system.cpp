@@ -92,6 +92,13 @@ void LoweredSystem::SetThreads(int threads) {
 
 int LoweredSystem::threads() const { return pool_ ? pool_->threads() : 1; }
 
+internal::BlockContext LoweredSystem::MakeBlockContext() const {
+  internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
+  context.sparse = sparse_;
+  context.pool = pool_.get();
+  return context;
+}
+
 double LoweredSystem::worker_cpu_seconds() const {
   return pool_ ? pool_->worker_cpu_seconds() : 0.0;
 }
@@ -268,9 +275,7 @@ void LoweredSystem::FilterableConstraints(const Vector& y, const Vector& velocit
                                           Vector* rate_bounds) const {
   values->setConstant(num_declared_pairs_, std::numeric_limits<double>::quiet_NaN());
   rate_bounds->setConstant(num_declared_pairs_, std::numeric_limits<double>::quiet_NaN());
-  internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
-  context.sparse = sparse_;
-  context.pool = pool_.get();
+  internal::BlockContext context = MakeBlockContext();
   for (std::size_t b = 0; b < blocks_.size(); ++b) {
     internal::LoweredBlock& block = *blocks_[b];
     if (!block.Filterable()) continue;
@@ -283,9 +288,7 @@ void LoweredSystem::FilterableConstraints(const Vector& y, const Vector& velocit
 
 double LoweredSystem::MinExcludedConstraint(const Vector& y) const {
   double smallest = std::numeric_limits<double>::infinity();
-  internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
-  context.sparse = sparse_;
-  context.pool = pool_.get();
+  internal::BlockContext context = MakeBlockContext();
   for (const auto& block : blocks_) {
     if (block->Filterable()) smallest = std::min(smallest, block->MinExcluded(context, y));
   }
@@ -294,9 +297,7 @@ double LoweredSystem::MinExcludedConstraint(const Vector& y) const {
 
 void LoweredSystem::ExcludedViolations(const Vector& y, double threshold,
                                        std::vector<bool>* include) const {
-  internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
-  context.sparse = sparse_;
-  context.pool = pool_.get();
+  internal::BlockContext context = MakeBlockContext();
   for (std::size_t b = 0; b < blocks_.size(); ++b) {
     if (!blocks_[b]->Filterable()) continue;
     blocks_[b]->ExcludedBelow(context, y, threshold, declared_pair_offset_[b], include);
@@ -423,9 +424,7 @@ Vector LoweredSystem::MemorySwitchingFunctions(const Vector& y) const {
   if (memory_block_ < 0) return Vector();
   auto& block = *blocks_[static_cast<std::size_t>(memory_block_)];
   Vector out(block.num_memory_switches());
-  internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
-  context.sparse = sparse_;
-  context.pool = pool_.get();
+  internal::BlockContext context = MakeBlockContext();
   block.MemorySwitchingFunctions(context, y, out);
   return out;
 }
@@ -440,8 +439,7 @@ void LoweredSystem::BoundMemorySwitchingFunctions(const ConstVectorRef& y_lower,
   lower->setConstant(n, -infinity);
   upper->setConstant(n, infinity);
   if (n == 0) return;
-  internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
-  context.sparse = sparse_;
+  internal::BlockContext context = MakeBlockContext();
   blocks_[static_cast<std::size_t>(memory_block_)]->MemorySwitchingBounds(context, y_lower, y_upper,
                                                                           *lower, *upper);
 }
@@ -456,8 +454,7 @@ void LoweredSystem::BoundEventIndicators(const ConstVectorRef& y_lower,
   const double infinity = std::numeric_limits<double>::infinity();
   lower->setConstant(num_pairs_, -infinity);
   upper->setConstant(num_pairs_, infinity);
-  internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
-  context.sparse = sparse_;
+  internal::BlockContext context = MakeBlockContext();
   for (const auto& block : blocks_) {
     block->IndicatorBounds(context, y_lower, y_upper, a_zero, *lower, *upper);
   }
@@ -501,9 +498,7 @@ void LoweredSystem::InitialAlgebraicGuess(const Vector& y, const Vector* previou
                 "InitialAlgebraicGuess: previous has the wrong size");
   MOREAU_ASSERT(previous != z, "InitialAlgebraicGuess: previous is the output");
   z->setZero(num_algebraic_);
-  internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
-  context.sparse = sparse_;
-  context.pool = pool_.get();
+  internal::BlockContext context = MakeBlockContext();
   for (const auto& block : blocks_) block->InitialGuess(context, y, previous, *z);
 }
 
@@ -620,9 +615,7 @@ void LoweredSystem::EvaluatePoint(const ConstVectorRef& y, const ConstVectorRef&
     unread(&out->B_p, num_pairs_, np);
   }
 
-  internal::BlockContext context{nx, clock, &inputs_, &parameters_};
-  context.sparse = sparse_;
-  context.pool = pool_.get();
+  internal::BlockContext context = MakeBlockContext();
   context.field_only = field_only;
   context.switching_mode = field_only ? switching_mode : -1;
   // Smooth dynamics: x' = f(x, u, clock, p); clock' = 1.

@@ -760,11 +760,9 @@ void LoweredSystem::EvaluateVelocityLevel(const ConstVectorRef& y, const ConstVe
     curvature.equation_u.SetZero(ng, nu, sparse_);
     curvature.pair_p.SetZero(num_pairs_, np, sparse_);
     curvature.equation_p.SetZero(ng, np, sparse_);
-    internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
+    internal::BlockContext context = MakeBlockContext();
     context.velocity_roles = &roles;
     context.velocity = &v;
-    context.sparse = sparse_;
-    context.pool = pool_.get();
     for (const auto& block : blocks_) block->AddCurvature(context, y, e.F, derivatives, &curvature);
     for (DerivativeMatrix* m : {&curvature.pair_y, &curvature.equation_y, &curvature.pair_u,
                                 &curvature.equation_u, &curvature.pair_p, &curvature.equation_p}) {
@@ -786,9 +784,7 @@ void LoweredSystem::EvaluateEventIndicators(const ConstVectorRef& y, const Const
     out->d_u.SetZero(num_pairs_, scene_.num_inputs(), sparse_);
     out->d_p.SetZero(num_pairs_, scene_.num_parameters(), sparse_);
   }
-  internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
-  context.sparse = sparse_;
-  context.pool = pool_.get();
+  internal::BlockContext context = MakeBlockContext();
   for (const auto& block : blocks_) {
     block->EventIndicators(context, y, v, a_zero, derivatives, out);
   }
@@ -805,9 +801,7 @@ bool LoweredSystem::EvaluateEventIndicatorSlopes(const ConstVectorRef& y, const 
   MOREAU_ASSERT(dy.size() == num_states_, "slope direction of the wrong size");
   values->setZero(num_pairs_);
   slopes->setZero(num_pairs_);
-  internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
-  context.sparse = sparse_;
-  context.pool = pool_.get();
+  internal::BlockContext context = MakeBlockContext();
   for (const auto& block : blocks_) {
     if (!block->EventIndicatorSlopes(context, y, v, a_zero, dy, *values, *slopes)) return false;
   }

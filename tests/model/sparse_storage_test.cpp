@@ -5,14 +5,20 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <limits>
 #include <random>
+#include <string>
+#include <thread>
 #include <tuple>
+#include <type_traits>
 #include <utility>
 
 #include "../problems/test_scenes.hpp"
+#include "moreau/core/interval.hpp"
 #include "moreau/linalg/linear_solver.hpp"
 #include "moreau/model/lowered_system.hpp"
 #include "moreau/scenes/catalog.hpp"
@@ -438,6 +444,85 @@ TEST(SparseStorage, AutomaticStorageFollowsTheSize) {
     EXPECT_NE(std::string(e.what()).find("sparse derivative storage"), std::string::npos)
         << e.what();
   }
+}
+
+// Threads of the system in the enclosures: a moving set of 9000 constraints written block by
+// block (above the enclosures' parallel threshold of 8192 blocks), its event indicators bounded
+// (LoweredSystem::BoundEventIndicators) on a system with two threads. While armed, the calling
+// thread's enclosure of block 0 (the first block of the first chunk, which the caller claims
+// at once) waits for another thread to enclose a block: the pool's worker then claims a later
+// chunk. If the enclosures ran without the system's threads (as they once did: the bounds'
+// block context left them out), no other thread ever comes and the wait times out after
+// kWaitSeconds, generous beside a worker's wake-up (microseconds) on a loaded machine.
+std::atomic<bool> g_enclosure_wait_armed{false};
+std::atomic<int> g_enclosures_off_caller{0};
+std::thread::id g_enclosure_caller;
+
+TEST(SparseStorage, EventIndicatorEnclosuresRunOnTheSystemsThreads) {
+  constexpr int kConstraints = 9000;
+  constexpr double kWaitSeconds = 20.0;
+  Scene scene;
+  scene.name = "threaded_enclosures";
+  scene.state_names = {"x1", "x2"};
+  scene.initial_state = Vector{{0.0, 0.0}};
+  scene.final_time = 1.0;
+  scene.dynamics = MakeSmoothFunction(
+      "drift", 2, [](const auto&, const auto&, const auto&, const auto&, auto& out) {
+        out[0] = 1.0;
+        out[1] = 0.0;
+      });
+  MovingSet set;
+  set.name = "floors";
+  for (int b = 0; b < kConstraints; ++b) set.constraint_names.push_back("c" + std::to_string(b));
+  // c_b = x1 + b + 1 >= 0.
+  set.constraints = MakeBlockFunction(
+      "floors.c", kConstraints, 1,
+      [](int b, const auto& x, const auto&, const auto&, const auto&, auto& out) {
+        using Scalar = std::decay_t<decltype(out[0])>;
+        if constexpr (std::is_same_v<Scalar, Interval>) {
+          if (g_enclosure_wait_armed.load()) {
+            if (std::this_thread::get_id() != g_enclosure_caller) {
+              ++g_enclosures_off_caller;
+            } else if (b == 0) {
+              const auto start = std::chrono::steady_clock::now();
+              while (
+                  g_enclosures_off_caller.load() == 0 &&
+                  std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() <
+                      kWaitSeconds) {
+                std::this_thread::yield();
+              }
+            }
+          }
+        }
+        out[0] = x[0] + static_cast<double>(b + 1);
+      });
+  scene.effects.push_back(set);
+  LoweringOptions options;
+  options.storage = DerivativeStorage::kSparse;
+  LoweredSystem system(scene, options);
+  system.SetThreads(2);
+  ASSERT_EQ(system.threads(), 2);
+  ASSERT_EQ(system.num_pairs(), kConstraints);
+  const int ny = system.num_states();
+  const Vector y_lower = Vector::Constant(ny, -0.5), y_upper = Vector::Constant(ny, 0.25);
+  const std::vector<bool> a_zero(static_cast<std::size_t>(kConstraints), false);  // all inactive
+  Vector lower, upper;
+  g_enclosure_caller = std::this_thread::get_id();
+  g_enclosures_off_caller = 0;
+  g_enclosure_wait_armed = true;
+  system.BoundEventIndicators(y_lower, y_upper, a_zero, &lower, &upper);
+  g_enclosure_wait_armed = false;
+  EXPECT_GT(g_enclosures_off_caller.load(), 0) << "no enclosure ran on the system's worker";
+  // And the enclosures are those of c_b over x1 in [-0.5, 0.25]: [b + 0.5, b + 1.25] (rounded
+  // outward by at most an ulp of each end).
+  ASSERT_EQ(lower.size(), kConstraints);
+  int wrong = 0;
+  for (int b = 0; b < kConstraints; ++b) {
+    const double low = b + 0.5, high = b + 1.25;
+    wrong += !(lower[b] <= low && lower[b] >= std::nextafter(low, -HUGE_VAL) && upper[b] >= high &&
+               upper[b] <= std::nextafter(high, HUGE_VAL));
+  }
+  EXPECT_EQ(wrong, 0);
 }
 
 }  // namespace

@@ -223,6 +223,7 @@ struct StatusDecision {
 inline bool PairStatusIsAZero(double a, double b) { return a <= b; }
 
 namespace internal {
+struct BlockContext;
 class LoweredBlock;
 class ArgumentMatrix;
 class VelocitySolver;
@@ -512,6 +513,12 @@ class LoweredSystem {
 
  private:
   void Build();
+  // What every call of a block receives (lowered_block.hpp): the scene's state count and the
+  // clock's index, the inputs and parameters, the derivative storage and the system's threads.
+  // Made in one place so that no call leaves one out (the enclosures of the event indicators
+  // once ran without the threads); callers add what their call sets (velocity-level roles, a
+  // field-only evaluation).
+  internal::BlockContext MakeBlockContext() const;
   // Offsets, names and pair descriptions of the blocks' current working sets.
   void Layout();
   // The block that declares pair `declared`.
