@@ -48,6 +48,20 @@ struct BlockContext {
   int switching_mode = -1;
 };
 
+}  // namespace moreau::internal
+
+namespace moreau {
+// Defined here, where BlockContext is complete, so that every evaluation inlines it.
+inline internal::BlockContext LoweredSystem::MakeBlockContext() const {
+  internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
+  context.sparse = sparse_;
+  context.pool = pool_.get();
+  return context;
+}
+}  // namespace moreau
+
+namespace moreau::internal {
+
 // A matrix whose columns follow a smooth model function's argument layout x, [u], t, [p]
 // (Wrt::XT, or Wrt::All with Derivatives::kAll), dense or sparse, and whose rows the blocks
 // scatter into the y (x columns and the clock column), u and p derivative blocks of the

@@ -92,13 +92,6 @@ void LoweredSystem::SetThreads(int threads) {
 
 int LoweredSystem::threads() const { return pool_ ? pool_->threads() : 1; }
 
-internal::BlockContext LoweredSystem::MakeBlockContext() const {
-  internal::BlockContext context{scene_.num_states(), clock_index(), &inputs_, &parameters_};
-  context.sparse = sparse_;
-  context.pool = pool_.get();
-  return context;
-}
-
 double LoweredSystem::worker_cpu_seconds() const {
   return pool_ ? pool_->worker_cpu_seconds() : 0.0;
 }

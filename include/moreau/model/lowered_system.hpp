@@ -517,7 +517,7 @@ class LoweredSystem {
   // clock's index, the inputs and parameters, the derivative storage and the system's threads.
   // Made in one place so that no call leaves one out (the enclosures of the event indicators
   // once ran without the threads); callers add what their call sets (velocity-level roles, a
-  // field-only evaluation).
+  // field-only evaluation). Defined in lib/model/lowered_block.hpp.
   internal::BlockContext MakeBlockContext() const;
   // Offsets, names and pair descriptions of the blocks' current working sets.
   void Layout();
